@@ -1,0 +1,50 @@
+"""Shared fixtures: the third-party assets beside the project, validators, small rigs."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+SHARED_ASSETS = ROOT.parent / "shared" / "assets"
+SAMPLE_ASSETS = ROOT / "sample_assets"
+VALIDATOR_DIR = Path(__file__).resolve().parent / "gltf_validator"
+
+
+@pytest.fixture(scope="session")
+def shared_assets() -> Path:
+    """``../shared/assets`` beside the project; skips where that folder is absent."""
+    if not SHARED_ASSETS.is_dir():
+        pytest.skip(f"third-party assets not found at {SHARED_ASSETS}")
+    return SHARED_ASSETS
+
+
+@pytest.fixture(scope="session")
+def sample_assets() -> Path:
+    """The committed sample assets."""
+    if not SAMPLE_ASSETS.is_dir():
+        pytest.skip(f"sample assets not found at {SAMPLE_ASSETS}")
+    return SAMPLE_ASSETS
+
+
+def validate_gltf(*paths: Path) -> list[dict]:
+    """Run the Khronos glTF validator; returns one report per file.
+
+    Each report has ``numErrors``, ``numWarnings`` and the first error ``messages``.
+    """
+    node = shutil.which("node")
+    if node is None or not (VALIDATOR_DIR / "node_modules" / "gltf-validator").is_dir():
+        pytest.fail("gltf-validator is not installed: run `npm install --prefix tests/gltf_validator`")
+    out = subprocess.run([node, str(VALIDATOR_DIR / "validate.js"), *map(str, paths)],
+                         capture_output=True, text=True, check=True)
+    return json.loads(out.stdout)
+
+
+@pytest.fixture(scope="session")
+def gltf_validator():
+    """A function ``validate(*paths) -> list of reports`` (Khronos glTF validator)."""
+    return validate_gltf

@@ -1,0 +1,3 @@
+from usdhands.cli import entry_point
+
+entry_point()

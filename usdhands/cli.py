@@ -1,0 +1,69 @@
+"""The ``usdhands`` command line.
+
+Each subcommand lives in its own module under :mod:`usdhands.commands` and defines
+``register(subparsers)``, which adds its parser and sets ``func`` (a function of the
+parsed arguments returning an exit status). Modules are found automatically.
+
+User mistakes and bad assets print one line ``usdhands: error: ...`` and exit with
+status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import pkgutil
+import sys
+
+from usdhands import __version__
+from usdhands.errors import UsdHandsError
+
+EXIT_USER_ERROR = 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser with every subcommand registered."""
+    import usdhands.commands as commands
+
+    parser = argparse.ArgumentParser(
+        prog="usdhands",
+        description="Finger animation for skeletal characters in USD, glTF and BVH files.",
+    )
+    parser.add_argument("--version", action="version", version=f"usdhands {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log details to stderr")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"usdhands.commands.{info.name}")
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="usdhands: %(message)s", stream=sys.stderr)
+    if not getattr(args, "func", None):
+        parser.print_help(sys.stderr)
+        return EXIT_USER_ERROR
+    try:
+        return int(args.func(args) or 0)
+    except UsdHandsError as e:
+        print(f"usdhands: error: {e}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print("usdhands: interrupted", file=sys.stderr)
+        return 130
+
+
+def entry_point() -> None:
+    """Console-script entry point."""
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    entry_point()

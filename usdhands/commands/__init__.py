@@ -1,0 +1,1 @@
+"""One module per ``usdhands`` subcommand; each defines ``register(subparsers)``."""

@@ -1,0 +1,86 @@
+"""Reading and writing any supported file by its extension."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from usdhands.errors import AssetReadError, NoSkeletonError
+from usdhands.formats.registry import atomic_output, check_output_path, handler_for
+from usdhands.model.asset import Asset
+from usdhands.model.clip import Clip
+
+__all__ = ["read_asset", "read_clip", "write_asset", "write_clip"]
+
+
+def read_asset(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
+    """Read every skeleton, clip and skinned mesh of a file.
+
+    Parameters
+    ----------
+    path : path-like
+    fps : float, optional
+        Resample animations to this rate (formats with free key times pick a rate
+        of their own when omitted).
+
+    Raises
+    ------
+    AssetReadError
+        Missing file, unknown extension, corrupt content.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise AssetReadError("no such file", path=path)
+    if path.is_dir():
+        raise AssetReadError("is a folder, not a file", path=path)
+    asset = handler_for(path, "read").read(path, fps=fps)
+    for clip in asset.clips:
+        clip.validate(str(path))
+    return asset
+
+
+def read_clip(path: str | os.PathLike, *, animation: str | int | None = None,
+              fps: float | None = None) -> Clip:
+    """Read one animation (by name or index, default the first) of a file.
+
+    Raises
+    ------
+    NoSkeletonError
+        The file holds no skeleton.
+    AssetReadError
+        No animation of that name, or the file cannot be read.
+    """
+    asset = read_asset(path, fps=fps)
+    if not asset.skeletons:
+        raise NoSkeletonError("no skeleton in file", path=path)
+    try:
+        return asset.clip(animation)
+    except KeyError as e:
+        raise AssetReadError(str(e.args[0]).split(": ", 1)[-1]) from None
+
+
+def write_asset(asset: Asset, path: str | os.PathLike, *, inputs: tuple = (), **options) -> Path:
+    """Write ``asset`` as a standalone file (atomically; never onto one of ``inputs``)."""
+    path = check_output_path(path, asset.path, *inputs)
+    handler = handler_for(path, "write")
+    with atomic_output(path) as tmp:
+        handler.write(asset, tmp, **options)
+    return path
+
+
+def write_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLike, **options) -> Path:
+    """Write ``source`` to ``path`` with ``clip``'s animation put into it.
+
+    Everything else in the file is kept. ``source`` and ``path`` must have the same
+    format (convert first otherwise). Options go to the handler (``animation``,
+    ``as_layer`` for USD).
+    """
+    source = Path(source)
+    path = check_output_path(path, source)
+    handler = handler_for(path, "write")
+    if handler is not handler_for(source, "read"):
+        raise AssetReadError(f"cannot write {source.suffix} content as {path.suffix}; use 'usdhands convert' first",
+                             path=path)
+    with atomic_output(path) as tmp:
+        handler.write_clip(source, clip, tmp, final_path=path, **options)
+    return path

@@ -1,0 +1,154 @@
+"""Readers and writers found by file extension.
+
+Built-in handlers (USD, glTF, BVH) are imported only when a file of theirs is
+opened, so ``import usdhands`` never imports ``pxr`` or ``pygltflib``. Outside
+packages add handlers through the entry-point group ``usdhands.formats``; each
+entry point names an object (or a zero-argument factory returning one) with:
+
+- ``name`` : str
+- ``read_extensions`` / ``write_extensions`` : tuple of str, lower case with the dot
+- ``read(path, *, fps=None) -> Asset``
+- ``write(asset, path, **options) -> None``: a standalone file
+- ``write_clip(source, clip, path, **options) -> None``: the source file with the
+  clip's animation written into it, everything else kept
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterator, Protocol
+
+from usdhands.errors import AssetReadError, OutputPathError
+
+__all__ = [
+    "FormatHandler", "BUILTIN_HANDLERS", "handlers", "handler_for", "atomic_output",
+    "check_output_path", "register_handler",
+]
+
+ENTRY_POINT_GROUP = "usdhands.formats"
+
+# extension -> "module:attribute" of a built-in handler
+BUILTIN_HANDLERS: dict[str, str] = {
+    "usd": "usdhands.formats.usd:HANDLER",
+    "gltf": "usdhands.formats.gltf:HANDLER",
+    "bvh": "usdhands.formats.bvh:HANDLER",
+}
+
+
+class FormatHandler(Protocol):
+    name: str
+    read_extensions: tuple[str, ...]
+    write_extensions: tuple[str, ...]
+
+    def read(self, path: Path, *, fps: float | None = None) -> Any: ...
+
+    def write(self, asset: Any, path: Path, **options: Any) -> None: ...
+
+    def write_clip(self, source: Path, clip: Any, path: Path, **options: Any) -> None: ...
+
+
+_loaded: dict[str, FormatHandler] | None = None
+_extra: list[FormatHandler] = []
+
+
+def register_handler(handler: FormatHandler) -> None:
+    """Add a handler at run time (takes precedence over built-ins for its extensions)."""
+    global _loaded
+    _extra.append(handler)
+    _loaded = None
+
+
+def _load_entry_points() -> list[FormatHandler]:
+    from importlib.metadata import entry_points
+
+    out = []
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        obj = ep.load()
+        out.append(obj() if callable(obj) and not hasattr(obj, "read") else obj)
+    return out
+
+
+def handlers() -> dict[str, FormatHandler]:
+    """All handlers by name: built-ins, then entry points, then registered ones."""
+    global _loaded
+    if _loaded is None:
+        found: dict[str, FormatHandler] = {}
+        for name, target in BUILTIN_HANDLERS.items():
+            mod, attr = target.split(":")
+            try:
+                found[name] = getattr(importlib.import_module(mod), attr)
+            except ImportError:  # the module's dependency is missing
+                continue
+        for h in _load_entry_points() + _extra:
+            found[h.name] = h
+        _loaded = found
+    return _loaded
+
+
+def _extension(path: Path) -> str:
+    return path.suffix.lower()
+
+
+def handler_for(path: str | os.PathLike, mode: str = "read") -> FormatHandler:
+    """The handler for ``path``'s extension.
+
+    Parameters
+    ----------
+    mode : {"read", "write"}
+
+    Raises
+    ------
+    AssetReadError, OutputPathError
+        For an extension no handler takes, listing the ones that are known.
+    """
+    path = Path(path)
+    ext = _extension(path)
+    found = None
+    for h in reversed(list(handlers().values())):
+        exts = h.read_extensions if mode == "read" else h.write_extensions
+        if ext in exts:
+            found = h
+            break
+    if found is None:
+        known = sorted({e for h in handlers().values()
+                        for e in (h.read_extensions if mode == "read" else h.write_extensions)})
+        msg = f"unknown file extension {ext or '(none)'!r}; {'readable' if mode == 'read' else 'writable'}: {', '.join(known)}"
+        raise (AssetReadError if mode == "read" else OutputPathError)(msg, path=path)
+    return found
+
+
+def check_output_path(out: str | os.PathLike, *inputs: str | os.PathLike) -> Path:
+    """Refuse an output path that is one of the inputs or whose folder does not exist."""
+    out = Path(out)
+    for i in inputs:
+        if i is None:
+            continue
+        i = Path(i)
+        if out.resolve() == i.resolve() or (out.exists() and i.exists() and os.path.samefile(out, i)):
+            raise OutputPathError("output path equals the input; choose another file", path=out)
+    if not out.parent.resolve().is_dir():
+        raise OutputPathError(f"output folder {str(out.parent)!r} does not exist", path=out)
+    return out
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+
+    On any exception the temporary file is removed and ``path`` is left as it was.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
+        raise

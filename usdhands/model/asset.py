@@ -1,0 +1,95 @@
+"""What a reader returns: the skeletons, clips and skinned meshes of one file."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from usdhands.model.clip import Clip
+from usdhands.model.skeleton import Skeleton
+
+__all__ = ["SkinnedMesh", "Asset"]
+
+
+@dataclass(frozen=True, eq=False)
+class SkinnedMesh:
+    """A triangle or polygon mesh bound to a skeleton.
+
+    Parameters
+    ----------
+    name : str
+    points : (V, 3) float
+        Positions in the asset's units, in the mesh's bind space.
+    face_vertex_counts : (F,) int
+        Vertices per face (3 for triangles).
+    face_vertex_indices : (sum(counts),) int
+        Indices into ``points``.
+    normals : (V, 3) float, optional
+        Per-vertex normals.
+    uvs : (V, 2) float, optional
+        Per-vertex texture coordinates, v up (USD convention; glTF flips).
+    joint_indices : (V, K) int, optional
+        Skeleton joint indices of the influences, K per vertex (any K).
+    joint_weights : (V, K) float, optional
+        Weights of the influences, rows summing to 1.
+    geom_bind_xform : (4, 4) float
+        Mesh-to-skeleton-space transform at bind time (column vectors).
+    skeleton_index : int
+        Which skeleton of the asset it is bound to.
+    """
+
+    name: str
+    points: np.ndarray
+    face_vertex_counts: np.ndarray
+    face_vertex_indices: np.ndarray
+    normals: np.ndarray | None = None
+    uvs: np.ndarray | None = None
+    joint_indices: np.ndarray | None = None
+    joint_weights: np.ndarray | None = None
+    geom_bind_xform: np.ndarray = field(default_factory=lambda: np.eye(4))
+    skeleton_index: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class Asset:
+    """The content of one file, as the model sees it.
+
+    Parameters
+    ----------
+    path : str
+        The file read.
+    skeletons : tuple of Skeleton
+    clips : tuple of Clip
+        Every animation, each on one of ``skeletons`` (same object).
+    meshes : tuple of SkinnedMesh
+    """
+
+    path: str
+    skeletons: tuple[Skeleton, ...] = ()
+    clips: tuple[Clip, ...] = ()
+    meshes: tuple[SkinnedMesh, ...] = ()
+
+    def clip(self, animation: str | int | None = None) -> Clip:
+        """One clip by name or index; the first when ``animation`` is None.
+
+        Raises
+        ------
+        KeyError
+            Listing the animations there are.
+        """
+        if not self.clips:
+            raise KeyError(f"{self.path}: no animation in file")
+        if animation is None:
+            return self.clips[0]
+        if isinstance(animation, int) or (isinstance(animation, str) and animation.isdigit()
+                                          and not any(c.name == animation for c in self.clips)):
+            i = int(animation)
+            if not 0 <= i < len(self.clips):
+                raise KeyError(f"{self.path}: animation index {i} out of range 0..{len(self.clips) - 1}")
+            return self.clips[i]
+        for c in self.clips:
+            if c.name == animation or c.name.rsplit("/", 1)[-1] == animation:
+                return c
+        names = ", ".join(repr(c.name) for c in self.clips)
+        raise KeyError(f"{self.path}: no animation named {animation!r}; there are {names}")

@@ -1,0 +1,180 @@
+"""An animation of a skeleton: immutable, time-major arrays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from usdhands.errors import InvalidAnimationError
+from usdhands.model.rotations import check_quat, quat_slerp, trs_to_xform
+from usdhands.model.skeleton import Skeleton, forward_kinematics, readonly
+
+__all__ = ["Clip"]
+
+
+@dataclass(frozen=True, eq=False)
+class Clip:
+    """A skeleton animated over time.
+
+    Every joint of the skeleton has a value at every frame (readers fill joints the
+    file does not animate from the rest pose).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The joints animated, J of them.
+    fps : float
+        Frames per second.
+    rotations : (T, J, 4) float
+        Local rotations, unit quaternions xyzw.
+    translations : (T, J, 3) float, optional
+        Local translations in asset units; the rest translations when omitted.
+    scales : (T, J, 3) float, optional
+        Local scales; the rest scales when omitted.
+    name : str
+        Name of the animation in its file.
+    start_time : float
+        Time of frame 0 in seconds (USD time code / fps, glTF seconds).
+    """
+
+    skeleton: Skeleton
+    fps: float
+    rotations: np.ndarray
+    translations: np.ndarray | None = None
+    scales: np.ndarray | None = None
+    name: str = "animation"
+    start_time: float = 0.0
+
+    def __post_init__(self) -> None:
+        sk = self.skeleton
+        J = sk.num_joints
+        if not (np.isfinite(self.fps) and self.fps > 0):
+            raise ValueError(f"Expected fps > 0, got {self.fps}")
+        q = check_quat(self.rotations, "rotations")
+        if q.ndim != 3 or q.shape[1] != J:
+            raise ValueError(f"Expected rotations to have shape (T, {J}, 4), got {q.shape}")
+        T = q.shape[0]
+        t = self.translations
+        t = np.broadcast_to(sk.rest_translations, (T, J, 3)) if t is None else np.asarray(t, dtype=np.float64)
+        if t.shape != (T, J, 3):
+            raise ValueError(f"Expected translations to have shape ({T}, {J}, 3), got {t.shape}")
+        s = self.scales
+        s = np.broadcast_to(sk.rest_scales, (T, J, 3)) if s is None else np.asarray(s, dtype=np.float64)
+        if s.shape != (T, J, 3):
+            raise ValueError(f"Expected scales to have shape ({T}, {J}, 3), got {s.shape}")
+        set_ = object.__setattr__
+        set_(self, "fps", float(self.fps))
+        set_(self, "rotations", readonly(q))
+        set_(self, "translations", readonly(t))
+        set_(self, "scales", readonly(s))
+        set_(self, "start_time", float(self.start_time))
+
+    # -- checks ---------------------------------------------------------------
+    def validate(self, path: str | None = None) -> "Clip":
+        """Raise :class:`InvalidAnimationError` for zero frames, NaN or zero-length quaternions."""
+        if self.num_frames == 0:
+            raise InvalidAnimationError(f"animation {self.name!r} has zero frames", path=path)
+        for label, arr in (("rotations", self.rotations), ("translations", self.translations),
+                           ("scales", self.scales)):
+            bad = ~np.isfinite(arr).all(axis=-1)
+            if bad.any():
+                f, j = np.argwhere(bad)[0]
+                raise InvalidAnimationError(
+                    f"animation {self.name!r} has NaN or infinite {label} "
+                    f"(joint {self.skeleton.joint_names[j]!r}, frame {f})", path=path)
+        norms = np.linalg.norm(self.rotations, axis=-1)
+        bad = norms < 1e-6
+        if bad.any():
+            f, j = np.argwhere(bad)[0]
+            raise InvalidAnimationError(
+                f"animation {self.name!r} has a zero-length quaternion "
+                f"(joint {self.skeleton.joint_names[j]!r}, frame {f})", path=path)
+        return self
+
+    # -- sizes ----------------------------------------------------------------
+    @property
+    def num_frames(self) -> int:
+        """Number of frames T."""
+        return self.rotations.shape[0]
+
+    @property
+    def num_joints(self) -> int:
+        """Number of joints J."""
+        return self.skeleton.num_joints
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last frame."""
+        return max(self.num_frames - 1, 0) / self.fps
+
+    @property
+    def times(self) -> np.ndarray:
+        """Time of each frame in seconds, ``(T,)``."""
+        return self.start_time + np.arange(self.num_frames) / self.fps
+
+    # -- derived copies --------------------------------------------------------
+    def replace(self, **changes) -> "Clip":
+        """A copy with some fields changed (arrays are copied and validated)."""
+        fields = dict(skeleton=self.skeleton, fps=self.fps, rotations=self.rotations,
+                      translations=self.translations, scales=self.scales, name=self.name,
+                      start_time=self.start_time)
+        fields.update(changes)
+        return Clip(**fields)
+
+    def slice(self, start: int, stop: int | None = None) -> "Clip":
+        """Frames ``start`` to ``stop`` (exclusive), like Python slicing with step 1."""
+        sl = slice(start, stop)
+        first = range(self.num_frames)[sl]
+        t0 = self.start_time + (first[0] / self.fps if len(first) else 0.0)
+        return self.replace(rotations=self.rotations[sl], translations=self.translations[sl],
+                            scales=self.scales[sl], start_time=t0)
+
+    def resample(self, fps: float) -> "Clip":
+        """The same motion sampled at ``fps``: slerp for rotations, linear otherwise.
+
+        The new frames cover ``[0, duration]``; the last frame lands on or before the
+        old last frame's time.
+        """
+        fps = float(fps)
+        if not fps > 0:
+            raise ValueError(f"Expected fps > 0, got {fps}")
+        if abs(fps - self.fps) < 1e-9 or self.num_frames < 2:
+            return self.replace(fps=fps)
+        n = int(np.floor(self.duration * fps + 1e-6)) + 1
+        src = np.arange(n) / fps * self.fps
+        i0 = np.clip(np.floor(src).astype(int), 0, self.num_frames - 2)
+        w = np.clip(src - i0, 0.0, 1.0)
+        rot = quat_slerp(self.rotations[i0], self.rotations[i0 + 1], np.broadcast_to(w[:, None], (n, self.num_joints)))
+        lin = lambda a: a[i0] * (1 - w)[:, None, None] + a[i0 + 1] * w[:, None, None]  # noqa: E731
+        return self.replace(fps=fps, rotations=rot, translations=lin(self.translations),
+                            scales=lin(self.scales))
+
+    def with_joint_rotations(self, joints: list[int], rotations: np.ndarray) -> "Clip":
+        """A copy with new local rotations ``(T, len(joints), 4)`` for the given joints."""
+        rot = np.array(self.rotations)
+        rot[:, joints] = rotations
+        return self.replace(rotations=rot)
+
+    def with_meters_per_unit(self, meters_per_unit: float) -> "Clip":
+        """The same clip in other units (translations and rest rescaled)."""
+        f = self.skeleton.meters_per_unit / float(meters_per_unit)
+        return self.replace(skeleton=self.skeleton.with_meters_per_unit(meters_per_unit),
+                            translations=self.translations * f)
+
+    # -- kinematics ------------------------------------------------------------
+    def local_xforms(self) -> np.ndarray:
+        """Local transforms ``(T, J, 4, 4)``."""
+        return trs_to_xform(self.translations, self.rotations, self.scales)
+
+    def world_xforms(self) -> np.ndarray:
+        """World transforms ``(T, J, 4, 4)`` by forward kinematics, asset units."""
+        return forward_kinematics(self.skeleton.parents, self.local_xforms())
+
+    def world_positions(self) -> np.ndarray:
+        """World joint positions ``(T, J, 3)``, asset units."""
+        return self.world_xforms()[..., :3, 3]
+
+    def world_positions_cm(self) -> np.ndarray:
+        """World joint positions ``(T, J, 3)`` in centimetres."""
+        return self.world_positions() * (self.skeleton.meters_per_unit * 100.0)
