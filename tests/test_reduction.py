@@ -1,0 +1,371 @@
+"""Finger DOF reduction (Jörg and O'Sullivan 2009): rules, distances, chains, model, CLI."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from usdhands.algorithms.reduction import (
+    RangeRule, RmsdRule, pair_rmsd, paper_style_names, parse_steps, reduce_curves, standardise,
+)
+from usdhands.algorithms.reduction_model import Constant, ReductionModel, Relation
+from usdhands.errors import ConfigError
+from usdhands.model import HandMap, HandSide
+
+ROOT = Path(__file__).resolve().parent.parent
+T = 1200
+_t = np.arange(T) / T * 2 * np.pi
+
+
+def basis(k: int) -> np.ndarray:
+    """Orthonormal zero-mean curves over whole periods: mean 0, mean square 1, mutually orthogonal."""
+    return math.sqrt(2) * np.sin((k + 1) * _t + 0.3)
+
+
+def unit_with_corr(u: np.ndarray, n: np.ndarray, r: float) -> np.ndarray:
+    """A standardised curve whose correlation with standardised ``u`` is exactly ``r`` (``n`` orthogonal)."""
+    return r * u + math.sqrt(1 - r * r) * n
+
+
+# ---------------------------------------------------------------------------- the distances
+def naive_rmsd(values):
+    """The paper's equations pair by pair: standardise, then rmsd1 and rmsd2 (a twin of pair_rmsd)."""
+    T_, D = values.shape
+    z = [(values[:, k] - values[:, k].mean()) / values[:, k].std() for k in range(D)]
+    r1 = np.full((D, D), np.nan)
+    r2 = np.full((D, D), np.nan)
+    for i in range(D):
+        for j in range(D):
+            if i != j:
+                r1[i, j] = math.sqrt(sum((z[i] - z[j]) ** 2) / T_)
+                r2[i, j] = math.sqrt(sum((z[i] + z[j]) ** 2) / T_)
+    return r1, r2
+
+
+def test_pair_rmsd_matches_paper_equations_pair_by_pair():
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(300, 7)).cumsum(axis=0) * rng.uniform(0.5, 20, size=7) + rng.uniform(-40, 40, size=7)
+    v[:, 3] = -0.7 * v[:, 1] + rng.normal(0, 0.5, 300)
+    r1, r2 = pair_rmsd(v)
+    n1, n2 = naive_rmsd(v)
+    assert np.allclose(r1, n1, atol=1e-9, equal_nan=True)
+    assert np.allclose(r2, n2, atol=1e-9, equal_nan=True)
+    # rmsd1^2 = 2 - 2r and rmsd2^2 = 2 + 2r for standardised curves (population std)
+    r = np.corrcoef(v.T)
+    off = ~np.eye(7, dtype=bool)
+    assert np.allclose(r1[off] ** 2, 2 - 2 * r[off]) and np.allclose(r2[off] ** 2, 2 + 2 * r[off])
+
+
+def test_standardised_curves_have_mean_0_and_std_1_and_still_curves_are_left_out():
+    v = np.stack([np.linspace(0, 10, 50), np.full(50, 3.0), np.sin(np.arange(50.0))], axis=1)
+    z, valid = standardise(v)
+    assert valid.tolist() == [True, False, True]
+    assert np.allclose(z[:, valid].mean(axis=0), 0) and np.allclose(z[:, valid].std(axis=0), 1)
+    assert np.all(z[:, 1] == 0)
+    r1, r2 = pair_rmsd(v)
+    assert np.all(np.isnan(r1[1])) and np.all(np.isnan(r2[:, 1]))
+
+
+def test_pairs_across_groups_are_not_compared():
+    u = basis(0)
+    v = np.stack([u, 2 * u, 3 * u, -u], axis=1)
+    r1, r2 = pair_rmsd(v, ["left", "left", "right", "right"])
+    assert r1[0, 1] == pytest.approx(0, abs=1e-6) and np.isnan(r1[0, 2]) and np.isnan(r2[1, 3])
+    assert r2[2, 3] == pytest.approx(0, abs=1e-6)
+    res = reduce_curves(v, ["a.x", "b.x", "c.x", "d.x"], "rmsd<0.3", groups=["left", "left", "right", "right"])
+    rel = {r.dependent: r.controlling for r in res.final.model.relations}
+    assert rel == {"a.x": "b.x", "d.x": "c.x"}
+    assert res.final.dofs_left_by_group == {"left": 1, "right": 1}
+
+
+# ---------------------------------------------------------------------------- relations and formulas
+def test_positive_and_negative_relations_rebuild_by_the_papers_formulas():
+    rng = np.random.default_rng(7)
+    b = 40 * basis(0) + 10
+    a_pos = 0.3 * b - 5 + rng.normal(0, 0.4, T)  # smaller std, positive slope
+    a_neg = -0.6 * b + 2 + rng.normal(0, 0.4, T)  # smaller std, negative slope
+    v = np.stack([a_pos, b, a_neg], axis=1)
+    res = reduce_curves(v, ["p.x", "b.x", "n.x"], "rmsd<0.3")
+    rel = {r.dependent: r for r in res.final.model.relations}
+    assert set(rel) == {"p.x", "n.x"}
+    assert rel["p.x"].controlling == "b.x" and rel["p.x"].kind == "rmsd1"
+    assert rel["n.x"].controlling == "b.x" and rel["n.x"].kind == "rmsd2"
+    rebuilt = res.final.model.apply(v)
+    mb, sb = b.mean(), b.std()
+    paper_pos = (b - mb) / sb * a_pos.std() + a_pos.mean()  # §4.2, first equation
+    paper_neg = (mb - b) / sb * a_neg.std() + a_neg.mean()  # §4.2, second equation
+    assert np.allclose(rebuilt[:, 0], paper_pos, atol=1e-10)
+    assert np.allclose(rebuilt[:, 2], paper_neg, atol=1e-10)
+    # mean and standard deviation preserved; the controlling curve untouched
+    for k in (0, 2):
+        assert rebuilt[:, k].mean() == pytest.approx(v[:, k].mean(), abs=1e-9)
+        assert rebuilt[:, k].std() == pytest.approx(v[:, k].std(), rel=1e-9)
+    assert np.array_equal(rebuilt[:, 1], b)
+    # the reported distances are those of the standardised pair
+    r1, r2 = naive_rmsd(v)
+    assert rel["p.x"].rmsd == pytest.approx(r1[0, 1], abs=1e-9)
+    assert rel["n.x"].rmsd == pytest.approx(r2[2, 1], abs=1e-9)
+
+
+def test_relation_needs_the_right_kind_of_rule():
+    b = 10 * basis(0)
+    v = np.stack([-0.5 * b + 0.01 * basis(1), b], axis=1)
+    assert reduce_curves(v, ["a.x", "b.x"], "rmsd1<0.3").final.model.relations == ()
+    only2 = reduce_curves(v, ["a.x", "b.x"], "rmsd2<0.3").final.model.relations
+    assert [(r.dependent, r.kind) for r in only2] == [("a.x", "rmsd2")]
+
+
+def test_threshold_is_strict_and_uses_the_distance():
+    u, n = basis(0), basis(1)
+    r = 1 - 0.3 ** 2 / 2  # rmsd1 exactly 0.3
+    v = np.stack([5 * unit_with_corr(u, n, r + 1e-6), 9 * u], axis=1)
+    assert reduce_curves(v, ["a.x", "b.x"], "rmsd<0.3").final.dofs_left == 1
+    v = np.stack([5 * unit_with_corr(u, n, r - 1e-6), 9 * u], axis=1)
+    assert reduce_curves(v, ["a.x", "b.x"], "rmsd<0.3").final.dofs_left == 2
+
+
+# ---------------------------------------------------------------------------- range rule
+def test_constants_and_near_constants():
+    v = np.stack([
+        np.full(T, 12.5),  # never moves
+        7 + 0.999 * np.linspace(0, 1, T),  # range 0.999: below 1
+        -3 + np.linspace(0, 1, T),  # range exactly 1: not below 1
+        4.0 + 4.9 * np.linspace(0, 1, T) ** 2,  # range 4.9
+        30 * basis(0),
+    ], axis=1)
+    names = ["k.x", "near.x", "edge.x", "small.x", "big.x"]
+    res = reduce_curves(v, names, "range<1,range<5")
+    s1, s2 = res.steps
+    assert [c.curve for c in s1.model.constants] == ["k.x", "near.x"]
+    assert [c.curve for c in s2.model.constants] == ["k.x", "near.x", "edge.x", "small.x"]
+    assert s1.dofs_left == 3 and s2.dofs_left == 1
+    rebuilt = s2.model.apply(v)
+    for k in range(4):
+        assert np.all(rebuilt[:, k] == rebuilt[0, k]) and rebuilt[0, k] == pytest.approx(v[:, k].mean(), abs=1e-12)
+    assert s1.model.constants[1].range == pytest.approx(0.999)
+    # error figures: max = the largest distance from the mean, RMS over every entry
+    full = s2.model.apply(v) - v
+    assert s2.max_error_deg == pytest.approx(np.abs(full).max())
+    assert s2.rms_error_deg == pytest.approx(math.sqrt(np.mean(full ** 2)))
+    assert np.allclose(s2.curve_rms_error_deg, np.sqrt(np.mean(full ** 2, axis=0)))
+
+
+def test_never_moving_curve_stays_free_without_a_range_rule():
+    v = np.stack([np.zeros(T), np.zeros(T), 10 * basis(0)], axis=1)
+    res = reduce_curves(v, ["a.x", "b.x", "c.x"], "rmsd<0.5")
+    assert res.final.dofs_left == 3 and res.final.model.relations == ()
+
+
+def test_constant_curves_take_no_part_in_relations():
+    u = basis(0)
+    v = np.stack([0.2 * u, 0.3 * u + 0.001 * basis(1), 30 * u], axis=1)  # ranges ~0.57, ~0.85, 85
+    res = reduce_curves(v, ["a.x", "b.x", "c.x"], "range<1,rmsd<0.3")
+    assert [c.curve for c in res.final.model.constants] == ["a.x", "b.x"]
+    assert res.final.model.relations == () and res.final.dofs_left == 1
+    res = reduce_curves(v, ["a.x", "b.x", "c.x"], "rmsd<0.3")
+    assert {r.dependent: r.controlling for r in res.final.model.relations} == {"a.x": "c.x", "b.x": "c.x"}
+
+
+# ---------------------------------------------------------------------------- chains and ties
+def test_chain_is_resolved_to_the_final_controller_with_composed_sign():
+    u, n1, n2 = basis(0), basis(1), basis(2)
+    cos = 0.96875  # rmsd = 0.25 for each link; a to c: r = cos^2, rmsd ~0.351 > 0.3
+    c = u
+    b = unit_with_corr(c, n1, cos)
+    a = unit_with_corr(b, n2, cos)
+    v = np.stack([1.0 * a + 3, -2.0 * b + 1, 3.0 * c - 7], axis=1)  # b inverted: both links negative
+    res = reduce_curves(v, ["a.x", "b.x", "c.x"], "rmsd<0.3")
+    rel = {r.dependent: r for r in res.final.model.relations}
+    assert rel["b.x"].controlling == "c.x" and rel["b.x"].kind == "rmsd2"
+    assert rel["a.x"].controlling == "c.x" and rel["a.x"].kind == "rmsd1"  # (-1) * (-1)
+    assert rel["a.x"].rmsd == pytest.approx(math.sqrt(2 - 2 * cos ** 2), abs=1e-6)
+    assert rel["a.x"].rmsd > 0.3  # §5.2: kept though above the threshold
+    assert res.final.dofs_left == 1 and res.final.model.controlling_curves == ("c.x",)
+    # the composed map is the paper's formula from the final controller
+    rebuilt = res.final.model.apply(v)
+    va, vc = v[:, 0], v[:, 2]
+    assert np.allclose(rebuilt[:, 0], (vc - vc.mean()) / vc.std() * va.std() + va.mean(), atol=1e-10)
+    # and equals rebuilding a from b and b from c in turn
+    rb = (vc.mean() - vc) / vc.std() * v[:, 1].std() + v[:, 1].mean()
+    ra = (v[:, 1].mean() - rb) / v[:, 1].std() * va.std() + va.mean()
+    assert np.allclose(rebuilt[:, 0], ra, atol=1e-10)
+
+
+def test_longer_chain_ends_at_the_root():
+    u = basis(0)
+    cos = 0.99
+    curves = [u]
+    for k in range(1, 5):
+        curves.append(unit_with_corr(curves[-1], basis(k), cos))
+    v = np.stack([(5 - k) * c for k, c in enumerate(curves)], axis=1)  # std 5, 4, 3, 2, 1
+    res = reduce_curves(v, [f"c{k}.x" for k in range(5)], "rmsd<0.2")
+    assert {r.controlling for r in res.final.model.relations} == {"c0.x"}
+    assert res.final.dofs_left == 1
+
+
+def _tie_curves(std_b: float, std_c: float) -> np.ndarray:
+    u, n = basis(0), basis(1)
+    c15, s15 = math.cos(math.radians(15)), math.sin(math.radians(15))
+    a = u  # rmsd(a, b) = rmsd(a, c) = 0.261 < 0.3; rmsd(b, c) = 0.518
+    b = c15 * u + s15 * n
+    c = c15 * u - s15 * n
+    return np.stack([1.0 * a, std_b * b, std_c * c], axis=1)
+
+
+def test_tie_between_two_controllers_goes_to_the_larger_std():
+    names = ["a.x", "b.x", "c.x"]
+    res = reduce_curves(_tie_curves(2.0, 3.0), names, "rmsd<0.3")
+    assert {r.dependent: r.controlling for r in res.final.model.relations} == {"a.x": "c.x"}
+    res = reduce_curves(_tie_curves(3.0, 2.0), names, "rmsd<0.3")
+    assert {r.dependent: r.controlling for r in res.final.model.relations} == {"a.x": "b.x"}
+    assert res.final.dofs_left == 2
+
+
+def test_equal_standard_deviations_the_earlier_curve_controls():
+    u = basis(0)
+    v = np.stack([4 * u, -4 * u], axis=1)
+    res = reduce_curves(v, ["first.x", "second.x"], "rmsd<0.3")
+    [r] = res.final.model.relations
+    assert (r.dependent, r.controlling, r.kind) == ("second.x", "first.x", "rmsd2")
+    res = reduce_curves(v[:, ::-1], ["first.x", "second.x"], "rmsd<0.3")
+    [r] = res.final.model.relations
+    assert (r.dependent, r.controlling) == ("second.x", "first.x")
+
+
+# ---------------------------------------------------------------------------- steps
+def _hand():
+    """Ten curves whose step table is known (range and correlations set exactly)."""
+    u, n = basis(0), basis(1)
+    cols = {
+        "k1.x": np.full(T, 2.0),  # range 0
+        "k2.x": 0.2 * basis(3),  # range ~0.57
+        "s1.x": 1.5 * basis(4),  # range ~4.2
+        "m.x": 40 * u,  # the big controller
+        "p1.x": 20 * unit_with_corr(u, n, 0.99),  # rmsd ~0.141 with m
+        "p2.x": -10 * unit_with_corr(u, basis(5), 0.98),  # rmsd2 0.2 with m
+        "q1.x": 15 * unit_with_corr(u, basis(6), 0.9),  # rmsd 0.447: only at 0.5
+        "f1.x": 25 * basis(7),  # free
+        "f2.x": 25 * basis(8),  # free
+        "s2.x": 1.6 * unit_with_corr(u, basis(9), 0.999),  # range ~4.5, related to m at 0.3
+    }
+    return np.stack(list(cols.values()), axis=1), list(cols)
+
+
+def test_step_table_counts_on_constructed_data():
+    v, names = _hand()
+    res = reduce_curves(v, names)  # the paper's four steps
+    table = [(s.condition, s.dofs_left) for s in res.steps]
+    assert table == [
+        ("range < 1", 8),  # k1, k2 constant
+        ("range < 1 + rmsd < 0.3", 5),  # p1, p2, s2 from m
+        ("range < 5", 6),  # k1, k2, s1, s2 constant; no relations (paper's table 5: 31 > 27)
+        ("range < 5 + rmsd < 0.5", 3),  # p1, p2, q1 from m; left m, f1, f2
+    ]
+    d = res.to_dict()
+    assert [s["dofs_left"] for s in d["steps"]] == [10, 8, 5, 6, 3]
+    assert d["steps"][0]["condition"] == "original"
+    assert {r["dependent"] for r in d["relations"]} == {"p1.x", "p2.x", "q1.x"}
+    assert {c["curve"] for c in d["constants"]} == {"k1.x", "k2.x", "s1.x", "s2.x"}
+    # errors grow with each simplification of the same range rule
+    assert res.steps[1].rms_error_deg > res.steps[0].rms_error_deg
+    assert res.steps[3].max_error_deg >= res.steps[2].max_error_deg
+
+
+def test_rmsd_steps_accumulate_until_the_next_range_step():
+    v, names = _hand()
+    res = reduce_curves(v, names, "rmsd1<0.5,rmsd2<0.3,range<1")
+    assert [s.condition for s in res.steps] == ["rmsd1 < 0.5", "rmsd1 < 0.5 + rmsd2 < 0.3", "range < 1"]
+    first = {r.dependent for r in res.steps[0].model.relations}
+    second = {r.dependent for r in res.steps[1].model.relations}
+    assert "p2.x" not in first and "p2.x" in second and first < second
+    assert res.steps[2].model.relations == ()
+
+
+@pytest.mark.parametrize("text, message", [
+    ("", "no steps given"),
+    (" , ", "no steps given"),
+    ("range<1,foo", "bad step 'foo': expected range<N, rmsd<N, rmsd1<N or rmsd2<N with N a positive number"),
+    ("range<-1", "bad step 'range<-1': expected range<N, rmsd<N, rmsd1<N or rmsd2<N with N a positive number"),
+    ("rmsd<nan", "bad step 'rmsd<nan': expected range<N, rmsd<N, rmsd1<N or rmsd2<N with N a positive number"),
+    ("range>1", "bad step 'range>1': expected range<N, rmsd<N, rmsd1<N or rmsd2<N with N a positive number"),
+    ("range<1,,rmsd<0.3", "bad step '': expected range<N, rmsd<N, rmsd1<N or rmsd2<N with N a positive number"),
+])
+def test_bad_steps_are_refused_with_a_clear_message(text, message):
+    with pytest.raises(ConfigError) as e:
+        parse_steps(text)
+    assert str(e.value) == message
+
+
+def test_parse_steps():
+    assert parse_steps(" range < 1 , rmsd<0.3,rmsd1<0.4, rmsd2<5e-1") == (
+        RangeRule(1.0), RmsdRule(0.3), RmsdRule(0.4, ("rmsd1",)), RmsdRule(0.5, ("rmsd2",)))
+
+
+# ---------------------------------------------------------------------------- the model
+def test_model_json_round_trip_and_schema(tmp_path):
+    v, names = _hand()
+    model = reduce_curves(v, names, source="hand.bvh").final.model
+    path = model.save(tmp_path / "m.json")
+    back = ReductionModel.load(path)
+    assert back == model
+    assert np.array_equal(back.apply(v), model.apply(v))
+    d = json.loads(path.read_text())
+    assert d["free"] == ["m.x", "f1.x", "f2.x"] and d["controlling"] == ["m.x"]
+    assert d["condition"] == "range < 5 + rmsd < 0.5" and d["source"] == "hand.bvh"
+
+
+def test_schema_shipped_in_the_package_is_the_source_schema():
+    assert (ROOT / "schemas" / "reduction_model.schema.json").read_bytes() == \
+        (ROOT / "usdhands" / "schemas" / "reduction_model.schema.json").read_bytes()
+
+
+def test_model_load_errors(tmp_path):
+    with pytest.raises(ConfigError, match="no such reduction model file"):
+        ReductionModel.load(tmp_path / "missing.json")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{")
+    with pytest.raises(ConfigError, match="not JSON"):
+        ReductionModel.load(bad)
+    v, names = _hand()
+    d = reduce_curves(v, names).final.model.to_dict()
+    d["relations"][0]["kind"] = "rmsd3"
+    bad.write_text(json.dumps(d))
+    with pytest.raises(ConfigError) as e:
+        ReductionModel.load(bad)
+    assert str(e.value) == f"{bad}: relations/0/kind: not a valid reduction model: 'rmsd3' is not one of ['rmsd1', 'rmsd2']"
+    d = reduce_curves(v, names).final.model.to_dict()
+    d["relations"][0]["controlling"] = d["relations"][1]["dependent"]
+    bad.write_text(json.dumps(d))
+    with pytest.raises(ConfigError, match="chains must be resolved"):
+        ReductionModel.load(bad)
+
+
+def test_model_apply_reads_only_the_free_curves():
+    model = ReductionModel(("a.x", "b.x", "c.x"), (Constant("c.x", 4.0),),
+                           (Relation.from_statistics("a.x", "b.x", "rmsd2", 0.1, 1.0, 2.0, 10.0, 4.0),))
+    v = np.array([[99.0, 10.0, 99.0], [99.0, 14.0, 99.0]])
+    out = model.apply(v)
+    assert np.allclose(out, [[1.0, 10.0, 4.0], [-1.0, 14.0, 4.0]])  # a = -(b - 10)/4*2 + 1
+    with pytest.raises(ValueError, match=r"Curves \['c.x'\] of the model are not among the given names"):
+        model.apply(v[:, :2], ["a.x", "b.x"])
+
+
+# ---------------------------------------------------------------------------- naming
+def test_paper_style_names():
+    hm = HandMap(
+        left=HandSide("left", "LeftHand", fingers={
+            "thumb": ("LeftHandThumb1", "LeftHandThumb2", "LeftHandThumb3"),
+            "ring": ("LeftHandRing1", "LeftHandRing2", "LeftHandRing3")}),
+        right=HandSide("right", "hand_r", fingers={
+            "index": ("index_metacarpal_r", "index_01_r", "index_02_r", "index_03_r"),
+            "pinky": ("Root/Hand/PinkyA", "Root/Hand/PinkyB")}),
+    )
+    names = paper_style_names(hm)
+    assert names["LeftHandThumb1.z"] == "leThumbCMCz" and names["LeftHandThumb3.z"] == "leThumbIPz"
+    assert names["LeftHandRing2.y"] == "leRingPIPy" and names["LeftHandRing1.x"] == "leRingMCPx"
+    assert names["index_metacarpal_r.x"] == "riIndexCMCx" and names["index_01_r.y"] == "riIndexMCPy"
+    assert names["PinkyA.y"] == "riPinkyPIPy" and names["PinkyB.y"] == "riPinkyDIPy"
