@@ -369,3 +369,14 @@ def test_paper_style_names():
     assert names["LeftHandRing2.y"] == "leRingPIPy" and names["LeftHandRing1.x"] == "leRingMCPx"
     assert names["index_metacarpal_r.x"] == "riIndexCMCx" and names["index_01_r.y"] == "riIndexMCPy"
     assert names["PinkyA.y"] == "riPinkyPIPy" and names["PinkyB.y"] == "riPinkyDIPy"
+
+
+def test_bad_arrays_are_refused():
+    v = np.stack([basis(0), basis(1)], axis=1)
+    v[5, 1] = np.nan
+    with pytest.raises(ValueError, match="Expected finite values, got NaN or infinity"):
+        reduce_curves(v, ["a.x", "b.x"])
+    with pytest.raises(ValueError, match=r"Expected values to have shape \(T, D\), got \(5,\)"):
+        reduce_curves(np.zeros(5), ["a.x"])
+    with pytest.raises(ValueError, match="Expected 2 names, got 1"):
+        reduce_curves(np.zeros((5, 2)), ["a.x"])

@@ -154,11 +154,8 @@ def curve_statistics(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     mean, std, range : (D,) float64
         Degrees.
     """
-    v = _check_values(values)
-    mean = v.mean(axis=0)
-    std = v.std(axis=0)
-    rng = v.max(axis=0) - v.min(axis=0)
-    return mean, std, rng
+    mean, _, cov, rng = _moments(_check_values(values))
+    return mean, np.sqrt(np.diag(cov)), rng
 
 
 def standardise(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -178,11 +175,12 @@ def standardise(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         False for those curves.
     """
     v = _check_values(values)
-    mean, std, rng = curve_statistics(v)
-    valid = (rng >= DEGENERATE_RANGE_DEG) & (std > 0)
-    z = np.zeros_like(v)
-    z[:, valid] = (v[:, valid] - mean[valid]) / std[valid]
-    return z, valid
+    mean, centred, cov, rng = _moments(v)
+    std = np.sqrt(np.diag(cov))
+    valid = _valid(std, rng)
+    centred /= np.where(valid, std, 1.0)
+    centred[:, ~valid] = 0.0
+    return centred, valid
 
 
 def pair_rmsd(values: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndarray]:
@@ -201,15 +199,39 @@ def pair_rmsd(values: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndarray]:
         Symmetric; NaN on the diagonal, across groups, and for curves that never move.
         ``rmsd1 = sqrt(2 - 2r)``, ``rmsd2 = sqrt(2 + 2r)`` with ``r`` the correlation.
     """
-    z, valid = standardise(values)
-    n = z.shape[0]
-    zv = z[:, valid]
-    r_valid = (zv.T @ zv) / n
-    D = z.shape[1]
-    r = np.full((D, D), np.nan)
-    r[np.ix_(valid, valid)] = np.clip(r_valid, -1.0, 1.0)
+    v = _check_values(values)
+    _, _, cov, rng = _moments(v)
+    return _rmsd_from_cov(cov, rng, _group_codes(groups, v.shape[1]))
+
+
+def _moments(v: np.ndarray):
+    """Mean (D,), centred curves (T, D), covariance ``C^T C / T`` (D, D), range (D,).
+
+    One pass for the mean, one for the centring, one matrix product; the standard
+    deviations are the square roots of the covariance's diagonal.
+    """
+    T = v.shape[0]
+    mean = v.mean(axis=0)
+    rng = v.max(axis=0) - v.min(axis=0)
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(rng))):
+        raise ValueError("Expected finite values, got NaN or infinity")
+    centred = v - mean
+    cov = (centred.T @ centred) / T
+    return mean, centred, cov, rng
+
+
+def _valid(std: np.ndarray, rng: np.ndarray) -> np.ndarray:
+    return (rng >= DEGENERATE_RANGE_DEG) & (std > 0)
+
+
+def _rmsd_from_cov(cov: np.ndarray, rng: np.ndarray, codes: np.ndarray):
+    std = np.sqrt(np.diag(cov))
+    valid = _valid(std, rng)
+    s = np.where(valid, std, 1.0)
+    r = np.clip(cov / s[:, None] / s[None, :], -1.0, 1.0)
+    r[~valid, :] = np.nan
+    r[:, ~valid] = np.nan
     np.fill_diagonal(r, np.nan)
-    codes = _group_codes(groups, D)
     r[codes[:, None] != codes[None, :]] = np.nan
     rmsd1 = np.sqrt(np.maximum(2.0 - 2.0 * r, 0.0))
     rmsd2 = np.sqrt(np.maximum(2.0 + 2.0 * r, 0.0))
@@ -362,9 +384,11 @@ def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None
         raise ValueError(f"Expected {D} group labels, got {len(group_labels)}")
     codes = _group_codes(group_labels, D)
 
-    mean, std, rng = curve_statistics(v)
-    rmsd1, rmsd2 = pair_rmsd(v, codes)
-    valid = (rng >= DEGENERATE_RANGE_DEG) & (std > 0)
+    mean, centred, cov, rng = _moments(v)
+    del centred
+    std = np.sqrt(np.diag(cov))
+    rmsd1, rmsd2 = _rmsd_from_cov(cov, rng, codes)
+    valid = _valid(std, rng)
     # total order: larger std ranks higher; equal std -> the earlier column ranks higher
     rank = np.empty(D, dtype=np.int64)
     rank[np.lexsort((-np.arange(D), std))] = np.arange(D)
@@ -470,8 +494,6 @@ def _check_values(values) -> np.ndarray:
         raise ValueError(f"Expected values to have shape (T, D), got {v.shape}")
     if v.shape[0] < 2:
         raise ValueError(f"Expected at least 2 frames, got {v.shape[0]}")
-    if not np.all(np.isfinite(v)):
-        raise ValueError("Expected finite values, got NaN or infinity")
     return v
 
 
