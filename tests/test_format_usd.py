@@ -1,0 +1,450 @@
+"""USD reader and writers: stages built here with known content, round trips, real assets, bad input."""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
+
+from usdhands.errors import AssetReadError, JointMismatchError, NoSkeletonError
+from usdhands.formats.io import read_asset, read_clip, write_asset, write_clip
+from usdhands.formats.usd import HANDLER
+from usdhands.formats.usd_common import joint_tokens_for, matrices_to_numpy
+from usdhands.formats.usd_validate import usd_compliance_errors
+from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.model.clip import Clip
+from usdhands.model.rotations import quat_angle_deg, quat_slerp, trs_to_xform
+from usdhands.model.skeleton import Skeleton
+
+RNG = np.random.default_rng(7)
+
+# skeleton order; the animation animates a permuted subset
+SKEL_JOINTS = ["Hips", "Hips/Spine", "Hips/Spine/Hand", "Hips/Spine/Hand/Index1", "Hips/Leg"]
+ANIM_JOINTS = ["Hips/Spine/Hand", "Hips", "Hips/Leg"]  # not Spine, not Index1
+
+
+def random_quats(shape) -> np.ndarray:
+    q = RNG.normal(size=tuple(shape) + (4,))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q[q[..., 3] < 0] *= -1
+    return q
+
+
+def gf_rows(m: np.ndarray) -> Vt.Matrix4dArray:
+    """Column-vector (N,4,4) → Vt.Matrix4dArray (USD rows), written the naive way."""
+    return Vt.Matrix4dArray([Gf.Matrix4d(*[float(x) for x in mat.T.reshape(-1)]) for mat in m])
+
+
+class Built:
+    """Ground truth of a stage built by :func:`build_stage`."""
+
+    rest_t = np.array([[0, 1, 0], [0, 0.5, 0], [0.3, 0.2, 0], [0.1, 0, 0.02], [0.1, -0.5, 0]], dtype=float)
+    rest_q = random_quats((5,))
+    times = np.arange(10.0, 16.0)  # time codes 10..15
+    anim_q = random_quats((6, 3))
+    anim_t = RNG.normal(size=(6, 3, 3)).astype(np.float32).astype(float)
+
+
+def build_stage(path: Path, *, skel_root: bool = True, rest: str = "rest", anim_joints=ANIM_JOINTS,
+                n_rot=None, with_mesh: bool = True) -> Path:
+    """A stage written with raw pxr calls: tcps 30, centimetres, Z up, a Material, a mesh."""
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetTimeCodesPerSecond(30)
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    top = UsdSkel.Root.Define(stage, "/Char") if skel_root else UsdGeom.Xform.Define(stage, "/Char")
+    stage.SetDefaultPrim(top.GetPrim())
+    UsdShade.Material.Define(stage, "/Char/Looks/Skin")
+    skel = UsdSkel.Skeleton.Define(stage, "/Char/Skel")
+    skel.CreateJointsAttr().Set(SKEL_JOINTS)
+    local = trs_to_xform(Built.rest_t, Built.rest_q)
+    world = local.copy()
+    for j, p in enumerate([-1, 0, 1, 2, 0]):
+        if p >= 0:
+            world[j] = world[p] @ local[j]
+    if rest in ("rest", "both"):
+        skel.CreateRestTransformsAttr().Set(gf_rows(local))
+    skel.CreateBindTransformsAttr().Set(gf_rows(world))
+    anim = UsdSkel.Animation.Define(stage, "/Char/Skel/Anim")
+    anim.CreateJointsAttr().Set(list(anim_joints))
+    K = len(anim_joints)
+    for f, t in enumerate(Built.times):
+        q = Built.anim_q[f, :K] if n_rot is None else Built.anim_q[f, :n_rot]
+        anim.CreateRotationsAttr().Set(Vt.QuatfArray([Gf.Quatf(w, Gf.Vec3f(x, y, z)) for x, y, z, w in q]), t)
+        anim.CreateTranslationsAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*v) for v in Built.anim_t[f, :K]]), t)
+    anim.CreateScalesAttr().Set(Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)] * K))
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    if with_mesh and skel_root:
+        # a quad split into two triangles; st faceVarying with a seam at vertex 2
+        mesh = UsdGeom.Mesh.Define(stage, "/Char/Body")
+        mesh.CreatePointsAttr().Set([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)])
+        mesh.CreateFaceVertexCountsAttr().Set([3, 3])
+        mesh.CreateFaceVertexIndicesAttr().Set([0, 1, 2, 0, 2, 3])
+        mesh.CreateExtentAttr().Set([(0, 0, 0), (1, 1, 0)])
+        st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                     UsdGeom.Tokens.faceVarying)
+        st.Set([(0, 0), (1, 0), (1, 1), (0, 0), (0.5, 0.5), (0, 1)])
+        binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+        binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+        # mesh-local joint order: [Hand, Hips]; two influences per vertex
+        binding.CreateJointsAttr().Set(["Hips/Spine/Hand", "Hips"])
+        binding.CreateJointIndicesPrimvar(False, 2).Set([0, 1, 0, 1, 1, 0, 1, 0])
+        binding.CreateJointWeightsPrimvar(False, 2).Set([0.75, 0.25, 0.5, 0.5, 1.0, 0.0, 0.6, 0.4])
+        binding.CreateGeomBindTransformAttr().Set(Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(0, 0, 2)))
+    stage.GetRootLayer().Save()
+    return path
+
+
+def expected_clip_arrays(anim_joints=ANIM_JOINTS):
+    """(T, J, 4) rotations and (T, J, 3) translations the reader must produce."""
+    T = len(Built.times)
+    rot = np.tile(Built.rest_q, (T, 1, 1))
+    tr = np.tile(Built.rest_t, (T, 1, 1))
+    for k, name in enumerate(anim_joints):
+        j = SKEL_JOINTS.index(name)
+        rot[:, j] = Built.anim_q[:, k]
+        tr[:, j] = Built.anim_t[:, k]
+    return rot, tr
+
+
+def assert_rotations_close(a, b, deg=1e-4):
+    assert quat_angle_deg(np.asarray(a), np.asarray(b)).max() < deg
+
+
+def random_clip(T=40, J=65, names=None) -> Clip:
+    parents = np.array([-1] + [int(RNG.integers(0, j)) for j in range(1, J)])
+    names = names or [f"joint{j}" for j in range(J)]
+    sk = Skeleton(names, parents, RNG.normal(size=(J, 3)) * 10, random_quats((J,)), meters_per_unit=0.01,
+                  up_axis="Z", name="Rig")
+    return Clip(sk, 30.0, random_quats((T, J)), RNG.normal(size=(T, J, 3)) * 10, name="Take 1", start_time=0.5)
+
+
+# --------------------------------------------------------------------------- reading
+def test_read_permuted_subset_animation(tmp_path):
+    p = build_stage(tmp_path / "char.usda")
+    asset = HANDLER.read(p)
+    assert len(asset.skeletons) == 1 and len(asset.clips) == 1
+    sk = asset.skeletons[0]
+    assert sk.joint_names == tuple(SKEL_JOINTS)
+    assert list(sk.parents) == [-1, 0, 1, 2, 0]
+    assert sk.meters_per_unit == pytest.approx(0.01) and sk.up_axis == "Z"
+    assert sk.name == "/Char/Skel"
+    np.testing.assert_allclose(sk.rest_translations, Built.rest_t, atol=1e-12)
+    assert_rotations_close(sk.rest_rotations, Built.rest_q, 1e-6)
+    clip = asset.clips[0]
+    assert clip.name == "/Char/Skel/Anim"
+    assert clip.fps == 30.0 and clip.num_frames == 6
+    assert clip.start_time == pytest.approx(10 / 30)
+    rot, tr = expected_clip_arrays()
+    assert_rotations_close(clip.rotations, rot, 1e-5)
+    np.testing.assert_allclose(clip.translations, tr, atol=1e-6)
+    # unanimated joints (Spine, Index1) sit at rest at every frame
+    np.testing.assert_allclose(clip.translations[:, 1], np.tile(Built.rest_t[1], (6, 1)))
+
+
+def test_rest_derived_from_bind_transforms(tmp_path):
+    a = HANDLER.read(build_stage(tmp_path / "rest.usda"))
+    b = HANDLER.read(build_stage(tmp_path / "bind.usda", rest="bind"))
+    np.testing.assert_allclose(b.skeletons[0].rest_translations, a.skeletons[0].rest_translations, atol=1e-9)
+    assert_rotations_close(b.skeletons[0].rest_rotations, a.skeletons[0].rest_rotations, 1e-6)
+    np.testing.assert_allclose(b.skeletons[0].bind_xforms, a.skeletons[0].rest_world_xforms(), atol=1e-9)
+
+
+def test_skeleton_outside_skelroot(tmp_path):
+    p = build_stage(tmp_path / "free.usda", skel_root=False)
+    asset = HANDLER.read(p)
+    assert [c.name for c in asset.clips] == ["/Char/Skel/Anim"]
+    rot, _ = expected_clip_arrays()
+    assert_rotations_close(asset.clips[0].rotations, rot, 1e-5)
+    assert asset.meshes == ()
+
+
+def test_read_resamples_with_usd_interpolation(tmp_path):
+    p = build_stage(tmp_path / "char.usda")
+    clip = HANDLER.read(p, fps=60).clips[0]
+    assert clip.fps == 60 and clip.num_frames == 11
+    rot, tr = expected_clip_arrays()
+    assert_rotations_close(clip.rotations[::2], rot, 1e-5)
+    mid = quat_slerp(rot[:-1], rot[1:], 0.5)
+    assert_rotations_close(clip.rotations[1::2], mid, 1e-3)
+    np.testing.assert_allclose(clip.translations[1::2], (tr[:-1] + tr[1:]) / 2, atol=1e-6)
+
+
+def test_read_skinned_mesh_maps_joints_and_splits_uv_seams(tmp_path):
+    asset = HANDLER.read(build_stage(tmp_path / "char.usda"))
+    (m,) = asset.meshes
+    assert m.name == "/Char/Body" and m.skeleton_index == 0
+    # vertex 0 carries two UVs ((0,0) twice → one), vertex 2 two ((1,1), (0.5,0.5)) → 5 vertices
+    assert len(m.points) == 5
+    hand, hips = SKEL_JOINTS.index("Hips/Spine/Hand"), SKEL_JOINTS.index("Hips")
+    corner_points = m.points[m.face_vertex_indices]
+    np.testing.assert_allclose(corner_points, np.array([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 0, 0), (1, 1, 0),
+                                                        (0, 1, 0)], dtype=float))
+    np.testing.assert_allclose(m.uvs[m.face_vertex_indices], [(0, 0), (1, 0), (1, 1), (0, 0), (0.5, 0.5), (0, 1)])
+    # influences of original vertex 2 (mesh-local [1, 0] = Hips, Hand) follow both of its copies
+    for corner in (2, 4):
+        v = m.face_vertex_indices[corner]
+        assert list(m.joint_indices[v]) == [hips, hand]
+        np.testing.assert_allclose(m.joint_weights[v], [1.0, 0.0])
+    v0 = m.face_vertex_indices[0]
+    assert list(m.joint_indices[v0]) == [hand, hips]
+    np.testing.assert_allclose(m.geom_bind_xform[:3, 3], [0, 0, 2])
+
+
+def test_cesium_man(shared_assets):
+    path = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    asset = read_asset(path)
+    (sk,) = asset.skeletons
+    (clip,) = asset.clips
+    assert sk.num_joints == 19 and clip.num_frames == 48 and clip.fps == 24.0
+    assert clip.name == "/CesiumMan/Animations/skelAnim_0"
+    assert sk.joint_names[0] == "Skeleton_torso_joint_1"
+    (m,) = asset.meshes
+    assert m.points.shape == (3273, 3) and m.joint_indices.shape == (3273, 4)
+    np.testing.assert_allclose(m.joint_weights.sum(axis=1), 1.0, atol=1e-5)
+    # the clip's rotations are UsdSkel's own answer at each time code
+    stage = Usd.Stage.Open(str(path))
+    anim_query = UsdSkel.Cache().GetAnimQuery(UsdSkel.Animation(stage.GetPrimAtPath(clip.name)))
+    order = [sk.joint_names.index(str(t)) for t in anim_query.GetJointOrder()]
+    q = np.asarray(anim_query.ComputeJointLocalTransformComponents(Usd.TimeCode(20))[1])
+    np.testing.assert_allclose(clip.rotations[19][order], q, atol=1e-7)
+
+
+def test_teapot_has_no_skeleton(shared_assets):
+    path = shared_assets / "usd_teapot" / "UtahTeapot.usd"
+    assert read_asset(path).skeletons == ()
+    with pytest.raises(NoSkeletonError) as e:
+        read_clip(path)
+    assert str(e.value) == f"{path}: no skeleton in file"
+
+
+# --------------------------------------------------------------------------- bad input
+def test_missing_file(tmp_path):
+    p = tmp_path / "nope.usda"
+    with pytest.raises(AssetReadError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: no such file"
+    with pytest.raises(AssetReadError) as e:
+        HANDLER.read(p)
+    assert str(e.value) == f"{p}: no such file"
+
+
+def test_truncated_usdc(tmp_path):
+    good = tmp_path / "good.usdc"
+    stage = Usd.Stage.CreateNew(str(good))
+    UsdSkel.Skeleton.Define(stage, "/Skel").CreateJointsAttr().Set(["a"])
+    stage.Save()
+    data = good.read_bytes()
+    bad = tmp_path / "bad.usdc"
+    bad.write_bytes(data[: len(data) // 2])
+    with pytest.raises(AssetReadError) as e:
+        read_asset(bad)
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert re.fullmatch(re.escape(f"{bad}: cannot read as USD: Sdf crate file corrupt, possibly truncated: ")
+                        + r"table of contents at offset \d+ but file size is \d+", msg), msg
+
+
+def test_corrupt_usda(tmp_path):
+    bad = tmp_path / "bad.usda"
+    bad.write_text('#usda 1.0\ndef Xform "A" {\n  float x = \n')
+    with pytest.raises(AssetReadError) as e:
+        read_asset(bad)
+    assert str(e.value).startswith(f"{bad}: cannot read as USD: line 3:3: Expected }}")
+    assert "\n" not in str(e.value)
+
+
+def test_animation_with_unknown_joints(tmp_path):
+    p = build_stage(tmp_path / "bad.usda", anim_joints=["Hips", "Hips/Tail", "Hips/Spine/Wing"])
+    with pytest.raises(JointMismatchError) as e:
+        read_asset(p)
+    assert str(e.value) == (f"{p}: /Char/Skel/Anim: animation names 2 joint(s) that skeleton /Char/Skel does not "
+                            "have: 'Hips/Tail', 'Hips/Spine/Wing'")
+
+
+def test_array_of_wrong_length(tmp_path):
+    p = build_stage(tmp_path / "bad.usda", n_rot=2)
+    with pytest.raises(JointMismatchError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: /Char/Skel/Anim: rotations has 2 values for 3 joints at time 10"
+
+
+def test_rest_transforms_of_wrong_length(tmp_path):
+    p = build_stage(tmp_path / "bad.usda")
+    stage = Usd.Stage.Open(str(p))
+    UsdSkel.Skeleton(stage.GetPrimAtPath("/Char/Skel")).GetRestTransformsAttr().Set(
+        Vt.Matrix4dArray([Gf.Matrix4d(1)] * 3))
+    stage.Save()
+    with pytest.raises(JointMismatchError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: /Char/Skel: restTransforms has 3 entries for 5 joints"
+
+
+# --------------------------------------------------------------------------- writing
+def test_joint_tokens_sanitised_and_unique():
+    names = ["mixamorig:Hips", "Palm1.L", "Palm1:L", "Hips/Spine"]
+    tokens = joint_tokens_for(names, [-1, 0, 0, -1])
+    assert tokens == ["mixamorig_Hips", "mixamorig_Hips/Palm1_L", "mixamorig_Hips/Palm1_L_2", "Hips_Spine"]
+    # USD joint paths come back unchanged
+    assert joint_tokens_for(SKEL_JOINTS, [-1, 0, 1, 2, 0]) == SKEL_JOINTS
+
+
+@pytest.mark.parametrize("ext", [".usda", ".usdc", ".usd"])
+def test_round_trip_random_clip(tmp_path, ext):
+    names = [f"mixamorig:J{j}" if j % 3 else f"Palm{j}.L" for j in range(65)]
+    clip = random_clip(names=names)
+    out = write_asset(Asset("mem", (clip.skeleton,), (clip,)), tmp_path / f"rt{ext}")
+    assert usd_compliance_errors(out) == []
+    back = read_clip(out)
+    assert back.skeleton.joint_names == tuple(names)
+    assert list(back.skeleton.parents) == list(clip.skeleton.parents)
+    assert back.fps == 30.0 and back.num_frames == clip.num_frames
+    assert back.start_time == pytest.approx(0.5)
+    assert back.skeleton.meters_per_unit == pytest.approx(0.01) and back.skeleton.up_axis == "Z"
+    assert back.name == "/Root/Take_1"
+    # quatf keeps ~1e-7; translations float32 relative 1e-6
+    assert np.abs(np.abs((back.rotations * clip.rotations).sum(-1)) - 1).max() < 1e-6
+    assert quat_angle_deg(back.rotations, clip.rotations).max() < 1e-4
+    np.testing.assert_allclose(back.translations, clip.translations, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(back.skeleton.rest_translations, clip.skeleton.rest_translations, atol=1e-9)
+    # UsdSkel's own queries read what was written: world transforms match the model's FK
+    stage = Usd.Stage.Open(str(out))
+    skel = UsdSkel.Skeleton(stage.GetPrimAtPath("/Root/Rig"))
+    query = UsdSkel.Cache().GetSkelQuery(skel)
+    assert query.GetAnimQuery().GetPrim().GetPath() == "/Root/Take_1"
+    code = Usd.TimeCode(0.5 * 30 + 7)
+    skel_space = matrices_to_numpy(query.ComputeJointSkelTransforms(code))
+    np.testing.assert_allclose(skel_space[:, :3, 3], clip.world_positions()[7], atol=1e-3)
+
+
+def test_round_trip_mesh_and_several_skeletons(tmp_path):
+    a, b = random_clip(T=5, J=4), random_clip(T=7, J=3)
+    b = b.replace(skeleton=Skeleton(b.skeleton.joint_names, b.skeleton.parents, b.skeleton.rest_translations,
+                                    b.skeleton.rest_rotations, meters_per_unit=0.01, up_axis="Z", name="Prop"),
+                  name="Spin")
+    a2 = a.replace(name="Take 2", rotations=random_quats((5, 4)))
+    mesh = SkinnedMesh("Body.001", RNG.normal(size=(4, 3)), np.array([3, 3]), np.array([0, 1, 2, 0, 2, 3]),
+                       normals=np.tile([0.0, 0, 1], (4, 1)), uvs=RNG.random((4, 2)),
+                       joint_indices=np.array([[0, 1, 2, 3, 0]] * 4), joint_weights=np.full((4, 5), 0.2),
+                       geom_bind_xform=trs_to_xform(np.array([1.0, 2, 3]), random_quats(())), skeleton_index=0)
+    out = write_asset(Asset("mem", (a.skeleton, b.skeleton), (a, a2, b), (mesh,)), tmp_path / "two.usda")
+    assert usd_compliance_errors(out) == []
+    back = read_asset(out)
+    assert [s.name for s in back.skeletons] == ["/Root/RigRoot/Rig", "/Root/PropRoot/Prop"]
+    assert [c.name for c in back.clips] == ["/Root/RigRoot/Take_1", "/Root/PropRoot/Spin", "/Root/RigRoot/Take_2"]
+    assert back.clips[2].skeleton is back.skeletons[0]
+    assert_rotations_close(back.clips[2].rotations, a2.rotations)
+    assert_rotations_close(back.clips[1].rotations, b.rotations)
+    (m,) = back.meshes
+    np.testing.assert_allclose(m.points, mesh.points, atol=1e-6)
+    np.testing.assert_allclose(m.uvs, mesh.uvs, atol=1e-7)
+    assert (m.joint_indices == mesh.joint_indices).all() and m.joint_indices.shape == (4, 5)
+    np.testing.assert_allclose(m.geom_bind_xform, mesh.geom_bind_xform, atol=1e-12)
+    stage = Usd.Stage.Open(str(out))
+    mesh_prim = stage.GetPrimAtPath("/Root/RigRoot/Body_001")
+    assert UsdSkel.BindingAPI(mesh_prim).GetJointIndicesPrimvar().GetElementSize() == 5
+
+
+def _layer_bytes(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_write_clip_as_layer_is_sparse_and_composes(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    before = _layer_bytes(src)
+    clip = read_clip(src)
+    finger = SKEL_JOINTS.index("Hips/Spine/Hand/Index1")
+    new_rot = random_quats((clip.num_frames, 1))
+    edited = clip.with_joint_rotations([finger], new_rot)
+    (tmp_path / "out").mkdir()
+    out = write_clip(src, edited, tmp_path / "out" / "fingers.usda", as_layer=True)
+    assert _layer_bytes(src) == before
+    layer = Sdf.Layer.FindOrOpen(str(out))
+    assert list(layer.subLayerPaths) == ["../char.usda"]
+    specs = []
+    layer.Traverse(layer.pseudoRoot.path, specs.append)
+    prim_specs = [layer.GetPrimAtPath(p) for p in specs if p.IsPrimPath()]
+    assert prim_specs and all(s.specifier == Sdf.SpecifierOver for s in prim_specs)
+    props = sorted(str(p) for p in specs if p.IsPropertyPath())
+    # the finger joint was not animated: joints, rotations, translations change; scales stay ones
+    assert props == ["/Char/Skel/Anim.joints", "/Char/Skel/Anim.rotations", "/Char/Skel/Anim.scales",
+                     "/Char/Skel/Anim.translations"]
+    assert layer.timeCodesPerSecond == 30 and layer.GetPrimAtPath("/Char/Looks") is None
+    stage = Usd.Stage.Open(str(out))
+    anim = UsdSkel.Animation(stage.GetPrimAtPath("/Char/Skel/Anim"))
+    assert list(anim.GetJointsAttr().Get()) == ANIM_JOINTS + ["Hips/Spine/Hand/Index1"]
+    back = read_clip(out)
+    assert_rotations_close(back.rotations[:, finger], new_rot[:, 0])
+    assert_rotations_close(back.rotations, edited.rotations)
+    np.testing.assert_allclose(back.translations, edited.translations, atol=1e-6)
+    assert usd_compliance_errors(out) == []
+
+
+def test_write_clip_as_layer_leaves_unchanged_attributes_out(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    clip = read_clip(src)
+    hand = SKEL_JOINTS.index("Hips/Spine/Hand")
+    out = write_clip(src, clip.with_joint_rotations([hand], random_quats((clip.num_frames, 1))),
+                     tmp_path / "hand.usda", as_layer=True)
+    layer = Sdf.Layer.FindOrOpen(str(out))
+    specs = []
+    layer.Traverse(layer.pseudoRoot.path, specs.append)
+    assert sorted(str(p) for p in specs if p.IsPropertyPath()) == ["/Char/Skel/Anim.rotations"]
+    assert list(layer.subLayerPaths) == ["./char.usda"]
+
+
+def test_write_clip_full_copy_keeps_other_prims(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    before = _layer_bytes(src)
+    clip = read_clip(src)
+    new = clip.replace(rotations=random_quats(clip.rotations.shape[:2]))
+    out = write_clip(src, new, tmp_path / "copy.usdc")
+    assert _layer_bytes(src) == before
+    stage = Usd.Stage.Open(str(out))
+    assert stage.GetPrimAtPath("/Char/Looks/Skin").IsA(UsdShade.Material)
+    assert stage.GetPrimAtPath("/Char/Body").IsA(UsdGeom.Mesh)
+    assert UsdGeom.GetStageMetersPerUnit(stage) == pytest.approx(0.01)
+    assert not stage.GetRootLayer().subLayerPaths
+    back = read_clip(out)
+    assert_rotations_close(back.rotations, new.rotations)
+    assert len(UsdSkel.Animation(stage.GetPrimAtPath("/Char/Skel/Anim")).GetJointsAttr().Get()) == 5
+    assert usd_compliance_errors(out) == []
+
+
+def test_write_clip_binds_new_animation_when_none(tmp_path):
+    src = tmp_path / "rig.usda"
+    clip = random_clip(T=3, J=5)
+    write_asset(Asset("mem", (clip.skeleton,), ()), src)
+    assert read_asset(src).clips == ()
+    sk = read_asset(src).skeletons[0]
+    new = Clip(sk, 30, random_quats((3, 5)), name="whatever")
+    out = write_clip(src, new, tmp_path / "anim.usda", as_layer=True)
+    back = read_clip(out)
+    assert back.name == "/Root/Animation"
+    assert_rotations_close(back.rotations, new.rotations)
+
+
+def test_write_clip_unknown_joint(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    clip = random_clip(T=3, J=2)
+    with pytest.raises(AssetReadError) as e:
+        write_clip(src, clip, tmp_path / "x.usda")
+    assert str(e.value) == f"{src}: no Skeleton for the clip's skeleton 'Rig'"
+    assert not (tmp_path / "x.usda").exists()
+
+
+def test_cesium_man_write_clip(shared_assets, tmp_path):
+    src = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    clip = read_clip(src)
+    new = clip.with_joint_rotations([5], random_quats((clip.num_frames, 1)))
+    source_errors = set(usd_compliance_errors(src))
+    for as_layer in (False, True):
+        out = write_clip(src, new, tmp_path / f"cm{int(as_layer)}.usda", as_layer=as_layer)
+        assert set(usd_compliance_errors(out)) <= source_errors
+        back = read_asset(out)
+        assert_rotations_close(back.clips[0].rotations, new.rotations)
+        assert back.meshes[0].points.shape == (3273, 3)

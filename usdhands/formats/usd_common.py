@@ -1,0 +1,162 @@
+"""Helpers shared by the USD reader and writers: opening stages, diagnostics, names, matrices.
+
+Conventions at this boundary: ``Gf`` matrices are row-vector (``p' = p M``), the
+model's are column-vector, so every matrix array is transposed here; ``Vt.QuatfArray``
+holds xyzw in memory, which is the model's order, so quaternion arrays move as they are.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
+from pxr import Sdf, Tf, Usd, UsdSkel, UsdUtils, Vt
+
+from usdhands.errors import AssetReadError
+
+__all__ = [
+    "SOURCE_JOINT_NAMES_KEY", "SOURCE_SKELETON_KEY", "quiet_diagnostics", "open_stage",
+    "tf_error_reason", "matrices_to_numpy", "numpy_to_matrices", "valid_identifier",
+    "unique_name", "joint_tokens_for", "skeleton_tokens_and_names", "bound_animation_path",
+]
+
+#: customData key on a Skeleton prim: the original joint names when the tokens had to be sanitised
+SOURCE_JOINT_NAMES_KEY = "usdhands:sourceJointNames"
+#: customData key on a SkelAnimation prim: the Skeleton prim it animates (for animations not bound)
+SOURCE_SKELETON_KEY = "usdhands:skeleton"
+
+
+@contextlib.contextmanager
+def quiet_diagnostics() -> Iterator[object]:
+    """Collect USD warnings and status messages instead of letting USD print them.
+
+    The library never prints; while a delegate is installed, Tf hands diagnostics to it
+    rather than to stderr. Yields the delegate (``TakeUncoalescedDiagnostics()``).
+    """
+    delegate = UsdUtils.CoalescingDiagnosticDelegate()
+    try:
+        yield delegate
+    finally:
+        del delegate
+
+
+def tf_error_reason(err: BaseException, path: str | os.PathLike | None = None) -> str:
+    """The first commentary of a ``Tf.ErrorException``, on one line, without the file path."""
+    text = str(err)
+    first = text.split("\n\tError in ")[1] if "\n\tError in " in text else text
+    if " : '" in first:
+        first = first.split(" : '", 1)[1]
+        first = first.rsplit("'", 1)[0]
+    first = " ".join(first.split())
+    if path is not None:
+        for p in {str(path), str(Path(path).resolve())}:
+            first = first.replace(f"@{p}@", "the file").replace(f"{p}:", "line ").replace(p, "the file")
+    return first.strip() or "unknown error"
+
+
+def open_stage(path: str | os.PathLike) -> Usd.Stage:
+    """Open a USD file, all payloads loaded.
+
+    Raises
+    ------
+    AssetReadError
+        Missing, truncated or corrupt files, one line with the path.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise AssetReadError("no such file", path=path)
+    if path.is_dir():
+        raise AssetReadError("is a folder, not a file", path=path)
+    with quiet_diagnostics():
+        try:
+            stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
+        except Tf.ErrorException as e:
+            raise AssetReadError(f"cannot read as USD: {tf_error_reason(e, path)}", path=path) from None
+    if stage is None:
+        raise AssetReadError("cannot read as USD", path=path)
+    return stage
+
+
+def matrices_to_numpy(value) -> np.ndarray:
+    """``Vt.Matrix4dArray`` (row vectors) → ``(N, 4, 4)`` float64 for column vectors."""
+    a = np.asarray(value, dtype=np.float64).reshape(-1, 4, 4)
+    return np.ascontiguousarray(np.swapaxes(a, -1, -2))
+
+
+def numpy_to_matrices(m: np.ndarray) -> Vt.Matrix4dArray:
+    """``(N, 4, 4)`` column-vector transforms → ``Vt.Matrix4dArray`` (row vectors)."""
+    m = np.asarray(m, dtype=np.float64).reshape(-1, 4, 4)
+    return Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(np.swapaxes(m, -1, -2)))
+
+
+def valid_identifier(name: str) -> str:
+    """A USD prim/joint identifier made from any string (``"Palm1.L"`` → ``"Palm1_L"``)."""
+    return Tf.MakeValidIdentifier(str(name)) or "_"
+
+
+def unique_name(name: str, used: set[str]) -> str:
+    """``name``, or ``name_2``, ``name_3``... whichever is not in ``used``; adds it to ``used``."""
+    out, k = name, 1
+    while out in used:
+        k += 1
+        out = f"{name}_{k}"
+    used.add(out)
+    return out
+
+
+def joint_tokens_for(names: Sequence[str], parents: Sequence[int]) -> list[str]:
+    """UsdSkel joint tokens (paths of valid identifiers) for a skeleton's joint names.
+
+    A name that already is its parent's token plus one valid identifier is kept as it
+    is, so names read from USD come back unchanged; any other name (glTF
+    ``"mixamorig:Hips"``, ``"Palm1.L"``) becomes a valid identifier under its parent's
+    token, made unique among its siblings.
+
+    Parameters
+    ----------
+    names : sequence of str, length J
+    parents : (J,) int
+        Parent index per joint, -1 for roots, parents first.
+    """
+    tokens: list[str] = []
+    used: dict[int, set[str]] = {}
+    for j, (name, p) in enumerate(zip(names, parents)):
+        p = int(p)
+        name = str(name)
+        if p < 0:
+            leaf = name
+        else:
+            prefix = str(names[p]) + "/"
+            leaf = name[len(prefix):] if name.startswith(prefix) else name
+        ident = valid_identifier(leaf) if "/" not in leaf else valid_identifier(leaf.replace("/", "_"))
+        ident = unique_name(ident, used.setdefault(p, set()))
+        tokens.append(ident if p < 0 else f"{tokens[p]}/{ident}")
+    return tokens
+
+
+def skeleton_tokens_and_names(skel: UsdSkel.Skeleton) -> tuple[list[str], list[str]]:
+    """The joint tokens of a Skeleton prim and the names the model uses for them.
+
+    The names are the tokens, unless the prim's customData ``usdhands:sourceJointNames``
+    (written by :mod:`usdhands.formats.usd_write`) holds one original name per joint.
+    """
+    tokens = [str(t) for t in (skel.GetJointsAttr().Get() or [])]
+    names = list(tokens)
+    stored = skel.GetPrim().GetCustomDataByKey(SOURCE_JOINT_NAMES_KEY)
+    if stored is not None and len(stored) == len(tokens) and len(set(map(str, stored))) == len(tokens):
+        names = [str(n) for n in stored]
+    return tokens, names
+
+
+def bound_animation_path(skel_prim: Usd.Prim) -> Sdf.Path | None:
+    """The SkelAnimation bound to a Skeleton prim through ``skel:animationSource``, if any."""
+    binding = UsdSkel.BindingAPI(skel_prim)
+    rel = binding.GetAnimationSourceRel()
+    if rel:
+        targets = rel.GetForwardedTargets()
+        if targets:
+            return targets[0]
+    return None

@@ -1,0 +1,424 @@
+"""Reading UsdSkel skeletons, animations and skinned meshes into the model.
+
+Everything goes through UsdSkel's queries: ``UsdSkel.Cache`` populated from every
+SkelRoot, ``SkeletonQuery`` for topology and rest/bind poses, ``AnimQuery`` for the
+joint-local components of the animation at each time, ``SkinningQuery`` for the
+influences of each bound mesh. Skeletons outside any SkelRoot are read too (the cache
+answers ``GetSkelQuery`` for them, with the animation their own
+``skel:animationSource`` names).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+from pxr import Gf, Usd, UsdGeom, UsdSkel
+
+from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.formats.usd_common import (
+    SOURCE_SKELETON_KEY,
+    bound_animation_path,
+    matrices_to_numpy,
+    open_stage,
+    quiet_diagnostics,
+    skeleton_tokens_and_names,
+)
+from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.model.clip import Clip
+from usdhands.model.rotations import xform_to_trs
+from usdhands.model.skeleton import Skeleton
+
+__all__ = ["read_usd", "read_skeleton", "frame_times"]
+
+_PREDICATE = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+
+
+def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
+    """Read every Skeleton, its animations and its skinned meshes.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.usd``, ``.usda``, ``.usdc`` or ``.usdz``.
+    fps : float, optional
+        Sample the animations at this rate (USD interpolates between time samples);
+        by default the rate of the time samples (``timeCodesPerSecond`` for one sample
+        per time code).
+
+    Returns
+    -------
+    Asset
+        One Skeleton per Skeleton prim (joint names are the USD joint paths, or the
+        original names the writer stored), one Clip per SkelAnimation (bound ones
+        first; ``Clip.name`` is the prim path), one SkinnedMesh per skinned Mesh.
+
+    Raises
+    ------
+    AssetReadError
+        Missing or corrupt file, invalid joint topology.
+    JointMismatchError
+        An animation names joints its skeleton does not have, or an array's length
+        does not match its joints.
+    """
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"Expected fps > 0, got {fps}")
+    path = Path(path)
+    stage = open_stage(path)
+    with quiet_diagnostics():
+        return _read_stage(stage, path, fps)
+
+
+def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
+    tcps = float(stage.GetTimeCodesPerSecond())
+    mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+    up = str(UsdGeom.GetStageUpAxis(stage)).upper()
+    up = up if up in ("Y", "Z") else "Y"
+    cache = UsdSkel.Cache()
+    roots = []
+    skel_prims = []
+    anim_prims = []
+    for prim in stage.Traverse(_PREDICATE):
+        if prim.IsA(UsdSkel.Root):
+            roots.append(UsdSkel.Root(prim))
+            cache.Populate(roots[-1], _PREDICATE)
+        elif prim.IsA(UsdSkel.Skeleton):
+            skel_prims.append(prim)
+        elif prim.IsA(UsdSkel.Animation):
+            anim_prims.append(prim)
+
+    skeletons: list[Skeleton] = []
+    tokens_of: list[list[str]] = []
+    clips: list[Clip] = []
+    used_anims: set[str] = set()
+    index_of_skel: dict[str, int] = {}
+    for prim in skel_prims:
+        skel = UsdSkel.Skeleton(prim)
+        query = cache.GetSkelQuery(skel)
+        sk, tokens = read_skeleton(skel, query, path=path, meters_per_unit=mpu, up_axis=up)
+        if sk is None:
+            continue
+        index_of_skel[str(prim.GetPath())] = len(skeletons)
+        skeletons.append(sk)
+        tokens_of.append(tokens)
+        anim_query = query.GetAnimQuery() if query else None
+        if not anim_query:
+            anim_path = bound_animation_path(prim)
+            anim_prim = stage.GetPrimAtPath(anim_path) if anim_path else None
+            if anim_prim and anim_prim.IsA(UsdSkel.Animation):
+                anim_query = cache.GetAnimQuery(UsdSkel.Animation(anim_prim))
+        if anim_query:
+            clips.append(_read_clip(anim_query, sk, tokens, tcps, fps, path))
+            used_anims.add(str(anim_query.GetPrim().GetPath()))
+
+    # animations bound to no skeleton: attach each to the skeleton it names or fits
+    for prim in anim_prims:
+        if str(prim.GetPath()) in used_anims:
+            continue
+        anim_query = cache.GetAnimQuery(UsdSkel.Animation(prim))
+        if not anim_query:
+            continue
+        joints = [str(t) for t in anim_query.GetJointOrder()]
+        target = prim.GetCustomDataByKey(SOURCE_SKELETON_KEY)
+        k = index_of_skel.get(str(target)) if target is not None else None
+        if k is None:
+            k = next((i for i, toks in enumerate(tokens_of) if joints and set(joints) <= set(toks)), None)
+        if k is None:
+            continue  # animates no skeleton of this file
+        clips.append(_read_clip(anim_query, skeletons[k], tokens_of[k], tcps, fps, path))
+
+    meshes: list[SkinnedMesh] = []
+    for root in roots:
+        for binding in cache.ComputeSkelBindings(root, _PREDICATE):
+            k = index_of_skel.get(str(binding.GetSkeleton().GetPrim().GetPath()))
+            if k is None:
+                continue
+            for sq in binding.GetSkinningTargets():
+                if sq.GetPrim().IsA(UsdGeom.Mesh):
+                    meshes.append(_read_mesh(sq, k, tokens_of[k], path))
+    return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes))
+
+
+def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_unit: float = 1.0,
+                  up_axis: str = "Y") -> tuple[Skeleton | None, list[str]]:
+    """The model Skeleton of a Skeleton prim and its joint tokens (None for no joints).
+
+    Rest transforms come from ``restTransforms``, or are derived from
+    ``bindTransforms`` (``local = bind[parent]^-1 · bind[joint]``) where those are missing.
+
+    Raises
+    ------
+    AssetReadError
+        Joint paths that do not form a valid topology (parents first).
+    JointMismatchError
+        ``restTransforms`` or ``bindTransforms`` with a length other than the joints'.
+    """
+    prim = skel.GetPrim()
+    where = str(prim.GetPath())
+    tokens, names = skeleton_tokens_and_names(skel)
+    J = len(tokens)
+    if J == 0:
+        return None, []
+    if query:
+        topology = query.GetTopology()
+    else:
+        topology = UsdSkel.Topology(tokens)
+    ok, reason = topology.Validate()
+    if not ok:
+        raise AssetReadError(f"invalid joint hierarchy: {' '.join(str(reason).split())}", path=path, location=where)
+    parents = np.asarray(topology.GetParentIndices(), dtype=np.int64)
+    if len(set(tokens)) != J:
+        raise AssetReadError("repeated joint paths in 'joints'", path=path, location=where)
+
+    bind = skel.GetBindTransformsAttr().Get()
+    bind = None if bind is None or len(bind) == 0 else bind
+    if bind is not None and len(bind) != J:
+        raise JointMismatchError(f"bindTransforms has {len(bind)} entries for {J} joints", path=path, location=where)
+    bind_np = matrices_to_numpy(bind) if bind is not None else None
+    rest = skel.GetRestTransformsAttr().Get()
+    rest = None if rest is None or len(rest) == 0 else rest
+    if rest is not None and len(rest) != J:
+        raise JointMismatchError(f"restTransforms has {len(rest)} entries for {J} joints", path=path, location=where)
+    if rest is not None:
+        local = matrices_to_numpy(rest)
+    elif bind_np is not None:
+        local = np.empty_like(bind_np)
+        for j, p in enumerate(parents):
+            local[j] = bind_np[j] if p < 0 else np.linalg.solve(bind_np[p], bind_np[j])
+    else:
+        raise JointMismatchError(f"neither restTransforms nor bindTransforms is authored for its {J} joints",
+                                 path=path, location=where)
+    t, q, s = xform_to_trs(local)
+    sk = Skeleton(names, parents, t, q, s, bind_np, meters_per_unit=meters_per_unit, up_axis=up_axis, name=where)
+    return sk, tokens
+
+
+def frame_times(samples: list[float], tcps: float, fps: float | None) -> tuple[np.ndarray, float]:
+    """Time codes to sample and the frame rate they make.
+
+    Parameters
+    ----------
+    samples : list of float
+        The animation's time samples (time codes), sorted.
+    tcps : float
+        The stage's time codes per second.
+    fps : float, optional
+        Wanted rate; by default the rate of evenly spaced samples, else ``tcps``.
+
+    Returns
+    -------
+    times : (T,) float
+        Time codes.
+    fps : float
+    """
+    samples = np.asarray(samples, dtype=np.float64)
+    if len(samples) == 0:
+        return np.zeros(0), float(fps or tcps)
+    first, last = samples[0], samples[-1]
+    if fps is None:
+        if len(samples) == 1:
+            return samples, tcps
+        steps = np.diff(samples)
+        if np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9) and steps[0] < 1.0 + 1e-9:
+            return samples, tcps / float(steps[0])
+        fps = tcps
+    step = tcps / float(fps)
+    n = int(np.floor((last - first) / step + 1e-6)) + 1
+    return first + np.arange(n) * step, float(fps)
+
+
+def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: float | None,
+               path: Path) -> Clip:
+    prim = anim_query.GetPrim()
+    where = str(prim.GetPath())
+    joints = [str(t) for t in anim_query.GetJointOrder()]
+    index = {t: i for i, t in enumerate(tokens)}
+    missing = [t for t in joints if t not in index]
+    if missing:
+        shown = ", ".join(repr(m) for m in missing[:8]) + (" ..." if len(missing) > 8 else "")
+        raise JointMismatchError(
+            f"animation names {len(missing)} joint(s) that skeleton {sk.name} does not have: {shown}",
+            path=path, location=where)
+    if len(set(joints)) != len(joints):
+        raise JointMismatchError("animation 'joints' repeats joints", path=path, location=where)
+    cols = np.array([index[t] for t in joints], dtype=np.int64)
+    K = len(joints)
+    samples = list(anim_query.GetJointTransformTimeSamples())
+    times, rate = frame_times(samples, tcps, fps)
+    if len(times) == 0:  # values without time samples: one frame
+        codes = [Usd.TimeCode.Default()]
+        start = 0.0
+    else:
+        codes = [Usd.TimeCode(float(t)) for t in times]
+        start = float(times[0]) / tcps
+    T = len(codes)
+    J = sk.num_joints
+    rot = np.empty((T, J, 4))
+    rot[:] = sk.rest_rotations
+    tr = np.empty((T, J, 3))
+    tr[:] = sk.rest_translations
+    sc = np.empty((T, J, 3))
+    sc[:] = sk.rest_scales
+    # gather in the animation's joint order, then scatter into the skeleton's
+    r_k = np.empty((T, K, 4), dtype=np.float32)
+    t_k = np.empty((T, K, 3), dtype=np.float32)
+    s_k = np.empty((T, K, 3), dtype=np.float32)
+    has = {"translations": False, "rotations": False, "scales": False}
+    for f, code in enumerate(codes):
+        values = anim_query.ComputeJointLocalTransformComponents(code)
+        if not values:
+            continue
+        for label, arr, dst in zip(("translations", "rotations", "scales"), values, (t_k, r_k, s_k)):
+            n = len(arr)
+            if n == 0:
+                if has[label]:
+                    raise JointMismatchError(f"{label} is empty at time {code.GetValue()}", path=path,
+                                             location=where)
+                continue
+            if n != K:
+                at = "" if code.IsDefault() else f" at time {code.GetValue():g}"
+                raise JointMismatchError(f"{label} has {n} values for {K} joints{at}", path=path, location=where)
+            if f > 0 and not has[label]:
+                raise JointMismatchError(f"{label} is missing before time {code.GetValue():g}", path=path,
+                                         location=where)
+            has[label] = True
+            dst[f] = np.asarray(arr)
+    if has["rotations"]:
+        rot[:, cols] = r_k
+    if has["translations"]:
+        tr[:, cols] = t_k
+    if has["scales"]:
+        sc[:, cols] = s_k
+    return Clip(sk, rate if len(times) else tcps, rot, tr, sc, name=where, start_time=start)
+
+
+def _flattened(primvar: UsdGeom.Primvar, n_points: int, counts: np.ndarray, where: str, path: Path
+               ) -> tuple[np.ndarray, str] | None:
+    """A primvar's values expanded to per-vertex (``"vertex"``) or per-corner (``"corner"``)."""
+    if not primvar or not primvar.HasValue():
+        return None
+    value = primvar.ComputeFlattened(Usd.TimeCode.EarliestTime())
+    if value is None:
+        return None
+    a = np.asarray(value, dtype=np.float64)
+    if a.size == 0:
+        return None
+    interp = primvar.GetInterpolation()
+    n_corners = int(counts.sum())
+    if interp in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying):
+        if len(a) != n_points:
+            raise JointMismatchError(f"primvar {primvar.GetPrimvarName()} has {len(a)} values for {n_points} points",
+                                     path=path, location=where)
+        return a, "vertex"
+    if interp == UsdGeom.Tokens.faceVarying:
+        if len(a) != n_corners:
+            raise JointMismatchError(f"primvar {primvar.GetPrimvarName()} has {len(a)} values for {n_corners} "
+                                     "face corners", path=path, location=where)
+        return a, "corner"
+    if interp == UsdGeom.Tokens.uniform:
+        if len(a) != len(counts):
+            raise JointMismatchError(f"primvar {primvar.GetPrimvarName()} has {len(a)} values for {len(counts)} faces",
+                                     path=path, location=where)
+        return np.repeat(a, counts, axis=0), "corner"
+    # constant
+    return np.broadcast_to(a[:1], (n_points,) + a.shape[1:]).copy(), "vertex"
+
+
+def _uv_primvar(api: UsdGeom.PrimvarsAPI) -> UsdGeom.Primvar | None:
+    pv = api.GetPrimvar("st")
+    if pv and pv.HasValue():
+        return pv
+    for pv in api.GetPrimvarsWithValues():
+        tn = pv.GetTypeName()
+        if tn.role == "TextureCoordinate" or str(tn) in ("texCoord2f[]", "texCoord2d[]", "texCoord2h[]"):
+            return pv
+    return None
+
+
+def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path) -> SkinnedMesh:
+    prim = sq.GetPrim()
+    where = str(prim.GetPath())
+    mesh = UsdGeom.Mesh(prim)
+    early = Usd.TimeCode.EarliestTime()
+    points = np.asarray(mesh.GetPointsAttr().Get(early) or [], dtype=np.float64).reshape(-1, 3)
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(early) or [], dtype=np.int64)
+    fvi = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(early) or [], dtype=np.int64)
+    V = len(points)
+    if counts.sum() != len(fvi):
+        raise JointMismatchError(f"faceVertexIndices has {len(fvi)} entries, faceVertexCounts sum to {counts.sum()}",
+                                 path=path, location=where)
+    if len(fvi) and (fvi.min() < 0 or fvi.max() >= V):
+        raise JointMismatchError(f"faceVertexIndices outside 0..{V - 1}", path=path, location=where)
+
+    # joint influences, in the skeleton's joint order
+    idx, w = sq.ComputeJointInfluences(early) or (None, None)
+    K = int(sq.GetNumInfluencesPerComponent())
+    joint_indices = joint_weights = None
+    if idx is not None and K > 0:
+        idx = np.asarray(idx, dtype=np.int64)
+        w = np.asarray(w, dtype=np.float64)
+        if sq.IsRigidlyDeformed() or sq.GetInterpolation() == UsdGeom.Tokens.constant:
+            idx = np.tile(idx[:K], (V, 1))
+            w = np.tile(w[:K], (V, 1))
+        if idx.size != V * K or w.size != V * K:
+            raise JointMismatchError(f"skel:jointIndices/jointWeights have {idx.size}/{w.size} values for "
+                                     f"{V} points x {K} influences", path=path, location=where)
+        idx = idx.reshape(V, K)
+        w = w.reshape(V, K)
+        order = sq.GetJointOrder()
+        if order:
+            local = [str(t) for t in order]
+            index = {t: i for i, t in enumerate(tokens)}
+            missing = [t for t in local if t not in index]
+            if missing:
+                raise JointMismatchError(f"skel:joints names joints the skeleton does not have: "
+                                         f"{', '.join(repr(m) for m in missing[:8])}", path=path, location=where)
+            remap = np.array([index[t] for t in local], dtype=np.int64)
+            if len(idx) and (idx.min() < 0 or idx.max() >= len(remap)):
+                raise JointMismatchError(f"skel:jointIndices outside 0..{len(remap) - 1}", path=path, location=where)
+            idx = remap[idx]
+        elif len(idx) and (idx.min() < 0 or idx.max() >= len(tokens)):
+            raise JointMismatchError(f"skel:jointIndices outside 0..{len(tokens) - 1}", path=path, location=where)
+        joint_indices, joint_weights = idx, w
+    gbt = sq.GetGeomBindTransform(early)
+    geom_bind = matrices_to_numpy([gbt if gbt is not None else Gf.Matrix4d(1)])[0]
+
+    api = UsdGeom.PrimvarsAPI(prim)
+    normals = _flattened(api.GetPrimvar("normals"), V, counts, where, path)
+    if normals is None and mesh.GetNormalsAttr().HasValue():
+        n = np.asarray(mesh.GetNormalsAttr().Get(early), dtype=np.float64)
+        interp = mesh.GetNormalsInterpolation()
+        if interp == UsdGeom.Tokens.faceVarying and len(n) == len(fvi):
+            normals = (n, "corner")
+        elif interp == UsdGeom.Tokens.uniform and len(n) == len(counts):
+            normals = (np.repeat(n, counts, axis=0), "corner")
+        elif len(n) == V:
+            normals = (n, "vertex")
+    uvs = _flattened(_uv_primvar(api), V, counts, where, path)
+
+    pts, face_idx = points, fvi
+    n_out = None if normals is None else normals[0]
+    uv_out = None if uvs is None else uvs[0][:, :2]
+    if any(x is not None and x[1] == "corner" for x in (normals, uvs)):
+        # split vertices where face corners disagree (seams), keeping the vertex order
+        cols = [fvi[:, None].astype(np.float64)]
+        for x in (normals, uvs):
+            if x is not None:
+                cols.append(x[0] if x[1] == "corner" else x[0][fvi])
+        keys = np.hstack([c.reshape(len(fvi), -1) for c in cols])
+        uniq, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+        src = fvi[first]
+        pts = points[src]
+        face_idx = inverse.reshape(-1).astype(np.int64)
+        if normals is not None:
+            n_out = normals[0][first] if normals[1] == "corner" else normals[0][src]
+        if uvs is not None:
+            uv_out = (uvs[0][first] if uvs[1] == "corner" else uvs[0][src])[:, :2]
+        if joint_indices is not None:
+            joint_indices, joint_weights = joint_indices[src], joint_weights[src]
+    return SkinnedMesh(
+        name=where, points=pts, face_vertex_counts=counts, face_vertex_indices=face_idx,
+        normals=n_out, uvs=uv_out, joint_indices=joint_indices, joint_weights=joint_weights,
+        geom_bind_xform=geom_bind, skeleton_index=skel_index,
+    )

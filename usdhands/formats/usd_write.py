@@ -1,0 +1,421 @@
+"""Writing the model to USD: standalone stages, and a clip put back into its source.
+
+Animation values are written as UsdSkel requires them: rotations ``quatf[]``,
+translations ``float3[]``, scales ``half3[]``, one time sample per frame, moved in bulk
+with ``Vt.*Array.FromNumpy``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.formats.usd_common import (
+    SOURCE_JOINT_NAMES_KEY,
+    SOURCE_SKELETON_KEY,
+    bound_animation_path,
+    joint_tokens_for,
+    numpy_to_matrices,
+    open_stage,
+    quiet_diagnostics,
+    skeleton_tokens_and_names,
+    unique_name,
+    valid_identifier,
+)
+from usdhands.formats.usd_read import read_skeleton
+from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.model.clip import Clip
+from usdhands.model.rotations import quat_angle_deg
+from usdhands.model.skeleton import Skeleton
+
+__all__ = ["write_usd", "write_usd_clip", "author_animation", "frame_time_codes"]
+
+# a joint absent from an animation's `joints` is added when the clip moves it this much
+_ROT_TOL_DEG = 1e-3
+_LIN_TOL = 1e-6
+
+
+def _f32(a: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def author_animation(anim: UsdSkel.Animation, clip: Clip, cols: Sequence[int], tokens: Sequence[str],
+                     time_codes: np.ndarray, *, only_changed: bool = False) -> None:
+    """Author ``joints``, rotations, translations and scales of ``anim`` from ``clip``.
+
+    Existing values of the three transform attributes (default and every time sample)
+    are replaced in the edit target. Rotations and translations get one time sample per
+    frame; scales too, unless they are the same at every frame (then a default value).
+
+    Parameters
+    ----------
+    anim : UsdSkel.Animation
+    clip : Clip
+    cols : sequence of int, length K
+        The clip's joint index for each animation joint, in the animation's order.
+    tokens : sequence of str, length K
+        The animation's joint tokens.
+    time_codes : (T,) float
+        Time code of each frame.
+    only_changed : bool
+        Leave an attribute unauthored when the stage already resolves it to the new
+        values at every frame (for sparse override layers).
+    """
+    cols = np.asarray(cols, dtype=np.int64)
+    rot = _f32(clip.rotations[:, cols])
+    tr = _f32(clip.translations[:, cols])
+    sc = np.ascontiguousarray(clip.scales[:, cols], dtype=np.float16)
+    joints_attr = anim.GetJointsAttr()
+    old_tokens = [str(t) for t in (joints_attr.Get() or [])] if joints_attr else []
+    same_joints = old_tokens == list(tokens)
+    if not same_joints:
+        anim.CreateJointsAttr().Set(Vt.TokenArray(list(tokens)))
+    codes = [Usd.TimeCode(c) for c in time_codes.tolist()]
+    constant_scales = bool(len(sc)) and bool((sc == sc[:1]).all())
+    jobs = [
+        (anim.GetRotationsAttr, anim.CreateRotationsAttr, rot, Vt.QuatfArray.FromNumpy, False),
+        (anim.GetTranslationsAttr, anim.CreateTranslationsAttr, tr, Vt.Vec3fArray.FromNumpy, False),
+        (anim.GetScalesAttr, anim.CreateScalesAttr, sc, Vt.Vec3hArray.FromNumpy, constant_scales),
+    ]
+    if only_changed and same_joints:
+        jobs = [j for j in jobs if not _resolves_to(j[0](), j[2], codes)]
+    with Sdf.ChangeBlock():
+        for _, create, values, convert, constant in jobs:
+            attr = create()
+            attr.Clear()
+            if constant:
+                attr.Set(convert(np.ascontiguousarray(values[0])))
+                continue
+            for f, tc in enumerate(codes):
+                attr.Set(convert(values[f]), tc)
+
+
+def _resolves_to(attr: Usd.Attribute, values: np.ndarray, codes: list) -> bool:
+    """Whether ``attr`` already gives ``values`` (T, K, n) at every time code."""
+    if not attr or not attr.HasValue():
+        return False
+    tol = 1e-3 if values.dtype == np.float16 else 1e-6
+    for f, tc in enumerate(codes):
+        old = attr.Get(tc)
+        if old is None or len(old) != values.shape[1]:
+            return False
+        old = np.asarray(old, dtype=np.float64)
+        new = values[f].astype(np.float64)
+        if values.shape[-1] == 4:  # q and -q are the same rotation
+            diff = np.minimum(np.abs(old - new).max(axis=-1), np.abs(old + new).max(axis=-1))
+            if (diff > tol).any():
+                return False
+        elif not np.allclose(old, new, rtol=tol, atol=tol):
+            return False
+    return True
+
+
+def frame_time_codes(clip: Clip, tcps: float) -> np.ndarray:
+    """Time code of each frame of ``clip`` on a stage of ``tcps`` time codes per second, ``(T,)``.
+
+    Codes within 1e-6 of an integer are snapped to it (``start_time`` is a float in
+    seconds, so ``0.4 * 30`` would otherwise give 11.999999999999998).
+    """
+    codes = (clip.start_time + np.arange(clip.num_frames) / clip.fps) * float(tcps)
+    near = np.round(codes)
+    return np.where(np.abs(codes - near) < 1e-6, near, codes)
+
+
+def _set_time_range(layer: Sdf.Layer, codes: np.ndarray, *, extend: bool) -> None:
+    if not len(codes):
+        return
+    lo, hi = float(codes.min()), float(codes.max())
+    if extend and layer.HasStartTimeCode():
+        lo = min(lo, layer.startTimeCode)
+    if extend and layer.HasEndTimeCode():
+        hi = max(hi, layer.endTimeCode)
+    layer.startTimeCode = lo
+    layer.endTimeCode = hi
+
+
+# --------------------------------------------------------------------------- standalone
+def write_usd(asset: Asset, path: str | os.PathLike) -> None:
+    """Write ``asset`` as a standalone stage.
+
+    Layout: ``/Root`` is the default prim, a SkelRoot holding the Skeleton, its
+    SkelAnimations (the first bound through ``skel:animationSource``) and its skinned
+    Meshes; with several skeletons ``/Root`` is an Xform with one SkelRoot per skeleton.
+    ``timeCodesPerSecond`` is the first clip's frame rate, ``metersPerUnit`` and
+    ``upAxis`` the first skeleton's (other skeletons' clips are rescaled to its units).
+    Joint names that are not USD identifiers are sanitised and the originals kept in
+    the Skeleton prim's customData ``usdhands:sourceJointNames``, which the reader
+    restores.
+
+    Parameters
+    ----------
+    asset : Asset
+    path : path-like
+        ``.usd`` (binary), ``.usda`` or ``.usdc``.
+    """
+    path = Path(path)
+    if not asset.skeletons:
+        raise ValueError("Expected an asset with at least one skeleton, got none")
+    with quiet_diagnostics():
+        stage = Usd.Stage.CreateInMemory()
+        layer = stage.GetRootLayer()
+        first = asset.skeletons[0]
+        mpu = first.meters_per_unit
+        UsdGeom.SetStageMetersPerUnit(stage, mpu)
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if first.up_axis == "Z" else UsdGeom.Tokens.y)
+        tcps = asset.clips[0].fps if asset.clips else 24.0
+        stage.SetTimeCodesPerSecond(tcps)
+        stage.SetFramesPerSecond(tcps)
+        single = len(asset.skeletons) == 1
+        root_path = Sdf.Path("/Root")
+        if single:
+            UsdSkel.Root.Define(stage, root_path)
+        else:
+            UsdGeom.Xform.Define(stage, root_path)
+        stage.SetDefaultPrim(stage.GetPrimAtPath(root_path))
+        all_codes = []
+        used_roots: set[str] = set()
+        for k, sk in enumerate(asset.skeletons):
+            if single:
+                parent = root_path
+            else:
+                leaf = valid_identifier(sk.name.rsplit("/", 1)[-1]) + "Root"
+                parent = root_path.AppendChild(unique_name(leaf, used_roots))
+                UsdSkel.Root.Define(stage, parent)
+            used: set[str] = set()
+            skel_path = parent.AppendChild(unique_name(valid_identifier(sk.name.rsplit("/", 1)[-1] or "Skeleton"),
+                                                       used))
+            skel = UsdSkel.Skeleton.Define(stage, skel_path)
+            tokens = joint_tokens_for(sk.joint_names, sk.parents)
+            skel.CreateJointsAttr().Set(Vt.TokenArray(tokens))
+            if list(tokens) != list(sk.joint_names):
+                skel.GetPrim().SetCustomDataByKey(SOURCE_JOINT_NAMES_KEY, Vt.StringArray(list(sk.joint_names)))
+            skel.CreateRestTransformsAttr().Set(numpy_to_matrices(sk.rest_local_xforms()))
+            bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
+            skel.CreateBindTransformsAttr().Set(numpy_to_matrices(bind))
+            binding = UsdSkel.BindingAPI.Apply(skel.GetPrim())
+            bound = False
+            for clip in asset.clips:
+                if clip.skeleton is not sk:
+                    continue
+                if abs(clip.skeleton.meters_per_unit - mpu) > 1e-12:
+                    clip = clip.with_meters_per_unit(mpu)
+                anim_name = unique_name(valid_identifier(clip.name.rsplit("/", 1)[-1] or "Animation"), used)
+                anim = UsdSkel.Animation.Define(stage, parent.AppendChild(anim_name))
+                codes = frame_time_codes(clip, tcps)
+                all_codes.append(codes)
+                author_animation(anim, clip, np.arange(sk.num_joints), tokens, codes)
+                if not bound:
+                    binding.CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+                    bound = True
+                else:
+                    anim.GetPrim().SetCustomDataByKey(SOURCE_SKELETON_KEY, str(skel_path))
+            for m in asset.meshes:
+                if m.skeleton_index == k:
+                    _write_mesh(stage, parent, used, m, skel_path, sk.num_joints)
+        if all_codes:
+            _set_time_range(layer, np.concatenate(all_codes), extend=False)
+        layer.Export(str(path))
+
+
+def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMesh, skel_path: Sdf.Path,
+                num_joints: int) -> None:
+    name = unique_name(valid_identifier(m.name.rsplit("/", 1)[-1] or "Mesh"), used)
+    mesh = UsdGeom.Mesh.Define(stage, parent.AppendChild(name))
+    pts = _f32(m.points).reshape(-1, 3)
+    mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts))
+    mesh.CreateFaceVertexCountsAttr().Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(m.face_vertex_counts,
+                                                                                       dtype=np.int32)))
+    mesh.CreateFaceVertexIndicesAttr().Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(m.face_vertex_indices,
+                                                                                        dtype=np.int32)))
+    mesh.CreateSubdivisionSchemeAttr().Set(UsdGeom.Tokens.none)
+    if len(pts):
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        mesh.CreateExtentAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]))
+    if m.normals is not None:
+        mesh.CreateNormalsAttr().Set(Vt.Vec3fArray.FromNumpy(_f32(m.normals).reshape(-1, 3)))
+        mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    if m.uvs is not None:
+        st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                     UsdGeom.Tokens.vertex)
+        st.Set(Vt.Vec2fArray.FromNumpy(_f32(m.uvs).reshape(-1, 2)))
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel_path])
+    if m.joint_indices is not None:
+        idx = np.asarray(m.joint_indices).reshape(len(pts), -1)
+        w = np.asarray(m.joint_weights, dtype=np.float64).reshape(len(pts), -1)
+        K = idx.shape[1]
+        if len(idx) and (idx.min() < 0 or idx.max() >= num_joints):
+            raise ValueError(f"Expected joint indices in 0..{num_joints - 1} for mesh {m.name!r}, "
+                             f"got {idx.min()}..{idx.max()}")
+        binding.CreateJointIndicesPrimvar(False, K).Set(
+            Vt.IntArray.FromNumpy(np.ascontiguousarray(idx, dtype=np.int32).reshape(-1)))
+        binding.CreateJointWeightsPrimvar(False, K).Set(Vt.FloatArray.FromNumpy(_f32(w).reshape(-1)))
+    binding.CreateGeomBindTransformAttr().Set(numpy_to_matrices(m.geom_bind_xform[None])[0])
+
+
+# --------------------------------------------------------------------------- into a source
+def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLike, *,
+                   final_path: str | os.PathLike | None = None, animation: str | None = None,
+                   as_layer: bool = False) -> None:
+    """Write ``source`` with ``clip``'s animation values put into one of its SkelAnimations.
+
+    Which animation: ``animation`` (a prim path) if given, else the prim ``clip.name``
+    names, else the one bound to the clip's skeleton (a new SkelAnimation, bound, when
+    the skeleton has none). Joints the clip moves away from rest that the animation's
+    ``joints`` lacks (fingers, typically) are appended to it.
+
+    Parameters
+    ----------
+    source : path-like
+        The USD file the clip was read from (never modified).
+    clip : Clip
+        Joint names must be the source skeleton's (as the reader gives them).
+    path : path-like
+        Where to write (``.usd``, ``.usda``, ``.usdc``).
+    final_path : path-like, optional
+        Where ``path`` will be renamed to; relative sublayer paths are computed from its
+        folder. Defaults to ``path``.
+    animation : str, optional
+        Prim path of the SkelAnimation to replace.
+    as_layer : bool
+        False: a flattened copy of the source stage with the animation replaced
+        (meshes, materials and every other prim kept). True: a sparse layer that
+        sublayers ``source`` and holds only ``over``s of the changed animation
+        attributes (plus a new SkelAnimation where the skeleton had none).
+
+    Raises
+    ------
+    AssetReadError
+        The source cannot be read, or holds no skeleton for the clip.
+    JointMismatchError
+        The clip has joints the skeleton lacks, or lacks joints the animation has.
+    """
+    source = Path(source)
+    path = Path(path)
+    final_path = Path(final_path) if final_path is not None else path
+    src_stage = open_stage(source)
+    with quiet_diagnostics():
+        if as_layer:
+            layer = Sdf.Layer.CreateAnonymous(".usda")
+            src_root = src_stage.GetRootLayer()
+            for key in ("timeCodesPerSecond", "framesPerSecond", "metersPerUnit", "upAxis", "defaultPrim",
+                        "startTimeCode", "endTimeCode"):
+                if src_root.pseudoRoot.HasInfo(key):
+                    layer.pseudoRoot.SetInfo(key, src_root.pseudoRoot.GetInfo(key))
+            layer.subLayerPaths.append(str(source.resolve()))
+            stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
+        else:
+            layer = src_stage.Flatten()
+            stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
+        stage.SetEditTarget(Usd.EditTarget(layer))
+        codes = _put_clip(stage, clip, animation, source, only_changed=as_layer)
+        _set_time_range(layer, codes, extend=True)
+        if as_layer:
+            rel = _relative_asset_path(source, final_path.parent)
+            layer.subLayerPaths.clear()
+            layer.subLayerPaths.append(rel)
+        layer.Export(str(path))
+
+
+def _relative_asset_path(target: Path, folder: Path) -> str:
+    target = target.resolve()
+    folder = folder.resolve()
+    try:
+        rel = os.path.relpath(target, folder)
+    except ValueError:  # another drive
+        return target.as_posix()
+    rel = Path(rel).as_posix()
+    return rel if rel.startswith("../") else f"./{rel}"
+
+
+def _find_skeleton(stage: Usd.Stage, clip: Clip, anim_path: Sdf.Path | None) -> Usd.Prim:
+    skels = [p for p in stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate))
+             if p.IsA(UsdSkel.Skeleton)]
+    by_path = {str(p.GetPath()): p for p in skels}
+    if clip.skeleton.name in by_path:
+        return by_path[clip.skeleton.name]
+    if anim_path is not None:
+        for p in skels:
+            if bound_animation_path(p) == anim_path:
+                return p
+    names = set(clip.skeleton.joint_names)
+    for p in skels:
+        if names <= set(skeleton_tokens_and_names(UsdSkel.Skeleton(p))[1]):
+            return p
+    raise AssetReadError(f"no Skeleton for the clip's skeleton {clip.skeleton.name!r}")
+
+
+def _differs_from_rest(clip: Clip, rest: Skeleton, j: int, rj: int) -> bool:
+    if quat_angle_deg(clip.rotations[:, j], rest.rest_rotations[rj]).max(initial=0.0) > _ROT_TOL_DEG:
+        return True
+    scale = 1.0 + np.abs(rest.rest_translations[rj]).max()
+    if np.abs(clip.translations[:, j] - rest.rest_translations[rj]).max(initial=0.0) > _LIN_TOL * scale:
+        return True
+    return bool(np.abs(clip.scales[:, j] - rest.rest_scales[rj]).max(initial=0.0) > _LIN_TOL)
+
+
+def _put_clip(stage: Usd.Stage, clip: Clip, animation: str | None, source: Path, *,
+              only_changed: bool = False) -> np.ndarray:
+    wanted = animation if animation is not None else clip.name
+    anim_prim = None
+    if isinstance(wanted, str) and wanted.startswith("/") and Sdf.Path.IsValidPathString(wanted):
+        p = stage.GetPrimAtPath(wanted)
+        if p and p.IsA(UsdSkel.Animation):
+            anim_prim = p
+        elif animation is not None:
+            raise AssetReadError(f"no SkelAnimation at {animation}", path=source)
+    elif animation is not None:
+        raise AssetReadError(f"animation must be a SkelAnimation prim path, got {animation!r}", path=source)
+    try:
+        skel_prim = _find_skeleton(stage, clip, anim_prim.GetPath() if anim_prim else None)
+    except AssetReadError as e:
+        raise AssetReadError(e.message, path=source) from None
+    skel = UsdSkel.Skeleton(skel_prim)
+    tokens, names = skeleton_tokens_and_names(skel)
+    usd_sk, _ = read_skeleton(skel, path=source)
+    name_to_skel = {n: i for i, n in enumerate(names)}
+    missing = [n for n in clip.skeleton.joint_names if n not in name_to_skel]
+    if missing:
+        raise JointMismatchError(f"the clip has {len(missing)} joint(s) that skeleton {skel_prim.GetPath()} lacks: "
+                                 f"{', '.join(repr(m) for m in missing[:8])}", path=source)
+    clip_index = {n: i for i, n in enumerate(clip.skeleton.joint_names)}
+    if anim_prim is None:
+        bound = bound_animation_path(skel_prim)
+        p = stage.GetPrimAtPath(bound) if bound else None
+        if p and p.IsA(UsdSkel.Animation):
+            anim_prim = p
+    if anim_prim is None:  # the skeleton has no animation: make one beside it and bind it
+        parent = skel_prim.GetPath().GetParentPath()
+        used = {c.GetName() for c in stage.GetPrimAtPath(parent).GetAllChildren()}
+        anim_prim = UsdSkel.Animation.Define(stage, parent.AppendChild(unique_name("Animation", used))).GetPrim()
+        UsdSkel.BindingAPI.Apply(skel_prim).CreateAnimationSourceRel().SetTargets([anim_prim.GetPath()])
+        anim_tokens: list[str] = []
+    else:
+        anim_tokens = [str(t) for t in (UsdSkel.Animation(anim_prim).GetJointsAttr().Get() or [])]
+    token_to_skel = {t: i for i, t in enumerate(tokens)}
+    bad = [t for t in anim_tokens if t not in token_to_skel]
+    if bad:
+        raise JointMismatchError(f"animation names joint(s) that skeleton {skel_prim.GetPath()} does not have: "
+                                 f"{', '.join(repr(b) for b in bad[:8])}", path=source, location=str(anim_prim.GetPath()))
+    lacking = [names[token_to_skel[t]] for t in anim_tokens if names[token_to_skel[t]] not in clip_index]
+    if lacking:
+        raise JointMismatchError(f"the clip lacks {len(lacking)} joint(s) the animation has: "
+                                 f"{', '.join(repr(m) for m in lacking[:8])}", path=source,
+                                 location=str(anim_prim.GetPath()))
+    new_tokens = list(anim_tokens)
+    have = set(anim_tokens)
+    for i, t in enumerate(tokens):
+        if t in have or names[i] not in clip_index:
+            continue
+        if _differs_from_rest(clip, usd_sk, clip_index[names[i]], i):
+            new_tokens.append(t)
+    cols = [clip_index[names[token_to_skel[t]]] for t in new_tokens]
+    tcps = float(stage.GetTimeCodesPerSecond())
+    codes = frame_time_codes(clip, tcps)
+    author_animation(UsdSkel.Animation(anim_prim), clip, cols, new_tokens, codes, only_changed=only_changed)
+    return codes
