@@ -1,0 +1,264 @@
+"""BVH reading and writing: real Leap Motion files, every channel order, bad numbers."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.formats.bvh import HANDLER, parse_bvh
+from usdhands.formats.io import read_asset, write_asset, write_clip
+from usdhands.model import Clip, Skeleton
+from usdhands.model.asset import Asset
+from usdhands.model.rotations import quat_angle_deg
+from usdhands.model.units import up_axis_xform
+
+LEAP = {"fingers-ok.bvh": (245, 0.025), "gesture-pointing.bvh": (153, 0.027), "gesture-typing.bvh": (317, 0.027)}
+LEAP_JOINTS = ["rForeArm", "rHand"] + [
+    n for F in ("Thumb", "Index", "Mid", "Ring", "Pinky") for n in (f"r{F}1", f"r{F}2", f"r{F}3", f"r{F}3_end")]
+
+
+def assert_same_motion(a: Clip, b: Clip, deg=1e-5, units=1e-6):
+    assert a.skeleton.joint_names == b.skeleton.joint_names
+    assert np.array_equal(a.skeleton.parents, b.skeleton.parents)
+    assert np.allclose(a.skeleton.rest_translations, b.skeleton.rest_translations, atol=units)
+    assert a.num_frames == b.num_frames and a.fps == pytest.approx(b.fps, rel=1e-9)
+    assert quat_angle_deg(a.rotations, b.rotations).max() < deg
+    assert np.abs(a.translations - b.translations).max() < units
+
+
+@pytest.mark.parametrize("name", sorted(LEAP))
+def test_leap_files(shared_assets, name):
+    frames, frame_time = LEAP[name]
+    asset = read_asset(shared_assets / "leap_hands" / name)
+    sk, = asset.skeletons
+    clip = asset.clip()
+    assert list(sk.joint_names) == LEAP_JOINTS
+    assert sk.meters_per_unit == 0.01 and sk.up_axis == "Y"
+    assert clip.num_frames == frames
+    assert clip.fps == pytest.approx(1.0 / frame_time, rel=1e-12)
+    assert sk.parents[sk.index("rIndex1")] == sk.index("rHand")
+    assert np.allclose(sk.rest_translations[sk.index("rIndex1")], [-30, 0, 42])
+    assert np.allclose(sk.rest_translations[sk.index("rPinky3_end")], [1, 0, 20])
+    # joint 3 of each finger never moves (SOURCES.md)
+    assert quat_angle_deg(clip.rotations[:, sk.index("rMid3")], [0, 0, 0, 1]).max() == 0
+
+
+def test_leap_first_frame_values(shared_assets):
+    clip = read_asset(shared_assets / "leap_hands" / "fingers-ok.bvh").clip()
+    sk = clip.skeleton
+    # line 111 of the file (the first frame after the all-zero rest line)
+    assert np.allclose(clip.translations[0, 0], [49.97, 395.64, 215.54])
+    ref = Rotation.from_euler("ZYX", [-50.95, 2.03, -102.06], degrees=True).as_quat()
+    assert quat_angle_deg(clip.rotations[0, 0], ref) < 1e-9
+    ref = Rotation.from_euler("ZYX", [21.66, -25.04, 43.17], degrees=True).as_quat()
+    assert quat_angle_deg(clip.rotations[0, sk.index("rThumb1")], ref) < 1e-9
+    # non-root joints without position channels keep their offsets
+    assert np.allclose(clip.translations[:, sk.index("rIndex1")], [-30, 0, 42])
+
+
+@pytest.mark.parametrize("name", sorted(LEAP))
+def test_leap_round_trip_new_file(shared_assets, tmp_path, name):
+    src = shared_assets / "leap_hands" / name
+    asset = read_asset(src)
+    out = write_asset(asset, tmp_path / "out.bvh")
+    back = read_asset(out)
+    assert_same_motion(asset.clip(), back.clip())
+    text = out.read_text()
+    assert "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation" in text  # ZXY default
+    assert text.count("End Site") == 5
+    # a second round trip reproduces the written file exactly
+    out2 = write_asset(back, tmp_path / "out2.bvh")
+    assert out2.read_text() == text
+
+
+def test_leap_write_clip_keeps_hierarchy_and_orders(shared_assets, tmp_path):
+    src = shared_assets / "leap_hands" / "gesture-pointing.bvh"
+    clip = read_asset(src).clip()
+    bent = clip.with_joint_rotations([clip.skeleton.index("rIndex2")],
+                                     np.tile(Rotation.from_euler("X", 40, degrees=True).as_quat(),
+                                             (clip.num_frames, 1, 1)))
+    out = write_clip(src, bent, tmp_path / "bent.bvh")
+    head = src.read_text().split("MOTION")[0]
+    assert out.read_text().split("MOTION")[0] == head
+    back = read_asset(out).clip()
+    assert_same_motion(bent, back)
+    assert "Frame Time: 0.027\n" in out.read_text()
+
+
+def test_write_clip_missing_joint(shared_assets, tmp_path):
+    src = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    clip = read_asset(src).clip()
+    keep = [j for j, n in enumerate(clip.skeleton.joint_names) if not n.startswith("rPinky")]
+    sub = clip.skeleton.subset(keep)
+    small = Clip(sub, clip.fps, clip.rotations[:, keep], clip.translations[:, keep])
+    with pytest.raises(JointMismatchError) as e:
+        write_clip(src, small, tmp_path / "x.bvh")
+    assert str(e.value) == f"{src}: the clip has no joint(s) rPinky1, rPinky2, rPinky3 of the source hierarchy"
+    assert not (tmp_path / "x.bvh").exists()
+
+
+def synthetic_bvh(order: str, frames: np.ndarray, frame_time="0.0333333") -> str:
+    """Root with 6 channels, a joint with position + rotation channels, a 3-channel leaf."""
+    rot = " ".join(f"{a}rotation" for a in order)
+    lines = ["HIERARCHY", "ROOT Hips", "{", "  OFFSET 1 2 3", f"  CHANNELS 6 Xposition Yposition Zposition {rot}",
+             "  JOINT Chest", "  {", "    OFFSET 0 10 0", f"    CHANNELS 6 {rot} Xposition Yposition Zposition",
+             "    JOINT Head", "    {", "      OFFSET 0 5 0", f"      CHANNELS 3 {rot}",
+             "      End Site", "      {", "        OFFSET 0 3 0", "      }", "    }", "  }", "}",
+             "MOTION", f"Frames: {len(frames)}", f"Frame Time: {frame_time}"]
+    lines += [" ".join(f"{v:.6f}" for v in row) for row in frames]
+    return "\n".join(lines) + "\n"
+
+
+@pytest.mark.parametrize("order", ["".join(p) for p in itertools.permutations("XYZ")])
+def test_every_channel_order_matches_scipy_intrinsic(tmp_path, order):
+    rng = np.random.default_rng(abs(hash(order)) % 2**32)
+    T = 7
+    frames = np.concatenate([rng.uniform(-50, 50, (T, 3)), rng.uniform(-170, 170, (T, 3)),
+                             rng.uniform(-80, 80, (T, 3)), rng.uniform(-5, 5, (T, 3)),
+                             rng.uniform(-170, 170, (T, 3))], axis=1)
+    p = tmp_path / f"{order}.bvh"
+    p.write_text(synthetic_bvh(order, frames))
+    frames = np.round(frames, 6)  # as printed
+    clip = read_asset(p).clip()
+    sk = clip.skeleton
+    assert list(sk.joint_names) == ["Hips", "Chest", "Head", "Head_end"]
+    assert clip.fps == 30.0
+    for j, col in ((0, 3), (1, 6), (2, 12)):
+        ref = Rotation.from_euler(order, frames[:, col:col + 3], degrees=True).as_quat()
+        assert quat_angle_deg(clip.rotations[:, j], ref).max() < 1e-9
+    assert np.allclose(clip.translations[:, 0], frames[:, 0:3])
+    assert np.allclose(clip.translations[:, 1], frames[:, 9:12])
+    assert np.allclose(clip.translations[:, 2], [0, 5, 0]) and np.allclose(clip.translations[:, 3], [0, 3, 0])
+    # write_clip keeps this file's order and its channel layout; write() uses ZXY
+    out = write_clip(p, clip, tmp_path / "copy.bvh")
+    assert out.read_text().split("MOTION")[0] == p.read_text().split("MOTION")[0]
+    assert_same_motion(clip, read_asset(out).clip())
+    out2 = write_asset(read_asset(p), tmp_path / "new.bvh")
+    assert "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation" in out2.read_text()
+    assert_same_motion(clip, read_asset(out2).clip())
+
+
+def test_partial_rotation_channels_and_rest_only_joint(tmp_path):
+    p = tmp_path / "partial.bvh"
+    p.write_text("HIERARCHY\nROOT A\n{\nOFFSET 0 0 0\nCHANNELS 4 Xposition Yposition Zposition Yrotation\n"
+                 "JOINT B\n{\nOFFSET 0 1 0\nCHANNELS 0\nJOINT C\n{\nOFFSET 0 1 0\nCHANNELS 2 Xrotation Zrotation\n"
+                 "}\n}\n}\nMOTION\nFrames: 2\nFrame Time: 0.5\n1 2 3 30 10 20\n0 0 0 -30 0 90\n")
+    clip = read_asset(p).clip()
+    assert clip.fps == 2.0
+    ref = Rotation.from_euler("Y", [[30], [-30]], degrees=True).as_quat()
+    assert quat_angle_deg(clip.rotations[:, 0], ref).max() < 1e-9
+    assert quat_angle_deg(clip.rotations[:, 1], [0, 0, 0, 1]).max() == 0
+    ref = Rotation.from_euler("XZ", [[10, 20], [0, 90]], degrees=True).as_quat()
+    assert quat_angle_deg(clip.rotations[:, 2], ref).max() < 1e-9
+    out = write_clip(p, clip, tmp_path / "copy.bvh")
+    assert out.read_text().splitlines()[-2:] == ["1.000000 2.000000 3.000000 30.000000 10.000000 20.000000",
+                                                 "0.000000 0.000000 0.000000 -30.000000 0.000000 90.000000"]
+
+
+def test_units_option(shared_assets):
+    p = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    cm = HANDLER.read(p).clip()
+    m = HANDLER.read(p, units="m").clip()
+    mm = HANDLER.read(p, units=0.001).clip()
+    assert m.skeleton.meters_per_unit == 1.0 and mm.skeleton.meters_per_unit == 0.001
+    assert np.allclose(cm.world_positions_cm(), m.world_positions_cm() / 100)
+    assert np.allclose(cm.world_positions_cm(), mm.world_positions_cm() * 10)
+    with pytest.raises(ValueError, match=r"Expected units as one of .* or metres per unit, got 'furlong'"):
+        HANDLER.read(p, units="furlong")
+
+
+def test_fps_option_resamples(shared_assets):
+    clip = HANDLER.read(shared_assets / "leap_hands" / "fingers-ok.bvh", fps=20).clip()
+    full = HANDLER.read(shared_assets / "leap_hands" / "fingers-ok.bvh").clip()
+    assert clip.fps == 20 and clip.num_frames == 123
+    assert quat_angle_deg(clip.rotations[10], full.rotations[20]).max() < 1e-9
+
+
+def test_write_converts_metres_z_up_to_centimetres_y_up(tmp_path):
+    rng = np.random.default_rng(3)
+    names = ["root", "root/a", "root/a/b", "root/a/b/b_end"]
+    sk = Skeleton(names, [-1, 0, 1, 2], [[0, 0, 1.0], [0, 0, 0.5], [0.2, 0, 0.3], [0, 0, 0.1]],
+                  Rotation.random(4, random_state=5).as_quat(), meters_per_unit=1.0, up_axis="Z")
+    T = 5
+    rot = Rotation.random(T * 4, random_state=6).as_quat().reshape(T, 4, 4)
+    tr = np.tile(sk.rest_translations, (T, 1, 1))
+    tr[:, 0] += rng.normal(size=(T, 3))
+    clip = Clip(sk, 24, rot, tr)
+    out = write_asset(Asset("mem.usda", (sk,), (clip,)), tmp_path / "z.bvh")
+    back = read_asset(out).clip()
+    assert list(back.skeleton.joint_names) == ["root", "a", "b", "b_end"]
+    assert "End Site" in out.read_text()
+    want = clip.world_positions_cm() @ up_axis_xform("Z", "Y")[:3, :3].T
+    assert np.abs(back.world_positions_cm() - want).max() < 1e-4
+
+
+# -- bad files ---------------------------------------------------------------------------
+
+def leap_lines(shared_assets):
+    return (shared_assets / "leap_hands" / "fingers-ok.bvh").read_text().splitlines()
+
+
+def test_too_few_values_on_a_line(shared_assets, tmp_path):
+    lines = leap_lines(shared_assets)
+    lines[311] = " ".join(lines[311].split()[:-3])  # line 312
+    p = tmp_path / "short.bvh"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(AssetReadError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: line 312: expected 54 values, found 51"
+
+
+def test_too_many_values_on_a_line(shared_assets, tmp_path):
+    lines = leap_lines(shared_assets)
+    lines[119] += " 1 2"
+    p = tmp_path / "long.bvh"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(AssetReadError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: line 120: expected 54 values, found 56"
+
+
+def test_frames_count_disagrees(shared_assets, tmp_path):
+    lines = leap_lines(shared_assets)
+    lines[107] = "Frames: 250"
+    p = tmp_path / "count.bvh"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(AssetReadError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: line 355: 'Frames: 250' (line 108) but 246 frames of motion follow"
+    lines[107] = "Frames: 200"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(AssetReadError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: line 310: 'Frames: 200' (line 108) but 246 frames of motion follow"
+
+
+def test_not_a_number(tmp_path):
+    p = tmp_path / "nan.bvh"
+    p.write_text(synthetic_bvh("ZXY", np.zeros((3, 15))).replace("\n0.000000", "\nx.000000", 1))
+    with pytest.raises(AssetReadError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: line 24: not a number: 'x.000000'"
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace("      }\n    }\n", "      }\n", 1), "line 19: unexpected end of hierarchy inside 'Hips': missing '}'"),
+    (lambda t: t.replace("CHANNELS 3", "CHANNELS 4", 1), "line 14: CHANNELS 4 lists fewer than 4 channels"),
+    (lambda t: t.replace("  }\n}\n", "  }\n}\n}\n"), "line 21: expected 'ROOT' or 'MOTION', found '}'"),
+    (lambda t: t.replace("Zrotation", "Wrotation", 1), "line 5: unknown channel 'Wrotation' (expected X/Y/Z position or rotation)"),
+    (lambda t: t.replace("OFFSET 0 10 0", "OFFSET 0 ten 0"), "line 8: expected a number for OFFSET y, found 'ten'"),
+    (lambda t: t.replace("JOINT Head", "JOINT Chest"), "line 10: joint name 'Chest' is used twice"),
+    (lambda t: t.replace("HIERARCHY", "HIERARCHIE"), "line 1: expected 'HIERARCHY', found 'HIERARCHIE'"),
+    (lambda t: t.split("MOTION")[0], "line 20: no MOTION section"),
+    (lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0"), "line 23: expected a positive frame time, found '0'"),
+])
+def test_malformed_hierarchy(tmp_path, edit, message):
+    p = tmp_path / "bad.bvh"
+    p.write_text(edit(synthetic_bvh("ZXY", np.zeros((2, 15)))))
+    with pytest.raises(AssetReadError) as e:
+        parse_bvh(p)
+    assert str(e.value) == f"{p}: {message}"

@@ -1,0 +1,570 @@
+"""BVH (Biovision hierarchy): reading and writing skeletons with motion.
+
+Reading
+-------
+- Every ``ROOT`` and ``JOINT`` becomes a joint named as in the file. An ``End Site``
+  becomes a leaf joint named ``<parent>_end`` (``rThumb3_end``), with its offset as rest
+  translation and no DOF, so the skeleton keeps the shape of the file (finger tips
+  included) and writing gives the End Sites back.
+- ``OFFSET`` is the rest translation; rest rotations are identity (BVH has none).
+- Rotation channels in any order and number: the local rotation is the product of
+  the axis rotations in channel order, ``R = R_c1 @ R_c2 @ R_c3``, i.e. intrinsic
+  Euler angles in channel order (``Zrotation Yrotation Xrotation`` is scipy's
+  ``from_euler("ZYX", [z, y, x], degrees=True)``). A joint without rotation channels
+  keeps its rest rotation.
+- Position channels (on the root and on any other joint) *replace* the matching
+  component of ``OFFSET`` as the joint's local translation, as three.js, MotionBuilder
+  and Blender (for the root) read them.
+- ``Frame Time`` gives ``fps = 1 / frame_time``, snapped to the nearest integer when
+  within 0.001 of it (``0.0333333`` → 30).
+- Units: centimetres by default (``meters_per_unit = 0.01``); the ``units`` option of
+  :meth:`BvhHandler.read` names others (``"m"``, ``"mm"``, ``"in"``, ``"ft"`` or metres
+  per unit as a number). +Y up.
+- One tolerance: a file with exactly one motion line more than ``Frames:`` says, the
+  first of them all zeros, has that line skipped (the Leap Motion BVH exporter writes
+  such a rest line before the frames; the three Leap files of the test assets do).
+- Bad numbers: a motion line with too few or too many values, a ``Frames:`` count
+  that disagrees with the lines, a value that is not a number, or a malformed
+  hierarchy raise :class:`~usdhands.errors.AssetReadError` naming the line
+  (``line 312: expected 171 values, found 168``).
+
+Writing
+-------
+- :meth:`BvhHandler.write` writes a new file from a skeleton and its first clip (or
+  the rest pose as one frame when there is none): roots get 6 channels, other joints
+  3 rotation channels, plus position channels where the clip moves their translation
+  away from the rest; rotation order ``order`` (default ``"ZXY"``:
+  ``Zrotation Xrotation Yrotation``). A leaf joint named ``<parent>_end`` is written as
+  an End Site; other leaves as joints with no End Site. BVH has no rest rotation and no
+  scale: the clip's local rotations are written as they are, and scales are dropped.
+  Skeletons in other units or Z-up are converted to the ``units`` (default
+  centimetres) and +Y.
+- :meth:`BvhHandler.write_clip` writes the source file's hierarchy text unchanged
+  with the clip's motion, in the source's channel layout (orders kept).
+- Numbers are written with 6 decimals (1e-6 degree, 1e-6 unit); Euler angles are
+  unwrapped over time so curves have no 360° jumps.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.model.asset import Asset
+from usdhands.model.clip import Clip
+from usdhands.model.rotations import quat_identity, unwrap_deg
+from usdhands.model.skeleton import Skeleton
+
+__all__ = ["HANDLER", "BvhHandler", "UNITS", "units_to_meters", "parse_bvh", "BvhFile"]
+
+UNITS = {"cm": 0.01, "m": 1.0, "mm": 0.001, "dm": 0.1, "in": 0.0254, "inch": 0.0254, "ft": 0.3048}
+DEFAULT_ORDER = "ZXY"
+END_SUFFIX = "_end"
+_FMT = "%.6f"
+
+_CHANNELS = {"xposition": ("p", 0), "yposition": ("p", 1), "zposition": ("p", 2),
+             "xrotation": ("r", 0), "yrotation": ("r", 1), "zrotation": ("r", 2)}
+_AXES = "XYZ"
+
+
+def units_to_meters(units: str | float | None) -> float:
+    """Metres per unit for a unit name (``"cm"``, ``"m"``, ...) or a positive number."""
+    if units is None:
+        return UNITS["cm"]
+    if isinstance(units, str):
+        key = units.strip().lower()
+        if key in UNITS:
+            return UNITS[key]
+        try:
+            units = float(key)
+        except ValueError:
+            raise ValueError(f"Expected units as one of {sorted(UNITS)} or metres per unit, got {units!r}") from None
+    units = float(units)
+    if not (np.isfinite(units) and units > 0):
+        raise ValueError(f"Expected units > 0 metres per unit, got {units!r}")
+    return units
+
+
+@dataclass
+class BvhJoint:
+    """One ROOT/JOINT or End Site of a BVH hierarchy."""
+
+    name: str
+    parent: int
+    offset: np.ndarray
+    channels: list = field(default_factory=list)  # e.g. ["Xposition", ..., "Zrotation"]
+    end_site: bool = False
+    line: int = 0
+
+
+@dataclass
+class BvhFile:
+    """A parsed BVH file.
+
+    Attributes
+    ----------
+    joints : list of BvhJoint
+        Depth-first, parents first, End Sites included.
+    hierarchy_text : str
+        The file's text from ``HIERARCHY`` up to (not including) ``MOTION``.
+    frame_time : float
+        Seconds per frame.
+    values : (T, C) float
+        Motion values, C = total channel count, in channel order.
+    """
+
+    joints: list
+    hierarchy_text: str
+    frame_time: float
+    values: np.ndarray
+
+    @property
+    def num_channels(self) -> int:
+        return sum(len(j.channels) for j in self.joints)
+
+
+class _Tokens:
+    def __init__(self, lines: list[str], path):
+        self.toks = []
+        for i, line in enumerate(lines, start=1):
+            for t in re.findall(r"[{}]|[^\s{}]+", line):
+                self.toks.append((t, i))
+        self.pos = 0
+        self.path = path
+        self.last_line = len(lines)
+
+    def peek(self):
+        return self.toks[self.pos] if self.pos < len(self.toks) else (None, self.last_line)
+
+    def next(self, what: str):
+        if self.pos >= len(self.toks):
+            self.error(self.last_line, f"unexpected end of file, expected {what}")
+        t = self.toks[self.pos]
+        self.pos += 1
+        return t
+
+    def expect(self, word: str):
+        t, line = self.next(repr(word))
+        if t.lower() != word.lower():
+            self.error(line, f"expected {word!r}, found {t!r}")
+        return line
+
+    def number(self, what: str) -> float:
+        t, line = self.next(what)
+        try:
+            return float(t)
+        except ValueError:
+            self.error(line, f"expected a number for {what}, found {t!r}")
+
+    def error(self, line: int, msg: str):
+        raise AssetReadError(msg, path=self.path, location=f"line {line}")
+
+
+def parse_bvh(path: str | os.PathLike) -> BvhFile:
+    """Parse a BVH file into its hierarchy and motion values.
+
+    Raises
+    ------
+    AssetReadError
+        Naming the line of the first problem.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as e:
+        raise AssetReadError(f"cannot read: {e.strerror}", path=path) from None
+    lines = text.splitlines()
+    motion_line = None
+    for i, line in enumerate(lines):
+        if line.strip().upper() == "MOTION" or line.strip().upper().startswith("MOTION "):
+            motion_line = i
+            break
+    head = lines if motion_line is None else lines[:motion_line]
+    tok = _Tokens(head, path)
+    t, line = tok.peek()
+    if t is None or t.upper() != "HIERARCHY":
+        tok.error(line if t is not None else 1, f"expected 'HIERARCHY', found {t!r}" if t else
+                  "expected 'HIERARCHY', found an empty file")
+    tok.next("HIERARCHY")
+    joints: list[BvhJoint] = []
+    names: set[str] = set()
+    while tok.peek()[0] is not None:
+        t, line = tok.peek()
+        if t.upper() != "ROOT":
+            tok.error(line, f"expected 'ROOT' or 'MOTION', found {t!r}")
+        _parse_joint(tok, joints, names, -1)
+    if not joints:
+        tok.error(tok.last_line, "no ROOT in HIERARCHY")
+    if motion_line is None:
+        raise AssetReadError("no MOTION section", path=path, location=f"line {len(lines)}")
+    hierarchy_text = "\n".join(lines[:motion_line]) + "\n"
+    values, frame_time = _parse_motion(lines, motion_line, sum(len(j.channels) for j in joints), path)
+    return BvhFile(joints, hierarchy_text, frame_time, values)
+
+
+def _parse_joint(tok: _Tokens, joints: list, names: set, parent: int) -> None:
+    kw, line = tok.next("'JOINT'")
+    kwu = kw.upper()
+    if kwu == "END":
+        tok.expect("Site")
+        pname = joints[parent].name
+        name = pname + END_SUFFIX
+        k = 1
+        while name in names:
+            name = f"{pname}{END_SUFFIX}{k}"
+            k += 1
+        end = True
+    else:
+        name, nline = tok.next("a joint name")
+        if name in "{}":
+            tok.error(nline, f"expected a joint name after {kw!r}, found {name!r}")
+        if name in names:
+            tok.error(nline, f"joint name {name!r} is used twice")
+        end = False
+    names.add(name)
+    tok.expect("{")
+    tok.expect("OFFSET")
+    offset = np.array([tok.number("OFFSET x"), tok.number("OFFSET y"), tok.number("OFFSET z")])
+    j = BvhJoint(name, parent, offset, [], end, line)
+    joints.append(j)
+    me = len(joints) - 1
+    if not end and tok.peek()[0] is not None and tok.peek()[0].upper() == "CHANNELS":
+        tok.next("CHANNELS")
+        t, cline = tok.next("a channel count")
+        if not t.isdigit():
+            tok.error(cline, f"expected a channel count, found {t!r}")
+        n = int(t)
+        for _ in range(n):
+            c, cl = tok.next("a channel name")
+            if c.lower() not in _CHANNELS:
+                if c in "{}" or c.upper() in ("JOINT", "END"):
+                    tok.error(cl, f"CHANNELS {n} lists fewer than {n} channels")
+                tok.error(cl, f"unknown channel {c!r} (expected X/Y/Z position or rotation)")
+            j.channels.append(c[0].upper() + c[1:].lower())
+    while True:
+        t, tline = tok.peek()
+        if t is None:
+            tok.error(tline, f"unexpected end of hierarchy inside {name!r}: missing '}}'")
+        if t == "}":
+            tok.next("'}'")
+            return
+        if end:
+            tok.error(tline, f"expected '}}' closing the End Site of {joints[parent].name!r}, found {t!r}")
+        if t.upper() in ("JOINT", "END"):
+            _parse_joint(tok, joints, names, me)
+            continue
+        tok.error(tline, f"expected 'JOINT', 'End Site' or '}}' in {name!r}, found {t!r}")
+
+
+def _parse_motion(lines: list[str], motion_line: int, C: int, path) -> tuple[np.ndarray, float]:
+    i = motion_line + 1
+    n = len(lines)
+
+    def header(label: str) -> tuple[str, int]:
+        nonlocal i
+        while i < n and not lines[i].strip():
+            i += 1
+        if i >= n:
+            raise AssetReadError(f"expected '{label}', found the end of the file", path=path,
+                                 location=f"line {n}")
+        s = lines[i].strip()
+        if not s.lower().startswith(label.lower()):
+            raise AssetReadError(f"expected '{label}', found {s[:40]!r}", path=path, location=f"line {i + 1}")
+        i += 1
+        return s[len(label):].strip(), i
+
+    frames_text, frames_line = header("Frames:")
+    try:
+        frames = int(frames_text)
+        if frames < 0:
+            raise ValueError
+    except ValueError:
+        raise AssetReadError(f"expected a frame count, found {frames_text!r}", path=path,
+                             location=f"line {frames_line}") from None
+    ft_text, ft_line = header("Frame Time:")
+    try:
+        frame_time = float(ft_text)
+        if not (np.isfinite(frame_time) and frame_time > 0):
+            raise ValueError
+    except ValueError:
+        raise AssetReadError(f"expected a positive frame time, found {ft_text!r}", path=path,
+                             location=f"line {ft_line}") from None
+    rows = []
+    row_lines = []
+    for k in range(i, n):
+        parts = lines[k].split()
+        if not parts:
+            continue
+        if len(parts) != C:
+            raise AssetReadError(f"expected {C} values, found {len(parts)}", path=path, location=f"line {k + 1}")
+        rows.append(parts)
+        row_lines.append(k + 1)
+    if len(rows) == frames + 1 and all(float(v) == 0.0 for v in rows[0]):
+        # the Leap Motion exporter (jaanga) writes an all-zero rest line before the frames
+        rows, row_lines = rows[1:], row_lines[1:]
+    if len(rows) != frames:
+        where = row_lines[frames] if len(rows) > frames else n
+        raise AssetReadError(f"'Frames: {frames}' (line {frames_line}) but {len(rows)} frames of motion follow",
+                             path=path, location=f"line {where}")
+    try:
+        values = np.array(rows, dtype=np.float64).reshape(frames, C)
+    except ValueError:
+        for r, ln in zip(rows, row_lines):
+            for v in r:
+                try:
+                    float(v)
+                except ValueError:
+                    raise AssetReadError(f"not a number: {v!r}", path=path, location=f"line {ln}") from None
+        raise
+    if not np.all(np.isfinite(values)):
+        r, c = np.argwhere(~np.isfinite(values))[0]
+        raise AssetReadError(f"value {c + 1} is not finite: {rows[r][c]!r}", path=path,
+                             location=f"line {row_lines[r]}")
+    return values, frame_time
+
+
+def _fps(frame_time: float) -> float:
+    fps = 1.0 / frame_time
+    r = round(fps)
+    return float(r) if r > 0 and abs(fps - r) < 1e-3 else fps
+
+
+def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: float | None = None) -> Asset:
+    """The skeleton and clip of a parsed BVH file."""
+    J = len(bvh.joints)
+    names = [j.name for j in bvh.joints]
+    parents = np.array([j.parent for j in bvh.joints], dtype=np.int64)
+    offsets = np.array([j.offset for j in bvh.joints], dtype=np.float64).reshape(J, 3)
+    sk = Skeleton(names, parents, offsets, quat_identity((J,)), meters_per_unit=meters_per_unit,
+                  up_axis="Y", name=path.stem)
+    T = bvh.values.shape[0]
+    rot = np.tile(quat_identity(), (T, J, 1))
+    trans = np.tile(offsets, (T, 1, 1))
+    col = 0
+    for k, j in enumerate(bvh.joints):
+        raxes, rcols = [], []
+        for c in j.channels:
+            kind, axis = _CHANNELS[c.lower()]
+            if kind == "p":
+                trans[:, k, axis] = bvh.values[:, col]
+            else:
+                raxes.append(_AXES[axis])
+                rcols.append(col)
+            col += 1
+        if raxes and T:
+            angles = bvh.values[:, rcols]
+            if len(raxes) < 3:  # pad to three axes with zero angles (scipy wants 1-D angles otherwise)
+                pad = [a for a in _AXES if a not in raxes][: 3 - len(raxes)]
+                if len(pad) + len(raxes) == 3:
+                    raxes = raxes + pad
+                    angles = np.concatenate([angles, np.zeros((T, len(pad)))], axis=1)
+                else:  # e.g. "XX": compose one axis at a time
+                    r = Rotation.identity(T)
+                    for a, c in zip(raxes, rcols):
+                        r = r * Rotation.from_euler(a, bvh.values[:, c], degrees=True)
+                    rot[:, k] = r.as_quat()
+                    continue
+            rot[:, k] = Rotation.from_euler("".join(raxes), angles, degrees=True).as_quat()
+    clip = Clip(sk, _fps(bvh.frame_time), rot, trans, name=path.stem)
+    if fps is not None and T:
+        clip = clip.resample(fps)
+    return Asset(str(path), (sk,), (clip,), ())
+
+
+def _euler(q: np.ndarray, axes: str) -> np.ndarray:
+    """Intrinsic Euler angles (T, len(axes)) in degrees, unwrapped, for 1 to 3 axes."""
+    full = axes
+    if len(set(axes)) < 3 and len(axes) < 3:
+        full = axes + "".join(a for a in _AXES if a not in axes)[: 3 - len(axes)]
+    with warnings.catch_warnings():  # gimbal lock: scipy zeroes the third angle, still exact
+        warnings.simplefilter("ignore", UserWarning)
+        e = Rotation.from_quat(q).as_euler(full, degrees=True)[:, : len(axes)]
+    return unwrap_deg(e, axis=0) if len(e) > 1 else e
+
+
+def _format_rows(values: np.ndarray) -> str:
+    if values.shape[1] == 0:
+        return "\n" * values.shape[0]
+    values = np.where(np.abs(values) < 5e-7, 0.0, values)  # no "-0.000000"
+    fmt = " ".join([_FMT] * values.shape[1]) + "\n"
+    return "".join(fmt % tuple(row) for row in values.tolist())
+
+
+def _motion_text(frames: int, fps: float, values: np.ndarray) -> str:
+    return f"MOTION\nFrames: {frames}\nFrame Time: {1.0 / fps:.10g}\n" + _format_rows(values)
+
+
+def _clip_in(clip: Clip, meters_per_unit: float) -> Clip:
+    """``clip`` in ``meters_per_unit`` and +Y up."""
+    from usdhands.model.units import clip_to, skeleton_to
+
+    sk = clip.skeleton
+    if sk.up_axis == "Y" and abs(sk.meters_per_unit - meters_per_unit) < 1e-15:
+        return clip
+    return clip_to(clip, skeleton_to(sk, meters_per_unit, "Y"))
+
+
+def _bvh_names(sk: Skeleton) -> list[str]:
+    shorts = [re.sub(r"\s+", "_", n) for n in sk.short_names]
+    if len(set(shorts)) == len(shorts):
+        return shorts
+    return [re.sub(r"[\s/]+", "_", n) for n in sk.joint_names]
+
+
+def _check_order(order: str) -> str:
+    o = str(order).upper()
+    if len(o) != 3 or set(o) != set(_AXES):
+        raise ValueError(f"Expected a rotation order of X, Y and Z such as 'ZXY', got {order!r}")
+    return o
+
+
+class BvhHandler:
+    """The BVH format handler (see the module documentation)."""
+
+    name = "bvh"
+    read_extensions = (".bvh",)
+    write_extensions = (".bvh",)
+
+    def read(self, path: str | os.PathLike, *, fps: float | None = None, units: str | float | None = None) -> Asset:
+        """Read a BVH file.
+
+        Parameters
+        ----------
+        path : path-like
+        fps : float, optional
+            Resample to this rate; the file's ``1 / Frame Time`` otherwise.
+        units : str or float, optional
+            The unit of the file's numbers: ``"cm"`` (default), ``"m"``, ``"mm"``,
+            ``"dm"``, ``"in"``, ``"ft"``, or metres per unit.
+
+        Returns
+        -------
+        Asset
+            One skeleton (named after the file) and one clip.
+        """
+        path = Path(path)
+        return bvh_to_asset(parse_bvh(path), path, units_to_meters(units), fps)
+
+    def write(self, asset: Asset, path: str | os.PathLike, *, order: str = DEFAULT_ORDER,
+              units: str | float | None = None, animation: str | int | None = None, **options) -> None:
+        """Write a new BVH file from an asset's first clip (or ``animation``).
+
+        Parameters
+        ----------
+        order : str
+            Rotation channel order of every joint, e.g. ``"ZXY"`` (default).
+        units : str or float, optional
+            Unit of the numbers written (default centimetres).
+        """
+        order = _check_order(order)
+        mpu = units_to_meters(units)
+        if asset.clips:
+            try:
+                clip = asset.clip(animation)
+            except KeyError as e:
+                raise AssetReadError(str(e.args[0]).split(": ", 1)[-1], path=asset.path) from None
+        elif asset.skeletons:
+            sk = asset.skeletons[0]
+            clip = Clip(sk, 30.0, sk.rest_rotations[None], name=sk.name)
+        else:
+            raise AssetReadError("nothing to write as BVH: no skeleton", path=asset.path)
+        clip = _clip_in(clip, mpu)
+        sk = clip.skeleton
+        names = _bvh_names(sk)
+        J = sk.num_joints
+        kids = [sk.children(j) for j in range(J)]
+        is_end = [not kids[j] and sk.parents[j] >= 0 and names[j] == names[sk.parents[j]] + END_SUFFIX
+                  for j in range(J)]
+        moved = np.abs(clip.translations - sk.rest_translations[None]).max(axis=0).max(axis=-1) > 1e-9 \
+            if clip.num_frames else np.zeros(J, bool)
+        rot_ch = " ".join(f"{a}rotation" for a in order)
+        lines = ["HIERARCHY"]
+        columns = []  # (joint, "p"/"r")
+
+        def emit(j: int, depth: int) -> None:
+            ind = "\t" * depth
+            off = sk.rest_translations[j]
+            if is_end[j]:
+                lines.extend([f"{ind}End Site", f"{ind}{{", f"{ind}\tOFFSET {_FMT % off[0]} {_FMT % off[1]} "
+                              f"{_FMT % off[2]}", f"{ind}}}"])
+                return
+            kw = "ROOT" if sk.parents[j] < 0 else "JOINT"
+            lines.extend([f"{ind}{kw} {names[j]}", f"{ind}{{",
+                          f"{ind}\tOFFSET {_FMT % off[0]} {_FMT % off[1]} {_FMT % off[2]}"])
+            if sk.parents[j] < 0 or moved[j]:
+                lines.append(f"{ind}\tCHANNELS 6 Xposition Yposition Zposition {rot_ch}")
+                columns.append((j, "p"))
+            else:
+                lines.append(f"{ind}\tCHANNELS 3 {rot_ch}")
+            columns.append((j, "r"))
+            for c in kids[j]:
+                emit(c, depth + 1)
+            lines.append(f"{ind}}}")
+
+        for r in range(J):
+            if sk.parents[r] < 0:
+                emit(r, 0)
+        parts = []
+        for j, kind in columns:
+            if kind == "p":
+                parts.append(clip.translations[:, j])
+            else:
+                parts.append(_euler(clip.rotations[:, j], order) if clip.num_frames else np.zeros((0, 3)))
+        values = np.concatenate(parts, axis=1) if parts else np.zeros((clip.num_frames, 0))
+        Path(path).write_text("\n".join(lines) + "\n" + _motion_text(clip.num_frames, clip.fps, values),
+                              encoding="utf-8")
+
+    def write_clip(self, source: str | os.PathLike, clip: Clip, path: str | os.PathLike, *,
+                   units: str | float | None = None, **options) -> None:
+        """Write ``source``'s hierarchy (text unchanged) with ``clip``'s motion.
+
+        Every ROOT/JOINT of the source must be in the clip's skeleton (matched by
+        short name); channel orders are the source's.
+
+        Raises
+        ------
+        JointMismatchError
+            Naming the source joints the clip lacks.
+        """
+        source = Path(source)
+        bvh = parse_bvh(source)
+        clip = _clip_in(clip, units_to_meters(units))
+        sk = clip.skeleton
+        lookup = {}
+        for i, n in enumerate(sk.short_names):
+            lookup.setdefault(n, i)
+        for i, n in enumerate(sk.joint_names):
+            lookup.setdefault(n, i)
+        missing = [j.name for j in bvh.joints if not j.end_site and j.name not in lookup]
+        if missing:
+            raise JointMismatchError(f"the clip has no joint(s) {', '.join(missing[:10])}"
+                                     f"{' ...' if len(missing) > 10 else ''} of the source hierarchy",
+                                     path=source)
+        T = clip.num_frames
+        parts = []
+        for bj in bvh.joints:
+            if not bj.channels:
+                continue
+            k = lookup[bj.name]
+            kinds = [_CHANNELS[c.lower()] for c in bj.channels]
+            raxes = "".join(_AXES[a] for kind, a in kinds if kind == "r")
+            e = _euler(clip.rotations[:, k], raxes) if raxes and T else np.zeros((T, len(raxes)))
+            ri = 0
+            for kind, a in kinds:
+                if kind == "p":
+                    parts.append(clip.translations[:, k, a][:, None])
+                else:
+                    parts.append(e[:, ri:ri + 1])
+                    ri += 1
+        values = np.concatenate(parts, axis=1) if parts else np.zeros((T, 0))
+        Path(path).write_text(bvh.hierarchy_text + _motion_text(T, clip.fps, values), encoding="utf-8")
+
+
+HANDLER = BvhHandler()
