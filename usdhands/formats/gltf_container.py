@@ -1,0 +1,402 @@
+"""glTF 2.0 container: loading ``.gltf``/``.glb`` files, typed accessors, appending data.
+
+The JSON document is a :class:`pygltflib.GLTF2`; buffer bytes are kept beside it in
+:class:`GltfFile` (one ``bytes`` per buffer) and accessors are read into numpy arrays
+here, with byte strides, sparse substitution and normalized integers applied.
+
+The GLB chunk framing is read and written here rather than by pygltflib: a truncated
+or corrupt file then gets one precise line (:class:`~usdhands.errors.AssetReadError`)
+instead of a struct or Unicode error, and the binary chunk is used as it is, with no
+re-packing of buffer views.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import struct
+import urllib.parse
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pygltflib
+
+from usdhands.errors import AssetReadError
+
+__all__ = [
+    "GltfFile", "load_gltf", "read_accessor", "BinaryAppender", "save_gltf",
+    "COMPONENT_DTYPES", "TYPE_SIZES",
+]
+
+GLB_MAGIC = b"glTF"
+CHUNK_JSON = 0x4E4F534A
+CHUNK_BIN = 0x004E4942
+
+#: componentType -> numpy dtype (little endian)
+COMPONENT_DTYPES: dict[int, np.dtype] = {
+    5120: np.dtype("<i1"), 5121: np.dtype("<u1"), 5122: np.dtype("<i2"),
+    5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4"),
+}
+#: accessor type -> number of components
+TYPE_SIZES: dict[str, int] = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_DTYPE_COMPONENTS = {np.dtype("<u1"): 5121, np.dtype("<u2"): 5123, np.dtype("<u4"): 5125, np.dtype("<f4"): 5126,
+                     np.dtype("<i1"): 5120, np.dtype("<i2"): 5122}
+
+
+@dataclass
+class GltfFile:
+    """A loaded glTF document and its buffers.
+
+    Attributes
+    ----------
+    path : Path
+        The file read.
+    gltf : pygltflib.GLTF2
+        The JSON document.
+    buffers : list of bytes
+        Content of each ``gltf.buffers[i]`` (GLB chunk, data URI or external file).
+    is_glb : bool
+    """
+
+    path: Path
+    gltf: pygltflib.GLTF2
+    buffers: list[bytes]
+    is_glb: bool
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    def error(self, message: str, location: str | None = None) -> AssetReadError:
+        """An :class:`AssetReadError` about this file."""
+        return AssetReadError(message, path=self.path, location=location)
+
+    def accessor(self, index: int, *, as_float: bool = True) -> np.ndarray:
+        """Accessor ``index`` as an array ``(count, components)``.
+
+        Parameters
+        ----------
+        index : int
+        as_float : bool
+            Float64 with normalized integers mapped to [0, 1] / [-1, 1] (True), or
+            the stored integer values (False, for indices and joint numbers).
+        """
+        key = (index, as_float)
+        if key not in self._cache:
+            self._cache[key] = read_accessor(self, index, as_float=as_float)
+        return self._cache[key]
+
+
+def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
+    try:
+        data = json.loads(text)
+    except UnicodeDecodeError as e:
+        raise AssetReadError(f"glTF JSON is not UTF-8 ({e.reason} at byte {e.start})", path=path) from None
+    except json.JSONDecodeError as e:
+        raise AssetReadError(f"invalid glTF JSON: {e.msg} at line {e.lineno} column {e.colno}", path=path) from None
+    if not isinstance(data, dict):
+        raise AssetReadError(f"invalid glTF JSON: top level is a {type(data).__name__}, not an object", path=path)
+    version = str((data.get("asset") or {}).get("version", ""))
+    if not version.startswith("2."):
+        raise AssetReadError(f"not a glTF 2.0 file (asset.version {version or 'missing'!r})", path=path)
+    try:
+        return pygltflib.GLTF2.gltf_from_json(text)
+    except Exception as e:  # dataclasses_json raises a variety of types on wrong shapes
+        raise AssetReadError(f"invalid glTF JSON structure: {type(e).__name__}: {e}".splitlines()[0], path=path) from None
+
+
+def _split_glb(path: Path, raw: bytes) -> tuple[bytes, bytes | None]:
+    """JSON and BIN chunks of a GLB file, with every length checked."""
+    if len(raw) < 12:
+        raise AssetReadError(f"truncated .glb: {len(raw)} bytes, shorter than the 12-byte header", path=path)
+    magic, version, length = struct.unpack_from("<4sII", raw, 0)
+    if magic != GLB_MAGIC:
+        raise AssetReadError(f"not a .glb file (magic {magic!r}, expected b'glTF')", path=path)
+    if version != 2:
+        raise AssetReadError(f"unsupported .glb version {version} (expected 2)", path=path)
+    if length > len(raw):
+        raise AssetReadError(f"truncated .glb: header says {length} bytes, file has {len(raw)}", path=path)
+    offset = 12
+    json_chunk = bin_chunk = None
+    while offset < length:
+        if offset + 8 > length:
+            raise AssetReadError(f"truncated .glb: chunk header at byte {offset} cut off", path=path)
+        clen, ctype = struct.unpack_from("<II", raw, offset)
+        start, end = offset + 8, offset + 8 + clen
+        if end > length:
+            raise AssetReadError(f"truncated .glb: chunk at byte {offset} needs {clen} bytes, "
+                                 f"{length - start} left", path=path)
+        if ctype == CHUNK_JSON and json_chunk is None:
+            json_chunk = raw[start:end]
+        elif ctype == CHUNK_BIN and bin_chunk is None and json_chunk is not None:
+            bin_chunk = raw[start:end]
+        offset = end
+    if json_chunk is None:
+        raise AssetReadError("corrupt .glb: no JSON chunk", path=path)
+    return json_chunk, bin_chunk
+
+
+def _buffer_bytes(path: Path, gltf: pygltflib.GLTF2, i: int, bin_chunk: bytes | None) -> bytes:
+    buf = gltf.buffers[i]
+    where = f"buffers[{i}]"
+    if buf.uri is None:
+        if i != 0 or bin_chunk is None:
+            raise AssetReadError("buffer has no uri and there is no GLB binary chunk", path=path, location=where)
+        data = bin_chunk
+    elif buf.uri.startswith("data:"):
+        head, _, payload = buf.uri.partition(",")
+        if not head.endswith(";base64"):
+            raise AssetReadError("data URI buffer is not base64", path=path, location=where)
+        try:
+            data = base64.b64decode(payload, validate=True)
+        except ValueError as e:
+            raise AssetReadError(f"bad base64 in data URI buffer ({e})", path=path, location=where) from None
+    else:
+        file = path.parent / urllib.parse.unquote(buf.uri)
+        try:
+            data = file.read_bytes()
+        except OSError as e:
+            raise AssetReadError(f"buffer file {buf.uri!r} cannot be read ({e.strerror or e})", path=path,
+                                 location=where) from None
+    if buf.byteLength is None or len(data) < buf.byteLength:
+        raise AssetReadError(f"buffer holds {len(data)} bytes, byteLength says {buf.byteLength}", path=path,
+                             location=where)
+    return data
+
+
+def load_gltf(path: str | os.PathLike) -> GltfFile:
+    """Load a ``.gltf`` or ``.glb`` file and all of its buffers.
+
+    Raises
+    ------
+    AssetReadError
+        Truncated or corrupt GLB, bad JSON, not glTF 2.0, a buffer file missing or
+        shorter than its ``byteLength``.
+    """
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise AssetReadError(f"cannot read file ({e.strerror or e})", path=path) from None
+    is_glb = raw[:4] == GLB_MAGIC or path.suffix.lower() == ".glb"
+    if is_glb:
+        json_chunk, bin_chunk = _split_glb(path, raw)
+    else:
+        json_chunk, bin_chunk = raw, None
+    gltf = _parse_json(path, json_chunk)
+    buffers = [_buffer_bytes(path, gltf, i, bin_chunk) for i in range(len(gltf.buffers))]
+    return GltfFile(path, gltf, buffers, is_glb)
+
+
+def read_accessor(doc: GltfFile, index: int, *, as_float: bool = True) -> np.ndarray:
+    """Accessor ``index`` of ``doc`` as ``(count, components)``; see :meth:`GltfFile.accessor`."""
+    g = doc.gltf
+    where = f"accessors[{index}]"
+    if not 0 <= index < len(g.accessors):
+        raise doc.error(f"accessor index {index} out of range (there are {len(g.accessors)})")
+    acc = g.accessors[index]
+    dtype = COMPONENT_DTYPES.get(acc.componentType)
+    ncomp = TYPE_SIZES.get(acc.type)
+    if dtype is None or ncomp is None or acc.count is None:
+        raise doc.error(f"bad accessor (componentType {acc.componentType}, type {acc.type!r})", where)
+    count = int(acc.count)
+    if acc.bufferView is not None:
+        values = _read_view(doc, acc.bufferView, int(acc.byteOffset or 0), count, dtype, acc.type, where)
+    else:
+        values = np.zeros((count, ncomp), dtype=dtype)
+    if acc.sparse is not None and acc.sparse.count:
+        sp = acc.sparse
+        idx_dtype = COMPONENT_DTYPES.get(sp.indices.componentType)
+        if idx_dtype is None:
+            raise doc.error(f"bad sparse indices componentType {sp.indices.componentType}", where)
+        idx = _read_view(doc, sp.indices.bufferView, int(sp.indices.byteOffset or 0), sp.count, idx_dtype,
+                         "SCALAR", where + ".sparse.indices")[:, 0].astype(np.int64)
+        val = _read_view(doc, sp.values.bufferView, int(sp.values.byteOffset or 0), sp.count, dtype, acc.type,
+                         where + ".sparse.values")
+        if idx.size and (idx.min() < 0 or idx.max() >= count):
+            raise doc.error(f"sparse index {int(idx.max())} out of range 0..{count - 1}", where)
+        values = np.array(values)
+        values[idx] = val
+    if not as_float:
+        return values
+    out = values.astype(np.float64)
+    if acc.normalized and dtype.kind in "iu":
+        info = np.iinfo(dtype)
+        out = out / info.max
+        if dtype.kind == "i":
+            out = np.maximum(out, -1.0)
+    return out
+
+
+def _read_view(doc: GltfFile, view_index: int, byte_offset: int, count: int, dtype: np.dtype, type_: str,
+               where: str) -> np.ndarray:
+    """``count`` elements of ``type_`` from a buffer view, honouring byteStride and column padding."""
+    g = doc.gltf
+    if view_index is None or not 0 <= view_index < len(g.bufferViews):
+        raise doc.error(f"bufferView {view_index} out of range (there are {len(g.bufferViews)})", where)
+    view = g.bufferViews[view_index]
+    if not 0 <= view.buffer < len(doc.buffers):
+        raise doc.error(f"buffer {view.buffer} out of range", f"bufferViews[{view_index}]")
+    buf = doc.buffers[view.buffer]
+    vstart = int(view.byteOffset or 0)
+    vlen = int(view.byteLength)
+    if vstart + vlen > len(buf):
+        raise doc.error(f"bufferView runs past the end of buffer {view.buffer} "
+                        f"({vstart + vlen} > {len(buf)} bytes)", f"bufferViews[{view_index}]")
+    ncomp = TYPE_SIZES[type_]
+    isz = dtype.itemsize
+    # matrix columns start on 4-byte boundaries (MAT2/MAT3 of 1- or 2-byte components)
+    rows = {"MAT2": 2, "MAT3": 3}.get(type_)
+    col_bytes = rows * isz if rows else ncomp * isz
+    col_stride = (col_bytes + 3) // 4 * 4 if rows else col_bytes
+    ncols = ncomp // rows if rows else 1
+    elem = col_stride * ncols if rows else ncomp * isz
+    stride = int(view.byteStride or 0) or elem
+    if count == 0:
+        return np.zeros((0, ncomp), dtype=dtype)
+    need = byte_offset + stride * (count - 1) + elem
+    if need > vlen:
+        raise doc.error(f"accessor needs {need} bytes of bufferView {view_index}, which has {vlen}", where)
+    start = vstart + byte_offset
+    if stride == elem and not (rows and col_stride != col_bytes):
+        arr = np.frombuffer(buf, dtype=dtype, count=count * ncomp, offset=start)
+        return arr.reshape(count, ncomp)
+    raw = np.frombuffer(buf, dtype=np.uint8, count=stride * (count - 1) + elem, offset=start)
+    out = np.empty((count, ncomp), dtype=dtype)
+    for c in range(ncols):
+        base = c * col_stride
+        per = (rows if rows else ncomp)
+        cols = np.lib.stride_tricks.as_strided(raw[base:], shape=(count, per * isz), strides=(stride, 1))
+        out[:, c * per:(c + 1) * per] = np.ascontiguousarray(cols).view(dtype).reshape(count, per)
+    return out
+
+
+class BinaryAppender:
+    """Appends arrays to one buffer of a document as new buffer views and accessors.
+
+    Every buffer view starts on a 4-byte boundary. Call :meth:`finish` to store the
+    bytes (``doc.buffers[i]``) and the buffer's ``byteLength``.
+
+    Parameters
+    ----------
+    gltf : pygltflib.GLTF2
+    buffer_index : int
+        The buffer to append to (it must exist in ``gltf.buffers``).
+    existing : bytes
+        Its current content.
+    """
+
+    def __init__(self, gltf: pygltflib.GLTF2, buffer_index: int, existing: bytes = b""):
+        self.gltf = gltf
+        self.buffer_index = buffer_index
+        self.parts: list[bytes] = [bytes(existing)]
+        self.size = len(existing)
+
+    def _align(self) -> None:
+        pad = -self.size % 4
+        if pad:
+            self.parts.append(b"\0" * pad)
+            self.size += pad
+
+    def add_view(self, data: bytes, target: int | None = None, byte_stride: int | None = None) -> int:
+        """Append ``data`` as a new buffer view; returns its index."""
+        self._align()
+        view = pygltflib.BufferView(buffer=self.buffer_index, byteOffset=self.size, byteLength=len(data),
+                                    target=target, byteStride=byte_stride)
+        self.parts.append(data)
+        self.size += len(data)
+        self.gltf.bufferViews.append(view)
+        return len(self.gltf.bufferViews) - 1
+
+    def add_accessor(self, array: np.ndarray, type_: str, *, view: int | None = None, byte_offset: int = 0,
+                     target: int | None = None, min_max: bool = False, normalized: bool = False) -> int:
+        """Append an accessor for ``array`` ``(count, components)``.
+
+        Parameters
+        ----------
+        array : (count, n) array of float32, uint8, uint16 or uint32
+            The data (stored in a new view unless ``view`` is given, in which case it
+            must already be in that view at ``byte_offset``).
+        type_ : str
+            ``"SCALAR"``, ``"VEC3"``, ``"VEC4"``, ``"MAT4"``...
+        min_max : bool
+            Write ``min``/``max`` (required for POSITION and animation inputs).
+        """
+        array = np.asarray(array)
+        comp = _DTYPE_COMPONENTS[array.dtype.newbyteorder("<") if array.dtype.byteorder == ">" else array.dtype]
+        count = array.shape[0]
+        if view is None:
+            view = self.add_view(np.ascontiguousarray(array).tobytes(), target=target)
+            byte_offset = 0
+        acc = pygltflib.Accessor(bufferView=view, byteOffset=byte_offset, componentType=comp,
+                                 count=count, type=type_, normalized=normalized or None)
+        if min_max and count:
+            flat = array.reshape(count, -1)
+            acc.min = [_json_number(v) for v in flat.min(axis=0)]
+            acc.max = [_json_number(v) for v in flat.max(axis=0)]
+        self.gltf.accessors.append(acc)
+        return len(self.gltf.accessors) - 1
+
+    def data(self) -> bytes:
+        """All bytes of the buffer, padded to a multiple of 4."""
+        self._align()
+        if len(self.parts) > 1:
+            self.parts = [b"".join(self.parts)]
+        return self.parts[0]
+
+    def finish(self, buffers: list[bytes]) -> bytes:
+        """Store the buffer's bytes in ``buffers`` and its byteLength in the document."""
+        data = self.data()
+        while len(buffers) <= self.buffer_index:
+            buffers.append(b"")
+        buffers[self.buffer_index] = data
+        self.gltf.buffers[self.buffer_index].byteLength = len(data)
+        return data
+
+
+def _json_number(v) -> float | int:
+    return int(v) if np.issubdtype(type(v), np.integer) else float(v)
+
+
+def _to_json(gltf: pygltflib.GLTF2) -> str:
+    return gltf.gltf_to_json(separators=(",", ":"), indent=None)
+
+
+def save_gltf(gltf: pygltflib.GLTF2, buffers: list[bytes], path: str | os.PathLike, *, glb: bool) -> None:
+    """Write a document and its buffers.
+
+    Parameters
+    ----------
+    glb : bool
+        A binary ``.glb``: buffer 0 (which must have no ``uri``) becomes the BIN chunk.
+        Otherwise a ``.gltf``: every buffer without ``uri`` is embedded as a data URI.
+        Buffers with a ``uri`` are written as they are (their files are not copied).
+    """
+    path = Path(path)
+    if glb:
+        for i, b in enumerate(gltf.buffers):
+            if b.uri is None and i != 0:
+                raise ValueError(f"only buffer 0 can be the GLB binary chunk, buffer {i} has no uri")
+        bin_data = buffers[0] if gltf.buffers and gltf.buffers[0].uri is None else None
+        json_bytes = _to_json(gltf).encode("utf-8")
+        json_bytes += b" " * (-len(json_bytes) % 4)
+        chunks = [struct.pack("<II", len(json_bytes), CHUNK_JSON), json_bytes]
+        if bin_data is not None:
+            bin_data = bytes(bin_data) + b"\0" * (-len(bin_data) % 4)
+            chunks += [struct.pack("<II", len(bin_data), CHUNK_BIN), bin_data]
+        total = 12 + sum(len(c) for c in chunks)
+        with open(path, "wb") as f:
+            f.write(struct.pack("<4sII", GLB_MAGIC, 2, total))
+            for c in chunks:
+                f.write(c)
+        return
+    saved = [b.uri for b in gltf.buffers]
+    try:
+        for i, b in enumerate(gltf.buffers):
+            if b.uri is None:
+                b.uri = "data:application/octet-stream;base64," + base64.b64encode(buffers[i]).decode("ascii")
+        text = _to_json(gltf)
+    finally:
+        for b, uri in zip(gltf.buffers, saved):
+            b.uri = uri
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(text)

@@ -1,0 +1,593 @@
+"""glTF 2.0 reader: skins → skeletons, animations → clips, skinned primitives → meshes.
+
+Decisions (see docs/format-gltf.md):
+
+- Skins that share a joint node are one skeleton (RobotExpressive has two skins over
+  the same 43 joints). Its joints are the union of the skins' joints, plus the
+  non-joint ancestors needed for correct world transforms: an ancestor is kept when
+  it, or a node above it, has a non-identity transform or is animated. Identity
+  nodes above everything are dropped (their transform changes nothing).
+- Joints keep the skin's order (ancestors first) when parents already come before
+  children there; otherwise they are in depth-first order of the node tree.
+- Joint names are node names; an empty name becomes ``"node<i>"``; repeated names
+  get Blender-style suffixes ``".001"``, ``".002"``.
+- ``bind_xforms`` are the inverses of the inverse bind matrices (identity where a
+  skin has none); kept ancestors, which no skin lists, bind at their rest world
+  transform.
+- Animations are sampled at ``fps`` or, when None, at a rate found from the key
+  times (see :func:`detect_fps`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from usdhands.formats.gltf_container import GltfFile, load_gltf
+from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.model.clip import Clip
+from usdhands.model.rotations import quat_slerp, trs_to_xform, xform_to_trs
+from usdhands.model.skeleton import Skeleton
+
+__all__ = ["GltfScene", "SkeletonBinding", "read_gltf", "scan_scene", "detect_fps", "sample_channel",
+           "COMMON_FPS", "DEFAULT_FPS", "snap_time"]
+
+#: Rates tried, in this order, when key times sit on a regular grid.
+COMMON_FPS = (30.0, 24.0, 25.0, 60.0, 50.0, 48.0, 120.0, 100.0, 90.0)
+#: Rate used when key times fit no grid.
+DEFAULT_FPS = 30.0
+_TRS_PATHS = ("translation", "rotation", "scale")
+
+
+@dataclass
+class SkeletonBinding:
+    """A skeleton of the file and the nodes behind it.
+
+    Attributes
+    ----------
+    skeleton : Skeleton
+    nodes : list of int
+        Node index of every joint, in joint order.
+    skins : list of int
+        The skins whose joints it holds.
+    node_to_joint : dict int -> int
+    """
+
+    skeleton: Skeleton
+    nodes: list[int]
+    skins: list[int]
+    node_to_joint: dict[int, int] = field(default_factory=dict)
+
+
+@dataclass
+class GltfScene:
+    """A loaded file with its node hierarchy and skeletons worked out."""
+
+    doc: GltfFile
+    parents: np.ndarray                   # (N,) parent node of each node, -1 for roots
+    local_trs: list[tuple]                # per node: (t (3,), q (4,), s (3,))
+    bindings: list[SkeletonBinding]
+    skin_binding: dict[int, int]          # skin index -> binding index
+
+    def binding_of_node(self, node: int) -> int | None:
+        """Index of the binding holding ``node`` as a joint, or None."""
+        for b, binding in enumerate(self.bindings):
+            if node in binding.node_to_joint:
+                return b
+        return None
+
+
+def _node_trs(doc: GltfFile, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    n = doc.gltf.nodes[i]
+    if n.matrix is not None and len(n.matrix) == 16:
+        m = np.asarray(n.matrix, dtype=np.float64).reshape(4, 4).T  # column-major in the file
+        t, q, s = xform_to_trs(m)
+        return t, q, s
+    t = np.asarray(n.translation if n.translation is not None else (0.0, 0.0, 0.0), dtype=np.float64)
+    q = np.asarray(n.rotation if n.rotation is not None else (0.0, 0.0, 0.0, 1.0), dtype=np.float64)
+    s = np.asarray(n.scale if n.scale is not None else (1.0, 1.0, 1.0), dtype=np.float64)
+    if t.shape != (3,) or q.shape != (4,) or s.shape != (3,):
+        raise doc.error("node TRS has the wrong number of components", f"nodes[{i}]")
+    if not np.isfinite(q).all() or np.linalg.norm(q) < 1e-12:
+        raise doc.error(f"node rotation {q.tolist()} is not a quaternion", f"nodes[{i}]")
+    return t, q / np.linalg.norm(q), s
+
+
+def _node_parents(doc: GltfFile) -> np.ndarray:
+    nodes = doc.gltf.nodes
+    parents = np.full(len(nodes), -1, dtype=np.int64)
+    for i, n in enumerate(nodes):
+        for c in n.children or []:
+            if not 0 <= c < len(nodes):
+                raise doc.error(f"child {c} out of range (there are {len(nodes)} nodes)", f"nodes[{i}]")
+            if parents[c] >= 0:
+                raise doc.error(f"node {c} has two parents ({parents[c]} and {i})", f"nodes[{i}]")
+            parents[c] = i
+    for i in range(len(nodes)):  # cycle check
+        seen, j = 0, i
+        while j >= 0:
+            j = parents[j]
+            seen += 1
+            if seen > len(nodes):
+                raise doc.error("node hierarchy has a cycle", f"nodes[{i}]")
+    return parents
+
+
+def _unique_names(names: list[str]) -> list[str]:
+    used = set(names)
+    seen: set[str] = set()
+    out = []
+    for n in names:
+        if n in seen:
+            k = 1
+            while f"{n}.{k:03d}" in used:
+                k += 1
+            n = f"{n}.{k:03d}"
+            used.add(n)
+        seen.add(n)
+        out.append(n)
+    return out
+
+
+def _is_identity(trs: tuple) -> bool:
+    t, q, s = trs
+    return (np.allclose(t, 0.0, atol=1e-12) and np.allclose(s, 1.0, atol=1e-12)
+            and (abs(abs(q[3]) - 1.0) < 1e-12))
+
+
+def scan_scene(doc: GltfFile) -> GltfScene:
+    """Work out the node hierarchy and one skeleton per group of skins sharing joints."""
+    g = doc.gltf
+    parents = _node_parents(doc)
+    trs = [_node_trs(doc, i) for i in range(len(g.nodes))]
+    animated = {ch.target.node for a in g.animations for ch in a.channels
+                if ch.target is not None and ch.target.node is not None and ch.target.path in _TRS_PATHS}
+
+    # group skins that share joints (union-find)
+    nskin = len(g.skins)
+    root = list(range(nskin))
+
+    def find(a: int) -> int:
+        while root[a] != a:
+            root[a] = root[root[a]]
+            a = root[a]
+        return a
+
+    owner: dict[int, int] = {}
+    for si, skin in enumerate(g.skins):
+        for j in skin.joints or []:
+            if not 0 <= j < len(g.nodes):
+                raise doc.error(f"joint node {j} out of range (there are {len(g.nodes)} nodes)", f"skins[{si}]")
+            if j in owner:
+                root[find(si)] = find(owner[j])
+            else:
+                owner[j] = si
+    groups: dict[int, list[int]] = {}
+    for si in range(nskin):
+        groups.setdefault(find(si), []).append(si)
+
+    bindings: list[SkeletonBinding] = []
+    skin_binding: dict[int, int] = {}
+    for skins in groups.values():
+        if not any(g.skins[s].joints for s in skins):
+            continue
+        binding = _build_binding(doc, skins, parents, trs, animated)
+        for s in skins:
+            skin_binding[s] = len(bindings)
+        bindings.append(binding)
+    return GltfScene(doc, parents, trs, bindings, skin_binding)
+
+
+def _build_binding(doc: GltfFile, skins: list[int], parents: np.ndarray, trs: list[tuple],
+                   animated: set[int]) -> SkeletonBinding:
+    g = doc.gltf
+    skin_nodes: list[int] = []
+    for s in skins:
+        for j in g.skins[s].joints or []:
+            if j not in skin_nodes:
+                skin_nodes.append(j)
+    in_skin = set(skin_nodes)
+
+    # non-joint ancestors, each kept when it or a non-joint node above it is needed
+    def needed(n: int) -> bool:
+        return n in animated or not _is_identity(trs[n])
+
+    ancestors: set[int] = set()
+    for j in skin_nodes:
+        p = parents[j]
+        while p >= 0:
+            if p not in in_skin:
+                ancestors.add(int(p))
+            p = parents[p]
+    kept = set()
+    for a in ancestors:
+        p = a
+        while p >= 0:
+            if p not in in_skin and needed(p):
+                kept.add(a)
+                break
+            p = parents[p]
+    included = in_skin | kept
+
+    def nearest_included(n: int) -> int:
+        p = parents[n]
+        while p >= 0 and p not in included:
+            p = parents[p]
+        return int(p)
+
+    anc_order = _dfs_order(g, parents, kept)
+    order = anc_order + skin_nodes
+    pos = {n: i for i, n in enumerate(order)}
+    if any(nearest_included(n) >= 0 and pos[nearest_included(n)] > pos[n] for n in order):
+        order = _dfs_order(g, parents, included)
+        pos = {n: i for i, n in enumerate(order)}
+    jparents = np.array([pos[nearest_included(n)] if nearest_included(n) >= 0 else -1 for n in order], dtype=np.int64)
+
+    # rest local transforms relative to the nearest kept ancestor: dropped nodes in
+    # between are identity by construction (a dropped node has no needed node above it)
+    rest_t = np.array([trs[n][0] for n in order]).reshape(-1, 3)
+    rest_q = np.array([trs[n][1] for n in order]).reshape(-1, 4)
+    rest_s = np.array([trs[n][2] for n in order]).reshape(-1, 3)
+
+    names = _unique_names([g.nodes[n].name or f"node{n}" for n in order])
+    world = _world_of(order, jparents, rest_t, rest_q, rest_s)
+    bind = world.copy()
+    done: set[int] = set()
+    for s in skins:
+        skin = g.skins[s]
+        ibm = _inverse_binds(doc, s)
+        for k, n in enumerate(skin.joints or []):
+            if n in done:
+                continue
+            done.add(n)
+            bind[pos[n]] = np.linalg.inv(ibm[k]) if ibm is not None else np.eye(4)
+    first = g.skins[skins[0]]
+    name = first.name or f"skin{skins[0]}"
+    skel = Skeleton(names, jparents, rest_t, rest_q, rest_s, bind, meters_per_unit=1.0, up_axis="Y", name=name)
+    return SkeletonBinding(skel, list(order), list(skins), {n: i for i, n in enumerate(order)})
+
+
+def _dfs_order(g, parents: np.ndarray, keep: set[int]) -> list[int]:
+    """Nodes of ``keep`` in depth-first pre-order of the node forest (scene roots in node order)."""
+    children: dict[int, list[int]] = {}
+    roots = []
+    for i, p in enumerate(parents):
+        if p < 0:
+            roots.append(i)
+        else:
+            children.setdefault(int(p), []).append(i)
+    out: list[int] = []
+    stack = list(reversed(roots))
+    while stack:
+        n = stack.pop()
+        if n in keep:
+            out.append(n)
+        stack.extend(reversed(children.get(n, [])))
+    return out
+
+
+def _world_of(order, parents, t, q, s) -> np.ndarray:
+    local = trs_to_xform(t, q, s)
+    world = np.empty_like(local)
+    for j, p in enumerate(parents):
+        world[j] = local[j] if p < 0 else world[p] @ local[j]
+    return world
+
+
+def _inverse_binds(doc: GltfFile, skin_index: int) -> np.ndarray | None:
+    """Inverse bind matrices ``(len(joints), 4, 4)`` of a skin, None when it has none."""
+    skin = doc.gltf.skins[skin_index]
+    if skin.inverseBindMatrices is None:
+        return None
+    m = doc.accessor(skin.inverseBindMatrices)
+    if m.shape != (len(skin.joints), 16):
+        raise doc.error(f"inverseBindMatrices has {m.shape[0]} matrices for {len(skin.joints)} joints",
+                        f"skins[{skin_index}]")
+    return m.reshape(-1, 4, 4).transpose(0, 2, 1)
+
+
+# -- animation ----------------------------------------------------------------
+
+def detect_fps(times: np.ndarray) -> float:
+    """A frame rate whose frames land on every key time.
+
+    Tries :data:`COMMON_FPS` in order (30 first), then a regular spacing of the keys
+    (1 to 240 frames per second), else :data:`DEFAULT_FPS`. Key times are
+    measured from the first key; a key counts as on a frame within 1% of a frame
+    (float32 key times drift).
+
+    Parameters
+    ----------
+    times : (K,) float
+        Key times in seconds, any order, repeats allowed.
+    """
+    t = np.unique(np.asarray(times, dtype=np.float64))
+    if t.size < 2:
+        return DEFAULT_FPS
+    rel = t - t[0]
+    for f in COMMON_FPS:
+        x = rel * f
+        if np.all(np.abs(x - np.round(x)) < 0.01):
+            return f
+    d = np.diff(t)
+    step = float(d.min())
+    if step > 0:
+        x = rel / step
+        if np.all(np.abs(x - np.round(x)) < 0.01) and 1.0 <= 1.0 / step <= 240.0:
+            return round(1.0 / step, 3)
+    return DEFAULT_FPS
+
+
+def sample_channel(times: np.ndarray, values: np.ndarray, interpolation: str, at: np.ndarray,
+                   rotation: bool, snap: float = 0.0) -> np.ndarray:
+    """Evaluate a glTF sampler at given times.
+
+    Parameters
+    ----------
+    times : (K,) float
+        Key times, seconds, increasing.
+    values : (K, C) or (3K, C) float
+        Key values; CUBICSPLINE holds (in-tangent, value, out-tangent) per key.
+    interpolation : {"LINEAR", "STEP", "CUBICSPLINE"}
+    at : (T,) float
+        Times to evaluate, seconds; before the first key gives the first value, after
+        the last the last value.
+    rotation : bool
+        Quaternions xyzw: slerp for LINEAR, normalised results.
+    snap : float
+        Seconds: a time this close to a key takes the key's value exactly (key times
+        are float32 in files, frame times are not; without it a STEP sampler would
+        give the previous key at a frame that is a hair before its key).
+
+    Returns
+    -------
+    (T, C) float
+    """
+    K = times.shape[0]
+    if interpolation == "CUBICSPLINE":
+        tangents_in, vals, tangents_out = values[0::3], values[1::3], values[2::3]
+    else:
+        vals = values
+    if K == 1:
+        out = np.broadcast_to(vals[0], (at.shape[0], vals.shape[1])).copy()
+        return _norm(out) if rotation else out
+    if interpolation == "STEP":
+        i = np.clip(np.searchsorted(times, at + snap, side="right") - 1, 0, K - 1)
+        out = vals[i].copy()
+        return _norm(out) if rotation else out
+    i = np.clip(np.searchsorted(times, at, side="right") - 1, 0, K - 2)
+    dt = times[i + 1] - times[i]
+    u = np.clip((at - times[i]) / np.where(dt > 0, dt, 1.0), 0.0, 1.0)
+    if snap > 0:
+        u = np.where(at - times[i] <= snap, 0.0, np.where(times[i + 1] - at <= snap, 1.0, u))
+    if interpolation == "CUBICSPLINE":
+        u2, u3 = u * u, u * u * u
+        h00 = 2 * u3 - 3 * u2 + 1
+        h10 = u3 - 2 * u2 + u
+        h01 = -2 * u3 + 3 * u2
+        h11 = u3 - u2
+        out = (h00[:, None] * vals[i] + (h10 * dt)[:, None] * tangents_out[i]
+               + h01[:, None] * vals[i + 1] + (h11 * dt)[:, None] * tangents_in[i + 1])
+        return _norm(out) if rotation else out
+    if rotation:
+        return quat_slerp(vals[i], vals[i + 1], u)
+    return vals[i] * (1.0 - u)[:, None] + vals[i + 1] * u[:, None]
+
+
+def snap_time(fps: float) -> float:
+    """Seconds within which a frame time takes a key's value: a thousandth of a frame."""
+    return 1e-3 / fps
+
+
+def _norm(q: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    return q / np.where(n > 0, n, 1.0)  # zero quaternions stay zero: Clip.validate reports them
+
+
+def channel_keys(doc: GltfFile, anim_index: int, channel_index: int) -> tuple[np.ndarray, np.ndarray, str]:
+    """Key times ``(K,)``, values ``(K or 3K, C)`` and interpolation of one channel."""
+    a = doc.gltf.animations[anim_index]
+    ch = a.channels[channel_index]
+    where = f"animations[{anim_index}].channels[{channel_index}]"
+    if ch.sampler is None or not 0 <= ch.sampler < len(a.samplers):
+        raise doc.error(f"sampler {ch.sampler} out of range", where)
+    smp = a.samplers[ch.sampler]
+    interp = smp.interpolation or "LINEAR"
+    if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
+        raise doc.error(f"unknown interpolation {interp!r}", where)
+    times = doc.accessor(smp.input)[:, 0]
+    values = doc.accessor(smp.output)
+    need = times.shape[0] * (3 if interp == "CUBICSPLINE" else 1)
+    if values.shape[0] != need:
+        raise doc.error(f"{interp} sampler has {values.shape[0]} output values for {times.shape[0]} keys "
+                        f"(expected {need})", where)
+    width = {"rotation": 4, "translation": 3, "scale": 3}[ch.target.path]
+    if values.shape[1] != width:
+        raise doc.error(f"{ch.target.path} output has {values.shape[1]} components, expected {width}", where)
+    if times.size and np.any(np.diff(times) < 0):
+        raise doc.error("sampler input times decrease", where)
+    return times, values, interp
+
+
+def animation_channels(doc: GltfFile, anim_index: int, binding: SkeletonBinding) -> list[tuple[int, int, str]]:
+    """``(channel index, joint index, path)`` of the TRS channels of an animation on a skeleton."""
+    out = []
+    for c, ch in enumerate(doc.gltf.animations[anim_index].channels):
+        t = ch.target
+        if t is None or t.node is None or t.path not in _TRS_PATHS:
+            continue
+        j = binding.node_to_joint.get(t.node)
+        if j is not None:
+            out.append((c, j, t.path))
+    return out
+
+
+def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, fps: float | None,
+                     name: str) -> Clip | None:
+    """One clip of ``binding``'s skeleton from an animation, None if it animates none of its joints."""
+    chans = animation_channels(doc, anim_index, binding)
+    if not chans:
+        return None
+    keys = {c: channel_keys(doc, anim_index, c) for c, _, _ in chans}
+    all_times = np.concatenate([k[0] for k in keys.values()])
+    if all_times.size == 0:
+        raise doc.error("animation has no key times", f"animations[{anim_index}]")
+    rate = float(fps) if fps else detect_fps(all_times)
+    t0, t1 = float(all_times.min()), float(all_times.max())
+    n = int(np.floor((t1 - t0) * rate + 1e-3)) + 1
+    at = t0 + np.arange(n) / rate
+    sk = binding.skeleton
+    J = sk.num_joints
+    rot = np.broadcast_to(sk.rest_rotations, (n, J, 4)).copy()
+    tra = np.broadcast_to(sk.rest_translations, (n, J, 3)).copy()
+    sca = np.broadcast_to(sk.rest_scales, (n, J, 3)).copy()
+    target = {"rotation": rot, "translation": tra, "scale": sca}
+    for c, j, path in chans:
+        times, values, interp = keys[c]
+        target[path][:, j] = sample_channel(times, values, interp, at, path == "rotation", snap_time(rate))
+    return Clip(sk, rate, rot, tra, sca, name=name, start_time=t0)
+
+
+# -- meshes --------------------------------------------------------------------
+
+def _triangles(mode: int, idx: np.ndarray) -> np.ndarray | None:
+    if mode == 4:
+        return idx[: idx.size // 3 * 3].reshape(-1, 3)
+    if mode == 5 and idx.size >= 3:  # strip
+        k = np.arange(idx.size - 2)
+        tri = np.stack([idx[k], idx[k + 1], idx[k + 2]], axis=1)
+        odd = k % 2 == 1
+        tri[odd] = tri[odd][:, [1, 0, 2]]
+        return tri
+    if mode == 6 and idx.size >= 3:  # fan
+        k = np.arange(1, idx.size - 1)
+        return np.stack([np.full(k.size, idx[0]), idx[k], idx[k + 1]], axis=1)
+    return None
+
+
+def read_meshes(scene: GltfScene) -> list[SkinnedMesh]:
+    """Every triangle primitive of a skinned mesh node, as one :class:`SkinnedMesh` each."""
+    doc = scene.doc
+    g = doc.gltf
+    out: list[SkinnedMesh] = []
+    used_names: set[str] = set()
+    for ni, node in enumerate(g.nodes):
+        if node.mesh is None or node.skin is None or node.skin not in scene.skin_binding:
+            continue
+        b = scene.skin_binding[node.skin]
+        binding = scene.bindings[b]
+        skin = g.skins[node.skin]
+        skin_to_joint = np.array([binding.node_to_joint[n] for n in skin.joints], dtype=np.int64)
+        geom_bind = _geom_bind(scene, node.skin, binding)
+        mesh = g.meshes[node.mesh]
+        base = mesh.name or node.name or f"mesh{node.mesh}"
+        for pi, prim in enumerate(mesh.primitives):
+            mode = 4 if prim.mode is None else prim.mode
+            attrs = _attributes(prim)
+            if attrs.get("POSITION") is None:
+                continue
+            where = f"meshes[{node.mesh}].primitives[{pi}]"
+            points = doc.accessor(attrs["POSITION"])
+            idx = (doc.accessor(prim.indices, as_float=False)[:, 0].astype(np.int64) if prim.indices is not None
+                   else np.arange(points.shape[0]))
+            tri = _triangles(mode, idx)
+            if tri is None:
+                continue  # points and lines carry no surface
+            if tri.size and (tri.max() >= points.shape[0]):
+                raise doc.error(f"index {int(tri.max())} out of range for {points.shape[0]} vertices", where)
+            normals = doc.accessor(attrs["NORMAL"]) if attrs.get("NORMAL") is not None else None
+            uvs = None
+            if attrs.get("TEXCOORD_0") is not None:
+                uv = doc.accessor(attrs["TEXCOORD_0"])
+                uvs = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
+            ji, jw = _influences(doc, attrs, skin_to_joint, points.shape[0], where)
+            name = base if len(mesh.primitives) == 1 else f"{base}_{pi}"
+            name = _unique_names(sorted(used_names) + [name])[-1] if name in used_names else name
+            used_names.add(name)
+            out.append(SkinnedMesh(
+                name=name, points=points, face_vertex_counts=np.full(tri.shape[0], 3, dtype=np.int64),
+                face_vertex_indices=tri.reshape(-1), normals=normals, uvs=uvs, joint_indices=ji,
+                joint_weights=jw, geom_bind_xform=geom_bind, skeleton_index=b))
+    return out
+
+
+def _attributes(prim) -> dict:
+    a = prim.attributes
+    return dict(a) if isinstance(a, dict) else dict(vars(a))
+
+
+def _influences(doc: GltfFile, attrs: dict, skin_to_joint: np.ndarray, nverts: int, where: str):
+    sets = sorted(int(k.split("_")[1]) for k in attrs if k.startswith("JOINTS_") and attrs[k] is not None
+                  and k.split("_")[1].isdigit())
+    if not sets:
+        return None, None
+    js, ws = [], []
+    for s in sets:
+        if attrs.get(f"WEIGHTS_{s}") is None:
+            raise doc.error(f"JOINTS_{s} without WEIGHTS_{s}", where)
+        j = doc.accessor(attrs[f"JOINTS_{s}"], as_float=False).astype(np.int64)
+        w = doc.accessor(attrs[f"WEIGHTS_{s}"])
+        if j.shape != (nverts, 4) or w.shape != (nverts, 4):
+            raise doc.error(f"JOINTS_{s}/WEIGHTS_{s} do not have 4 values per vertex", where)
+        js.append(j)
+        ws.append(w)
+    j = np.concatenate(js, axis=1)
+    w = np.concatenate(ws, axis=1)
+    bad = (j >= skin_to_joint.size) & (w != 0)
+    if bad.any():
+        raise doc.error(f"joint index {int(j[bad].max())} out of range for a skin of {skin_to_joint.size} joints",
+                        where)
+    j = np.where(j < skin_to_joint.size, j, 0)
+    ji = skin_to_joint[j]
+    total = w.sum(axis=1, keepdims=True)
+    w = np.where(total > 0, w / np.where(total > 0, total, 1.0), w)
+    return ji, w
+
+
+def _geom_bind(scene: GltfScene, skin_index: int, binding: SkeletonBinding) -> np.ndarray:
+    """Mesh-to-skeleton transform ``bind_j @ IBM_j``, the same for every joint of a consistent skin.
+
+    The skinned node's own transform is ignored, as the glTF specification says.
+    Where the skeleton's binds came from this skin it is the identity.
+    """
+    ibm = _inverse_binds(scene.doc, skin_index)
+    skin = scene.doc.gltf.skins[skin_index]
+    bind = binding.skeleton.bind_xforms
+    if ibm is None:
+        ibm = np.broadcast_to(np.eye(4), (len(skin.joints), 4, 4))
+    g = np.array([bind[binding.node_to_joint[n]] @ ibm[k] for k, n in enumerate(skin.joints)])
+    return g[0] if g.size else np.eye(4)
+
+
+# -- entry point -----------------------------------------------------------------
+
+def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | None = None) -> Asset:
+    """Read skeletons, clips and skinned meshes of a ``.gltf``/``.glb`` file.
+
+    Parameters
+    ----------
+    path : path-like
+    fps : float, optional
+        Sample every animation at this rate; by default a rate from its key times.
+
+    Raises
+    ------
+    AssetReadError
+        Unreadable, truncated or inconsistent file (one line, with the path).
+    """
+    if scene is None:
+        scene = scan_scene(load_gltf(path))
+    doc = scene.doc
+    clips: list[Clip] = []
+    for ai, anim in enumerate(doc.gltf.animations):
+        name = anim.name or f"animation{ai}"
+        k = 0
+        for binding in scene.bindings:
+            clip = sample_animation(doc, ai, binding, fps, name if k == 0 else f"{name}:{binding.skeleton.name}")
+            if clip is not None:
+                clips.append(clip)
+                k += 1
+    meshes = read_meshes(scene)
+    return Asset(str(path), tuple(b.skeleton for b in scene.bindings), tuple(clips), tuple(meshes))

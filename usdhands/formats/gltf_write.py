@@ -1,0 +1,516 @@
+"""glTF 2.0 writers: a new file from an :class:`~usdhands.model.asset.Asset`, and a
+source file with one animation's channels added or replaced (everything else kept).
+
+glTF is metres and +Y up: skeletons in other units are rescaled
+(:meth:`Clip.with_meters_per_unit`), and Z-up skeletons get a -90° rotation about X
+folded into their root joints (rest pose, bind transforms and every frame), so no
+extra node appears.
+"""
+
+from __future__ import annotations
+
+import os
+import posixpath
+import urllib.parse
+from pathlib import Path
+
+import numpy as np
+import pygltflib
+
+from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.formats.gltf_container import BinaryAppender, GltfFile, load_gltf, save_gltf
+from usdhands.formats.gltf_read import (
+    GltfScene, SkeletonBinding, animation_channels, channel_keys, sample_channel, scan_scene, snap_time,
+)
+from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.model.clip import Clip
+from usdhands.model.rotations import quat_angle_deg, quat_multiply
+from usdhands.model.skeleton import Skeleton, short_joint_name
+
+__all__ = ["write_gltf", "write_clip_gltf", "to_gltf_space", "ROTATION_TOLERANCE_DEG", "TRANSLATION_TOLERANCE_M"]
+
+ARRAY_BUFFER = 34962
+ELEMENT_ARRAY_BUFFER = 34963
+#: A joint's channel is rewritten by ``write_clip`` when the clip differs from the file
+#: by more than this at some frame (geodesic angle, degrees) ...
+ROTATION_TOLERANCE_DEG = 1e-3
+#: ... or by more than this in translation (metres) or scale (relative).
+TRANSLATION_TOLERANCE_M = 1e-6
+SCALE_TOLERANCE = 1e-6
+
+_Z_TO_Y = np.array([-np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])  # -90° about X: +Z up becomes +Y up
+_Z_TO_Y_M = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
+
+
+# -- units and axes ------------------------------------------------------------
+
+def _fold_root(skel: Skeleton, rot: np.ndarray, tra: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Apply the Z→Y rotation to the root joints of local rotations ``(..., J, 4)`` and translations."""
+    roots = skel.parents < 0
+    rot = np.array(rot)
+    tra = np.array(tra)
+    rot[..., roots, :] = quat_multiply(_Z_TO_Y, rot[..., roots, :])
+    tra[..., roots, :] = tra[..., roots, :] @ _Z_TO_Y_M[:3, :3].T
+    return rot, tra
+
+
+def to_gltf_space(skeleton: Skeleton) -> tuple[Skeleton, np.ndarray]:
+    """The skeleton in metres and +Y up, and the 4x4 map from its old space to the new one.
+
+    Returns
+    -------
+    skeleton : Skeleton
+    space : (4, 4) float
+        ``new_point = space @ old_point`` for points in the old skeleton's space
+        (scale to metres, then the up-axis rotation).
+    """
+    space = np.diag([skeleton.meters_per_unit] * 3 + [1.0])
+    sk = skeleton.with_meters_per_unit(1.0) if skeleton.meters_per_unit != 1.0 else skeleton
+    bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
+    if skeleton.up_axis == "Z":
+        rot, tra = _fold_root(sk, sk.rest_rotations, sk.rest_translations)
+        bind = _Z_TO_Y_M @ bind
+        space = _Z_TO_Y_M @ space
+        sk = Skeleton(sk.joint_names, sk.parents, tra, rot, sk.rest_scales, bind, 1.0, "Y", sk.name)
+    elif sk.bind_xforms is None:
+        sk = Skeleton(sk.joint_names, sk.parents, sk.rest_translations, sk.rest_rotations, sk.rest_scales,
+                      bind, 1.0, "Y", sk.name)
+    return sk, space
+
+
+def clip_to_gltf_space(clip: Clip, skeleton: Skeleton | None = None) -> Clip:
+    """``clip`` in metres and +Y up (on ``skeleton``, the converted skeleton, when given)."""
+    src = clip.skeleton
+    if src.meters_per_unit == 1.0 and src.up_axis == "Y":
+        return clip if skeleton is None else clip.replace(skeleton=skeleton)
+    c = clip.with_meters_per_unit(1.0) if src.meters_per_unit != 1.0 else clip
+    rot, tra = c.rotations, c.translations
+    if src.up_axis == "Z":
+        rot, tra = _fold_root(src, rot, tra)
+    sk = skeleton if skeleton is not None else to_gltf_space(src)[0]
+    return Clip(sk, c.fps, rot, tra, c.scales, c.name, c.start_time)
+
+
+# -- animation data ----------------------------------------------------------------
+
+def _continuous(q: np.ndarray) -> np.ndarray:
+    """Flip quaternion signs along time (axis 0) so neighbours have a non-negative dot product."""
+    if q.shape[0] < 2:
+        return q
+    d = np.sum(q[1:] * q[:-1], axis=-1)
+    flips = np.cumprod(np.where(d < 0, -1.0, 1.0), axis=0)
+    out = q.copy()
+    out[1:] *= flips[..., None]
+    return out
+
+
+def _key_times(clip: Clip) -> np.ndarray:
+    """Frame times as float32, shifted to start at 0 when the clip starts before 0."""
+    t = clip.times
+    if t.size and t[0] < 0:
+        t = t - t[0]
+    t32 = t.astype(np.float32)
+    if t32.size > 1 and not np.all(np.diff(t32) > 0):
+        raise ValueError(f"clip {clip.name!r}: frame times do not increase in float32 "
+                         f"({clip.num_frames} frames at {clip.fps} fps from {clip.start_time} s)")
+    return t32
+
+
+class _AnimationWriter:
+    """Adds samplers and channels for per-joint arrays of one clip to an animation."""
+
+    def __init__(self, app: BinaryAppender, animation: pygltflib.Animation, times: np.ndarray):
+        self.app = app
+        self.anim = animation
+        self.input = app.add_accessor(times.reshape(-1, 1), "SCALAR", min_max=True)
+
+    def add(self, path: str, joints: list[int], nodes: list[int], values: np.ndarray,
+            replace: dict[tuple[int, str], int] | None = None) -> None:
+        """Channels for ``joints`` (indices into ``values`` axis 1) targeting ``nodes``.
+
+        Parameters
+        ----------
+        values : (T, J, C) float
+        replace : dict (node, path) -> channel index
+            Existing channels to point at the new samplers instead of appending.
+        """
+        if not joints:
+            return
+        data = np.ascontiguousarray(values[:, joints].transpose(1, 0, 2), dtype=np.float32)
+        T, C = data.shape[1], data.shape[2]
+        view = self.app.add_view(data.tobytes())
+        type_ = {3: "VEC3", 4: "VEC4"}[C]
+        for k, node in enumerate(nodes):
+            acc = self.app.add_accessor(data[k], type_, view=view, byte_offset=k * T * C * 4)
+            self.anim.samplers.append(pygltflib.AnimationSampler(input=self.input, output=acc,
+                                                                 interpolation="LINEAR"))
+            s = len(self.anim.samplers) - 1
+            existing = None if replace is None else replace.get((node, path))
+            if existing is not None:
+                self.anim.channels[existing].sampler = s
+            else:
+                self.anim.channels.append(pygltflib.AnimationChannel(
+                    sampler=s, target=pygltflib.AnimationChannelTarget(node=node, path=path)))
+
+
+def _differs_from_rest(values: np.ndarray, rest: np.ndarray, tol: float) -> np.ndarray:
+    """Per joint: whether ``values (T, J, 3)`` leave ``rest (J, 3)`` anywhere (relative tolerance)."""
+    if values.shape[0] == 0:
+        return np.zeros(values.shape[1], dtype=bool)
+    scale = np.maximum(1.0, np.abs(rest))
+    return np.any(np.abs(values - rest[None]) > tol * scale[None], axis=(0, 2))
+
+
+# -- new files ---------------------------------------------------------------------
+
+def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
+    """Write ``asset`` as a new ``.gltf`` (buffers embedded as data URIs) or ``.glb``.
+
+    Every skeleton becomes a node tree with a skin (inverse bind matrices), every
+    skinned mesh a triangle mesh, every clip an animation with LINEAR samplers keyed
+    at its frames. Translation and scale channels that never leave the node's rest
+    value are left out (a reader falls back to the node, so the motion is the same);
+    rotation channels are written for every joint.
+
+    Parameters
+    ----------
+    asset : Asset
+    path : path-like
+        ``.glb`` for binary, anything else for JSON.
+    """
+    if options:
+        raise TypeError(f"unexpected options for glTF write: {sorted(options)}")
+    path = Path(path)
+    gltf = pygltflib.GLTF2(asset=pygltflib.Asset(generator="usdhands", version="2.0"))
+    gltf.buffers = [pygltflib.Buffer(byteLength=0)]
+    app = BinaryAppender(gltf, 0)
+    scene_nodes: list[int] = []
+    skel_nodes: list[list[int]] = []
+    skel_skins: list[int] = []
+    converted: list[tuple[Skeleton, np.ndarray]] = []
+    index_of = {id(s): i for i, s in enumerate(asset.skeletons)}
+    for skel in asset.skeletons:
+        sk, space = to_gltf_space(skel)
+        converted.append((sk, space))
+        base = len(gltf.nodes)
+        nodes = list(range(base, base + sk.num_joints))
+        for j in range(sk.num_joints):
+            gltf.nodes.append(pygltflib.Node(
+                name=short_joint_name(sk.joint_names[j]),
+                translation=[float(v) for v in sk.rest_translations[j]],
+                rotation=[float(v) for v in sk.rest_rotations[j]],
+                scale=[float(v) for v in sk.rest_scales[j]]))
+        for j, p in enumerate(sk.parents):
+            if p < 0:
+                scene_nodes.append(nodes[j])
+            else:
+                gltf.nodes[nodes[p]].children.append(nodes[j])
+        ibm = np.linalg.inv(sk.bind_xforms).transpose(0, 2, 1).reshape(-1, 16).astype(np.float32)
+        acc = app.add_accessor(ibm, "MAT4")
+        roots = [nodes[j] for j in range(sk.num_joints) if sk.parents[j] < 0]
+        gltf.skins.append(pygltflib.Skin(name=sk.name.rsplit("/", 1)[-1] or None, joints=nodes,
+                                         inverseBindMatrices=acc, skeleton=roots[0] if len(roots) == 1 else None))
+        skel_nodes.append(nodes)
+        skel_skins.append(len(gltf.skins) - 1)
+
+    for mesh in asset.meshes:
+        si = mesh.skeleton_index
+        if not 0 <= si < len(asset.skeletons):
+            raise ValueError(f"mesh {mesh.name!r} has skeleton_index {si}, the asset has {len(asset.skeletons)}")
+        sk, space = converted[si]
+        mi = _add_mesh(gltf, app, mesh, space, sk.num_joints)
+        gltf.nodes.append(pygltflib.Node(name=mesh.name, mesh=mi, skin=skel_skins[si]))
+        scene_nodes.append(len(gltf.nodes) - 1)
+
+    for clip in asset.clips:
+        si = index_of.get(id(clip.skeleton))
+        if si is None:
+            si = next((i for i, s in enumerate(asset.skeletons) if s.joint_names == clip.skeleton.joint_names), None)
+        if si is None:
+            raise ValueError(f"clip {clip.name!r} is on a skeleton that is not in the asset")
+        sk = converted[si][0]
+        c = clip_to_gltf_space(clip, sk)
+        anim = pygltflib.Animation(name=clip.name)
+        w = _AnimationWriter(app, anim, _key_times(c))
+        J = sk.num_joints
+        nodes = skel_nodes[si]
+        w.add("rotation", list(range(J)), nodes, _continuous(c.rotations))
+        for path_, values, rest, tol in (("translation", c.translations, sk.rest_translations, TRANSLATION_TOLERANCE_M),
+                                         ("scale", c.scales, sk.rest_scales, SCALE_TOLERANCE)):
+            moving = [j for j in np.nonzero(_differs_from_rest(values, rest, tol))[0]]
+            w.add(path_, moving, [nodes[j] for j in moving], values)
+        gltf.animations.append(anim)
+
+    gltf.scenes = [pygltflib.Scene(nodes=scene_nodes)]
+    gltf.scene = 0
+    buffers: list[bytes] = []
+    data = app.finish(buffers)
+    if not data:
+        gltf.buffers = []
+        buffers = []
+    save_gltf(gltf, buffers, path, glb=path.suffix.lower() == ".glb")
+
+
+def _triangulate(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Fan triangulation of polygons, ``(F', 3)`` vertex indices."""
+    counts = np.asarray(counts, dtype=np.int64)
+    indices = np.asarray(indices, dtype=np.int64)
+    if np.all(counts == 3):
+        return indices.reshape(-1, 3)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    ntri = np.maximum(counts - 2, 0)
+    face = np.repeat(np.arange(counts.size), ntri)
+    k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri) + 1
+    s = starts[face]
+    return np.stack([indices[s], indices[s + k], indices[s + k + 1]], axis=1)
+
+
+def _clean_influences(ji: np.ndarray, jw: np.ndarray, num_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    """Influences as glTF wants them: unique joints per vertex, zero weights on joint 0,
+    heaviest first, rows normalised in float32 (the validator sums in float32), width a
+    multiple of 4."""
+    ji = np.asarray(ji, dtype=np.int64)
+    jw = np.clip(np.asarray(jw, dtype=np.float64), 0.0, None)
+    V, K = ji.shape
+    if np.any((ji < 0) | (ji >= num_joints)):
+        raise ValueError(f"joint indices must be in 0..{num_joints - 1}, got {int(ji.min())}..{int(ji.max())}")
+    # merge repeated joints of a vertex: sort by joint, sum runs
+    order = np.argsort(ji, axis=1, kind="stable")
+    ji = np.take_along_axis(ji, order, 1)
+    jw = np.take_along_axis(jw, order, 1)
+    for k in range(1, K):
+        same = ji[:, k] == ji[:, k - 1]
+        jw[same, k] += jw[same, k - 1]
+        jw[same, k - 1] = 0.0
+    total = jw.sum(axis=1)
+    empty = total <= 0
+    jw[empty, 0] = 1.0  # an unweighted vertex follows the first joint
+    ji[empty, 0] = 0
+    jw /= jw.sum(axis=1, keepdims=True)
+    order = np.argsort(-jw, axis=1, kind="stable")
+    ji = np.take_along_axis(ji, order, 1)
+    jw = np.take_along_axis(jw, order, 1)
+    used = max(1, int((jw > 0).sum(axis=1).max()))
+    width = (used + 3) // 4 * 4
+    ji = ji[:, :width] if K >= width else np.pad(ji, ((0, 0), (0, width - K)))
+    jw = jw[:, :width] if K >= width else np.pad(jw, ((0, 0), (0, width - K)))
+    jw /= jw.sum(axis=1, keepdims=True)
+    ji = np.where(jw > 0, ji, 0)
+    w32 = jw.astype(np.float32)
+    for _ in range(4):  # nudge the heaviest weight until the float32 running sum is 1
+        acc = np.cumsum(w32, axis=1, dtype=np.float32)[:, -1].astype(np.float64)
+        n = (w32 > 0).sum(axis=1)
+        bad = np.abs(acc - 1.0) > 2e-7 * n * 0.5
+        if not bad.any():
+            break
+        w32[bad, 0] = (w32[bad, 0].astype(np.float64) - (acc[bad] - 1.0)).astype(np.float32)
+    ji = np.where(w32 > 0, ji, 0)  # weights too small for float32 became 0: their joint must be 0 too
+    return ji, w32
+
+
+def _add_mesh(gltf: pygltflib.GLTF2, app: BinaryAppender, mesh: SkinnedMesh, space: np.ndarray,
+              num_joints: int) -> int:
+    """Append one skinned mesh (points put in the skeleton's glTF space); returns the mesh index."""
+    xf = space @ np.asarray(mesh.geom_bind_xform, dtype=np.float64)
+    pts = np.asarray(mesh.points, dtype=np.float64)
+    pts = pts @ xf[:3, :3].T + xf[:3, 3]
+    attrs = {"POSITION": app.add_accessor(pts.astype(np.float32), "VEC3", target=ARRAY_BUFFER, min_max=True)}
+    if mesh.normals is not None:
+        lin = np.linalg.inv(xf[:3, :3]).T
+        n = np.asarray(mesh.normals, dtype=np.float64) @ lin.T
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        ok = (length[:, 0] > 1e-12) & np.isfinite(length[:, 0])
+        n = np.where(ok[:, None], n / np.where(ok[:, None], length, 1.0), [0.0, 1.0, 0.0])
+        attrs["NORMAL"] = app.add_accessor(n.astype(np.float32), "VEC3", target=ARRAY_BUFFER)
+    if mesh.uvs is not None:
+        uv = np.asarray(mesh.uvs, dtype=np.float64)
+        uv = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
+        attrs["TEXCOORD_0"] = app.add_accessor(uv.astype(np.float32), "VEC2", target=ARRAY_BUFFER)
+    if mesh.joint_indices is not None and mesh.joint_weights is not None:
+        ji, jw = _clean_influences(mesh.joint_indices, mesh.joint_weights, num_joints)
+        jdtype = np.uint8 if num_joints <= 256 else np.uint16
+        for s in range(ji.shape[1] // 4):
+            attrs[f"JOINTS_{s}"] = app.add_accessor(ji[:, 4 * s:4 * s + 4].astype(jdtype), "VEC4",
+                                                    target=ARRAY_BUFFER)
+            attrs[f"WEIGHTS_{s}"] = app.add_accessor(jw[:, 4 * s:4 * s + 4], "VEC4", target=ARRAY_BUFFER)
+    tri = _triangulate(mesh.face_vertex_counts, mesh.face_vertex_indices)
+    idtype = np.uint16 if pts.shape[0] <= 65535 else np.uint32
+    indices = app.add_accessor(tri.reshape(-1, 1).astype(idtype), "SCALAR", target=ELEMENT_ARRAY_BUFFER)
+    prim = pygltflib.Primitive(attributes=pygltflib.Attributes(**attrs), indices=indices, mode=4)
+    gltf.meshes.append(pygltflib.Mesh(name=mesh.name, primitives=[prim]))
+    return len(gltf.meshes) - 1
+
+
+# -- a source file with one animation changed ------------------------------------------
+
+def _find_binding(scene: GltfScene, clip: Clip, source: Path) -> SkeletonBinding:
+    names = clip.skeleton.joint_names
+    best, best_missing = None, None
+    for b in scene.bindings:
+        missing = [n for n in names if not b.skeleton.has_joint(n)]
+        if not missing:
+            return b
+        if best_missing is None or len(missing) < len(best_missing):
+            best, best_missing = b, missing
+    if best is None:
+        raise JointMismatchError("file has no skinned skeleton to write the animation to", path=source)
+    shown = ", ".join(repr(n) for n in best_missing[:5]) + (" ..." if len(best_missing) > 5 else "")
+    raise JointMismatchError(f"{len(best_missing)} joints of clip {clip.name!r} are not in the file's skeleton "
+                             f"{best.skeleton.name!r}: {shown}", path=source)
+
+
+def _find_animation(doc: GltfFile, clip: Clip, animation: str | int | None) -> tuple[int | None, str]:
+    """Index of the animation to change (None for a new one) and the name of a new one."""
+    anims = doc.gltf.animations
+    names = [a.name or f"animation{i}" for i, a in enumerate(anims)]
+    if isinstance(animation, int) or (isinstance(animation, str) and animation.isdigit() and animation not in names):
+        i = int(animation)
+        if not 0 <= i < len(anims):
+            raise AssetReadError(f"animation index {i} out of range 0..{len(anims) - 1}", path=doc.path)
+        return i, names[i]
+    wanted = animation if animation is not None else clip.name
+    if wanted in names:
+        return names.index(wanted), wanted
+    if animation is None and ":" in wanted and wanted.rsplit(":", 1)[0] in names:  # "Name:skeleton" of a reader
+        return names.index(wanted.rsplit(":", 1)[0]), wanted
+    return None, wanted
+
+
+def _relocate_uri(uri: str | None, source_dir: Path, out_dir: Path) -> str | None:
+    """A relative external URI re-expressed from ``out_dir`` (data URIs and absolute URLs unchanged)."""
+    if uri is None or uri.startswith("data:") or urllib.parse.urlparse(uri).scheme or uri.startswith("/"):
+        return uri
+    if source_dir.resolve() == out_dir.resolve():
+        return uri
+    target = (source_dir / urllib.parse.unquote(uri)).resolve()
+    rel = os.path.relpath(target, out_dir.resolve())
+    return urllib.parse.quote(Path(rel).as_posix() if os.sep != posixpath.sep else rel)
+
+
+def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLike, *,
+                    final_path: str | os.PathLike | None = None, animation: str | int | None = None,
+                    **options) -> None:
+    """Copy ``source`` to ``path`` with ``clip`` written into one of its animations.
+
+    The animation is ``animation`` (name or index) or, when None, the one named like
+    the clip; when there is none, a new animation of that name is added. In it, every
+    joint channel whose values differ from the clip at some frame (beyond
+    :data:`ROTATION_TOLERANCE_DEG` / :data:`TRANSLATION_TOLERANCE_M`) is replaced by
+    a LINEAR channel keyed at the clip's frames, and joints the animation does not
+    key yet (finger joints, typically) get channels where the clip leaves their rest
+    value. Nothing else changes: meshes, materials, morph targets, skins, images,
+    extensions, extras, other animations and unchanged channels keep their JSON and
+    their bytes. New data is appended to the GLB binary chunk (``.glb``) or to a new
+    data-URI buffer (``.gltf``); replaced channels' old accessors stay in the file,
+    unused.
+
+    Parameters
+    ----------
+    source : path-like
+        A ``.gltf`` or ``.glb`` file.
+    clip : Clip
+        On the file's skeleton (joint names as :func:`read_gltf` gives them).
+    path : path-like
+        Where to write (may be a temporary file; see ``final_path``).
+    final_path : path-like, optional
+        The file's final location, used to re-express relative URIs of external
+        buffers and images when it is in another folder than ``source``.
+    animation : str or int, optional
+
+    Raises
+    ------
+    JointMismatchError
+        The clip names joints the file's skeletons do not have.
+    """
+    if options:
+        raise TypeError(f"unexpected options for glTF write_clip: {sorted(options)}")
+    source = Path(source)
+    path = Path(path)
+    final = Path(final_path) if final_path is not None else path
+    doc = load_gltf(source)
+    scene = scan_scene(doc)
+    binding = _find_binding(scene, clip, source)
+    g = doc.gltf
+    sk = binding.skeleton
+    clip = clip_to_gltf_space(clip)
+    ai, new_name = _find_animation(doc, clip, animation)
+
+    times = _key_times(clip)
+    at = times.astype(np.float64)
+    cj = [sk.index(n) for n in clip.skeleton.joint_names]          # file joint of each clip joint
+    nodes = [binding.nodes[j] for j in cj]
+    existing: dict[tuple[int, str], int] = {}
+    if ai is not None:
+        for c, j, p in animation_channels(doc, ai, binding):
+            existing[(binding.nodes[j], p)] = c
+
+    def file_values(path_: str, k: int) -> np.ndarray:
+        node = nodes[k]
+        c = existing.get((node, path_))
+        if c is None:
+            rest = {"rotation": sk.rest_rotations, "translation": sk.rest_translations, "scale": sk.rest_scales}
+            return np.broadcast_to(rest[path_][cj[k]], (at.size, 4 if path_ == "rotation" else 3))
+        kt, kv, interp = channel_keys(doc, ai, c)
+        return sample_channel(kt, kv, interp, at, path_ == "rotation", snap_time(clip.fps))
+
+    changed: dict[str, list[int]] = {"rotation": [], "translation": [], "scale": []}
+    for k in range(len(cj)):
+        if np.any(quat_angle_deg(file_values("rotation", k), clip.rotations[:, k]) > ROTATION_TOLERANCE_DEG):
+            changed["rotation"].append(k)
+        ft = file_values("translation", k)
+        if np.any(np.abs(ft - clip.translations[:, k]) > TRANSLATION_TOLERANCE_M * np.maximum(1.0, np.abs(ft))):
+            changed["translation"].append(k)
+        fs = file_values("scale", k)
+        if np.any(np.abs(fs - clip.scales[:, k]) > SCALE_TOLERANCE * np.maximum(1.0, np.abs(fs))):
+            changed["scale"].append(k)
+
+    out_glb = final.suffix.lower() == ".glb"
+    buffers = list(doc.buffers)
+    for i, b in enumerate(g.buffers):  # a GLB chunk may carry up to 3 padding bytes past byteLength
+        if b.uri is None:
+            buffers[i] = buffers[i][: b.byteLength]
+    if source.parent.resolve() != final.parent.resolve():
+        for b in g.buffers:
+            b.uri = _relocate_uri(b.uri, source.parent, final.parent)
+        for im in g.images:
+            im.uri = _relocate_uri(im.uri, source.parent, final.parent)
+
+    if any(changed.values()):
+        target = _data_buffer(g, buffers, out_glb)
+        app = BinaryAppender(g, target, buffers[target])
+        if ai is None:
+            g.animations.append(pygltflib.Animation(name=new_name))
+            ai = len(g.animations) - 1
+        anim = g.animations[ai]
+        w = _AnimationWriter(app, anim, times)
+        arrays = {"rotation": _continuous(clip.rotations), "translation": clip.translations, "scale": clip.scales}
+        for path_, ks in changed.items():
+            w.add(path_, ks, [nodes[k] for k in ks], arrays[path_], replace=existing)
+        _drop_unused_samplers(anim)
+        app.finish(buffers)
+    save_gltf(g, buffers, path, glb=out_glb)
+
+
+def _data_buffer(g: pygltflib.GLTF2, buffers: list[bytes], glb: bool) -> int:
+    """Index of the buffer new data goes to: the GLB chunk (buffer 0, created if needed) or a new one."""
+    if g.buffers and g.buffers[0].uri is None:
+        return 0
+    if glb:  # the binary chunk must be buffer 0: shift the others
+        g.buffers.insert(0, pygltflib.Buffer(byteLength=0))
+        buffers.insert(0, b"")
+        for v in g.bufferViews:
+            v.buffer += 1
+        return 0
+    g.buffers.append(pygltflib.Buffer(byteLength=0))
+    buffers.append(b"")
+    return len(g.buffers) - 1
+
+
+def _drop_unused_samplers(anim: pygltflib.Animation) -> None:
+    used = sorted({ch.sampler for ch in anim.channels})
+    if len(used) == len(anim.samplers):
+        return
+    remap = {old: new for new, old in enumerate(used)}
+    anim.samplers = [anim.samplers[i] for i in used]
+    for ch in anim.channels:
+        ch.sampler = remap[ch.sampler]
