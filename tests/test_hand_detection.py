@@ -342,3 +342,77 @@ def test_handmap_bad_json(tmp_path):
     p.write_text("{\"left\": ")
     with pytest.raises(ConfigError, match=r"map.json: not valid JSON: Expecting value \(line 1, column 10\)"):
         load_handmap(p, mixamo())
+
+
+# -- real assets -----------------------------------------------------------------------
+
+def test_robot_expressive_glb(shared_assets):
+    from usdhands.formats.io import read_asset
+
+    asset = read_asset(shared_assets / "robot_expressive" / "RobotExpressive.glb")
+    hm = detect_hands(asset.skeletons[0])
+    sk = asset.skeletons[0]
+    short = lambda n: sk.short_names[sk.index(n)]  # noqa: E731
+    for s, hand in (("L", hm.left), ("R", hm.right)):
+        assert tuple(map(short, (hand.wrist, hand.forearm, hand.shoulder, hand.root))) == \
+            (f"LowerArm.{s}", f"UpperArm.{s}", f"Shoulder.{s}", "Hips")
+        assert {f: [short(j) for j in c] for f, c in hand.fingers.items()} == robot_expected(s)
+
+
+def test_leap_bvh(shared_assets):
+    from usdhands.formats.io import read_asset
+
+    sk = read_asset(shared_assets / "leap_hands" / "gesture-typing.bvh").skeletons[0]
+    hm = detect_hands(sk)
+    assert hm.left is None
+    assert (hm.right.wrist, hm.right.forearm, hm.right.shoulder, hm.right.root) == \
+        ("rHand", "rForeArm", None, "rForeArm")
+    assert chains(hm.right) == {f: [f"r{F}{k}" for k in (1, 2, 3)] for f, F in
+                                zip(("thumb", "index", "middle", "ring", "pinky"),
+                                    ("Thumb", "Index", "Mid", "Ring", "Pinky"))}
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_webxr_glb(shared_assets, side):
+    from usdhands.formats.io import read_asset
+
+    sk = read_asset(shared_assets / "webxr_hand" / f"{side}.glb").skeletons[0]
+    hm = detect_hands(sk, side_hint=side)
+    hand = hm[side]
+    other = hm["right" if side == "left" else "left"]
+    assert other is None
+    assert sk.short_names[sk.index(hand.wrist)] == "wrist"
+    assert {f: [sk.short_names[sk.index(j)] for j in c] for f, c in hand.fingers.items()} == webxr_expected()
+
+
+# -- the command -------------------------------------------------------------------------
+
+def test_handmap_command_writes_json(shared_assets, tmp_path, capsys):
+    from usdhands.cli import main
+
+    out = tmp_path / "map.json"
+    src = shared_assets / "webxr_hand" / "left.glb"
+    assert main(["handmap", str(src), "-o", str(out)]) == 0  # side from the file name
+    printed = capsys.readouterr().out
+    assert "left   wrist     wrist" in printed and "right  -         (no hand found)" in printed
+    data = json.loads(out.read_text())
+    assert data["right"] is None
+    assert [n.rsplit("/", 1)[-1] for n in data["left"]["fingers"]["thumb"]] == webxr_expected()["thumb"]
+    from usdhands.formats.io import read_asset
+
+    sk = read_asset(src).skeletons[0]
+    assert load_handmap(out, sk) == detect_hands(sk, side_hint="left")
+
+
+def test_handmap_command_errors(shared_assets, tmp_path, capsys):
+    from usdhands.cli import main
+
+    src = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    assert main(["handmap", str(src), "-o", str(tmp_path / "m.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"usdhands: error: {src}: no hand found in skeleton ")
+    assert "saw 19 joints: Skeleton_torso_joint_1" in err
+    assert not (tmp_path / "m.json").exists()
+    bvh = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    assert main(["handmap", str(bvh), "-o", str(bvh)]) == 2
+    assert "output path equals the input" in capsys.readouterr().err

@@ -1,0 +1,91 @@
+"""``usdhands handmap FILE [-o MAP.json]``: the detected hands of a skeleton, as a table or JSON."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from usdhands.commands._common import print_table
+from usdhands.errors import AssetReadError, NoHandsError, NoSkeletonError
+from usdhands.formats.io import read_asset
+from usdhands.formats.registry import atomic_output, check_output_path
+from usdhands.model.hand_detection import joint_tokens, resolve_handmap
+from usdhands.model.handmap import FINGERS, SIDES, HandMap
+from usdhands.model.skeleton import short_joint_name
+
+
+def register(sub) -> None:
+    p = sub.add_parser("handmap", help="show the detected hands of a skeleton; write them as a hand map JSON",
+                       description="Detect the wrist, forearm, shoulder, root and five finger chains of each "
+                                   "hand of a skeleton and print them. With -o, write them as a hand map JSON "
+                                   "(schemas/handmap.schema.json) to edit and pass back with --handmap.")
+    p.add_argument("file", type=Path, help="a .usd/.usda/.usdc/.usdz, .gltf/.glb or .bvh file")
+    p.add_argument("-o", "--output", type=Path, default=None, help="write the hand map JSON here")
+    p.add_argument("--animation", default=None,
+                   help="use the skeleton of this animation (name or 0-based index); default the first skeleton")
+    p.add_argument("--skeleton", default=None, help="skeleton name or 0-based index (files with several)")
+    p.add_argument("--side", choices=SIDES, default=None,
+                   help="side of a single hand whose joint names give none (WebXR); default: from the file name")
+    p.add_argument("--handmap", type=Path, default=None,
+                   help="check this hand map JSON against the skeleton instead of detecting")
+    p.set_defaults(func=run)
+
+
+def _side_from_path(path: Path) -> str | None:
+    toks = set(joint_tokens(path.stem))
+    left, right = bool(toks & {"left", "l"}), bool(toks & {"right", "r"})
+    return "left" if left and not right else "right" if right and not left else None
+
+
+def _pick_skeleton(asset, path: Path, animation, skeleton):
+    if not asset.skeletons:
+        raise NoSkeletonError("no skeleton in file", path=path)
+    if animation is not None:
+        try:
+            return asset.clip(animation).skeleton
+        except KeyError as e:
+            raise AssetReadError(str(e.args[0]).split(": ", 1)[-1], path=path) from None
+    if skeleton is None:
+        return asset.skeletons[0]
+    for i, sk in enumerate(asset.skeletons):
+        if sk.name == skeleton or short_joint_name(sk.name) == skeleton or str(i) == str(skeleton):
+            return sk
+    names = ", ".join(repr(s.name) for s in asset.skeletons)
+    raise AssetReadError(f"no skeleton named {skeleton!r}; there are {names}", path=path)
+
+
+def handmap_rows(hm: HandMap) -> list[tuple]:
+    """Table rows ``(side, part, joints)`` with short joint names."""
+    rows = []
+    for side in SIDES:
+        h = hm[side]
+        if h is None:
+            rows.append((side, "-", "(no hand found)"))
+            continue
+        for part in ("wrist", "forearm", "shoulder", "root"):
+            j = getattr(h, part)
+            rows.append((side, part, "-" if j is None else short_joint_name(j)))
+        for f in FINGERS:
+            rows.append((side, f, " ".join(short_joint_name(j) for j in h.fingers[f]) or "(absent)"))
+    return rows
+
+
+def run(args) -> int:
+    if args.output is not None:
+        check_output_path(args.output, args.file)
+    asset = read_asset(args.file)
+    sk = _pick_skeleton(asset, args.file, args.animation, args.skeleton)
+    side_hint = args.side or _side_from_path(args.file)
+    try:
+        hm = resolve_handmap(sk, args.handmap, side_hint=side_hint)
+    except NoHandsError as e:
+        raise NoHandsError(e.message, path=args.file) from None
+    print(f"{args.file}: skeleton {sk.name!r}, {sk.num_joints} joints")
+    print_table(handmap_rows(hm), ["side", "part", "joints (proximal to distal)"])
+    if args.output is not None:
+        data = {"skeleton": sk.name, **hm.to_dict()}
+        with atomic_output(args.output) as tmp:
+            tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {args.output}", file=sys.stderr)
+    return 0
