@@ -380,3 +380,146 @@ def test_bad_arrays_are_refused():
         reduce_curves(np.zeros(5), ["a.x"])
     with pytest.raises(ValueError, match="Expected 2 names, got 1"):
         reduce_curves(np.zeros((5, 2)), ["a.x"])
+
+
+# ---------------------------------------------------------------------------- the command line
+LEAP = ("leap_hands", "gesture-typing.bvh")
+
+
+def run_cli(capsys, *argv) -> tuple[int, str, str]:
+    from usdhands.cli import main
+
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_leap_never_moving_third_joints_are_irrelevant_at_step_1(shared_assets, capsys):
+    for name in ("fingers-ok.bvh", "gesture-pointing.bvh", "gesture-typing.bvh"):
+        code, out, err = run_cli(capsys, "reduce", shared_assets / "leap_hands" / name, "--json", "--step", "1")
+        assert code == 0, err
+        report = json.loads(out)
+        assert report["curves"] == 45 and report["steps"][0]["dofs_left"] == 45
+        assert report["steps"][1]["condition"] == "range < 1"
+        third = {f"r{f}3.{a}" for f in ("Thumb", "Index", "Mid", "Ring", "Pinky") for a in "xyz"}
+        constants = {c["curve"]: c for c in report["constants"]}
+        assert third <= set(constants), name
+        assert all(constants[c]["value"] == 0 for c in third)
+        assert constants["rIndex3.y"]["curve_paper"] == "riIndexDIPy"
+        assert constants["rThumb3.z"]["curve_paper"] == "riThumbIPz"
+        # the moving joints are not all constant: step 1 leaves DOFs, the last step fewer
+        assert report["steps"][1]["dofs_left"] == 45 - len(constants) > 0
+        assert report["steps"][-1]["dofs_left"] < report["steps"][2]["dofs_left"]
+
+
+def test_reduce_json_report_layout(shared_assets, capsys):
+    code, out, _ = run_cli(capsys, "reduce", shared_assets.joinpath(*LEAP), "--json")
+    assert code == 0
+    report = json.loads(out)
+    assert [s["condition"] for s in report["steps"]] == [
+        "original", "range < 1", "range < 1 + rmsd < 0.3", "range < 5", "range < 5 + rmsd < 0.5"]
+    for s in report["steps"]:
+        assert set(s) >= {"condition", "dofs_left", "rms_error_deg", "max_error_deg"}
+    for r in report["relations"]:
+        assert set(r) >= {"dependent", "controlling", "kind", "rmsd"} and r["kind"] in ("rmsd1", "rmsd2")
+    assert all(set(c) >= {"curve", "value"} for c in report["constants"])
+    # the reported rmsd is the distance of the original pair, recomputed here
+    from usdhands.commands.reduce import load_finger_curves
+
+    _, _, curves, _ = load_finger_curves(shared_assets.joinpath(*LEAP), None, None, None, "XYZ")
+    r1, r2 = pair_rmsd(curves.values)
+    col = {n: k for k, n in enumerate(curves.names)}
+    for r in report["relations"]:
+        m = r1 if r["kind"] == "rmsd1" else r2
+        assert r["rmsd"] == pytest.approx(m[col[r["dependent"]], col[r["controlling"]]], abs=1e-9)
+
+
+def test_reduce_then_expand_reproduces_the_reduced_clip(shared_assets, tmp_path, capsys):
+    from usdhands.algorithms.reduction_model import ReductionModel
+    from usdhands.commands.reduce import load_finger_curves
+    from usdhands.formats.io import read_clip
+    from usdhands.model.rotations import quat_angle_deg
+
+    src = shared_assets.joinpath(*LEAP)
+    reduced, model = tmp_path / "reduced.bvh", tmp_path / "model.json"
+    code, out, err = run_cli(capsys, "reduce", src, "-o", reduced, "--model", model)
+    assert code == 0, err
+    assert f"wrote {reduced}" in out
+    m = ReductionModel.load(model)
+    assert m.condition == "range < 5 + rmsd < 0.5" and m.relations and m.constants
+    assert m.metadata["paper_names"]["rIndex2.y"] == "riIndexPIPy"
+
+    # expand the original: the controlling curves are the same, so the result is the reduced clip
+    from_orig = tmp_path / "from_orig.bvh"
+    assert run_cli(capsys, "expand", src, "--model", model, "-o", from_orig)[0] == 0
+    # expand the reduced clip: reproduces itself (BVH stores 6 decimals: one rounding step each way)
+    again = tmp_path / "again.bvh"
+    code, out, err = run_cli(capsys, "expand", reduced, "--model", model, "-o", again)
+    assert code == 0, err
+    assert out.startswith(f"{reduced}: rebuilt {len(m.relations)} dependent curves from "
+                          f"{len(m.controlling_curves)} controlling curves and set {len(m.constants)} constants")
+    r_red, r_orig, r_again = (read_clip(p).rotations for p in (reduced, from_orig, again))
+    assert quat_angle_deg(r_red, r_orig).max() < 1e-9
+    assert quat_angle_deg(r_red, r_again).max() < 2e-6
+
+    # the reduced clip really is the model's rebuild of the original: dependents follow their controllers
+    _, _, curves, _ = load_finger_curves(reduced, None, None, None, "XYZ")
+    v = curves.values
+    col = {n: k for k, n in enumerate(curves.names)}
+    for r in m.relations:
+        assert np.allclose(v[:, col[r.dependent]], r.scale * v[:, col[r.controlling]] + r.offset, atol=1e-5)
+    for c in m.constants:
+        assert np.allclose(v[:, col[c.curve]], c.value, atol=1e-5)
+    # and differs from the original where the model rebuilt something
+    _, _, orig, _ = load_finger_curves(src, None, None, None, "XYZ")
+    assert np.abs(orig.values - v).max() > 1.0
+
+
+def test_expand_in_memory_is_exact(shared_assets):
+    from usdhands.commands.reduce import load_finger_curves
+    from usdhands.model.finger_dofs import apply_finger_curves, finger_curves
+    from usdhands.model.rotations import quat_angle_deg
+
+    clip, _, curves, sides = load_finger_curves(shared_assets.joinpath(*LEAP), None, None, None, "XYZ")
+    model = reduce_curves(curves.values, curves.names, groups=sides).final.model
+    reduced = apply_finger_curves(clip, curves.with_values(model.apply(curves.values, curves.names)))
+    again_curves = finger_curves(reduced, curves.joints)
+    again = apply_finger_curves(reduced, again_curves.with_values(model.apply(again_curves.values, curves.names)))
+    assert quat_angle_deg(reduced.rotations, again.rotations).max() < 1e-9
+
+
+@pytest.mark.parametrize("steps, message", [
+    ("range<1,foo", "bad step 'foo': expected range<N, rmsd<N, rmsd1<N or rmsd2<N with N a positive number"),
+    ("rmsd<0", "bad step 'rmsd<0': expected range<N, rmsd<N, rmsd1<N or rmsd2<N with N a positive number"),
+    ("", "no steps given"),
+])
+def test_cli_bad_steps_exit_2(shared_assets, capsys, steps, message):
+    code, out, err = run_cli(capsys, "reduce", shared_assets.joinpath(*LEAP), "--steps", steps)
+    assert code == 2 and out == ""
+    assert err == f"usdhands: error: {message}\n"
+
+
+def test_cli_user_mistakes(shared_assets, tmp_path, capsys):
+    src = shared_assets.joinpath(*LEAP)
+    code, _, err = run_cli(capsys, "reduce", src, "--hands", "left")
+    assert code == 2 and err == f"usdhands: error: {src}: no left hand with fingers (hands found: right)\n"
+    code, _, err = run_cli(capsys, "reduce", src, "--step", "5")
+    assert code == 2 and err == "usdhands: error: --step 5 is out of range: 4 step(s) given\n"
+    model = ReductionModel(("LeftHandIndex1.x", "LeftHandIndex1.y", "LeftHandIndex1.z"),
+                           (Constant("LeftHandIndex1.x", 1.0),))
+    model.save(tmp_path / "m.json")
+    code, _, err = run_cli(capsys, "expand", src, "--model", tmp_path / "m.json", "-o", tmp_path / "o.bvh")
+    assert code == 2
+    assert err == f"usdhands: error: {src}: joint 'LeftHandIndex1' of the reduction model m.json is not in the file\n"
+    assert not (tmp_path / "o.bvh").exists()
+
+
+def test_plots_are_written(shared_assets, tmp_path, capsys):
+    code, out, err = run_cli(capsys, "reduce", shared_assets.joinpath(*LEAP), "--plot", tmp_path / "plots")
+    assert code == 0, err
+    names = sorted(p.name for p in (tmp_path / "plots").iterdir())
+    assert names == ["reduction_curves.png", "reduction_ranges.png", "reduction_rmsd1.png",
+                     "reduction_rmsd2.png", "reduction_scatter.png"]
+    for p in (tmp_path / "plots").iterdir():
+        data = p.read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and 5_000 < len(data) < 150_000
