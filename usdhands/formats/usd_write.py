@@ -307,7 +307,7 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
                         "startTimeCode", "endTimeCode"):
                 if src_root.pseudoRoot.HasInfo(key):
                     layer.pseudoRoot.SetInfo(key, src_root.pseudoRoot.GetInfo(key))
-            layer.subLayerPaths.append(str(source.resolve()))
+            layer.subLayerPaths.append(os.path.abspath(source))
             stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
         else:
             layer = src_stage.Flatten()
@@ -323,8 +323,12 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
 
 
 def _relative_asset_path(target: Path, folder: Path) -> str:
-    target = target.resolve()
-    folder = folder.resolve()
+    """``target`` relative to ``folder`` as a USD asset path (``./x.usd``, ``../a/x.usd``).
+
+    Symbolic links are not resolved, so the path follows the folders as the user sees them.
+    """
+    target = Path(os.path.abspath(target))
+    folder = Path(os.path.abspath(folder))
     try:
         rel = os.path.relpath(target, folder)
     except ValueError:  # another drive
