@@ -183,6 +183,44 @@ def test_rokoko_finger_numbers():
     assert hm.right.shoulder == "RightArm"
 
 
+
+def test_3dsmax_biped_counts_fingers_from_zero():
+    pairs = [("Bip01", None), ("Bip01 Pelvis", "Bip01"), ("Bip01 Spine", "Bip01 Pelvis")]
+    for S in ("L", "R"):
+        pairs += [(f"Bip01 {S} Clavicle", "Bip01 Spine"), (f"Bip01 {S} UpperArm", f"Bip01 {S} Clavicle"),
+                  (f"Bip01 {S} Forearm", f"Bip01 {S} UpperArm"), (f"Bip01 {S} Hand", f"Bip01 {S} Forearm")]
+        for n in range(5):
+            names = [f"Bip01 {S} Finger{n}", f"Bip01 {S} Finger{n}1", f"Bip01 {S} Finger{n}2"]
+            pairs += [(names[0], f"Bip01 {S} Hand"), (names[1], names[0]), (names[2], names[1]),
+                      (f"Bip01 {S} Finger{n}Nub", names[2])]
+    hm = detect_hands(make_skeleton(pairs))
+    h = hm.right
+    assert (h.wrist, h.forearm, h.shoulder, h.root) == ("Bip01 R Hand", "Bip01 R Forearm", "Bip01 R UpperArm",
+                                                        "Bip01 Pelvis")
+    assert chains(h) == {f: [f"Bip01 R Finger{n}", f"Bip01 R Finger{n}1", f"Bip01 R Finger{n}2"]
+                         for n, f in enumerate(("thumb", "index", "middle", "ring", "pinky"))}
+
+
+def test_makehuman_numbers_and_shared_carpal():
+    # MakeHuman: finger1-1.L (thumb) ...; metacarpal1.L under the hand carries index AND middle here,
+    # so it is shared and stays out of both chains; metacarpal3.L carries the ring only
+    pairs = [("root", None), ("upperarm01.L", "root"), ("lowerarm01.L", "upperarm01.L"), ("wrist.L", "lowerarm01.L"),
+             ("metacarpal1.L", "wrist.L"), ("metacarpal3.L", "wrist.L"), ("metacarpal4.L", "wrist.L")]
+    parent_of = {1: "wrist.L", 2: "metacarpal1.L", 3: "metacarpal1.L", 4: "metacarpal3.L", 5: "metacarpal4.L"}
+    for n in range(1, 6):
+        parent = parent_of[n]
+        for k in (1, 2, 3):
+            pairs.append((f"finger{n}-{k}.L", parent))
+            parent = f"finger{n}-{k}.L"
+    hm = detect_hands(make_skeleton(pairs))
+    c = chains(hm.left)
+    assert hm.right is None and hm.left.wrist == "wrist.L" and hm.left.forearm == "lowerarm01.L"
+    assert hm.left.shoulder == "upperarm01.L" and hm.left.root == "root"
+    assert c["thumb"] == ["finger1-1.L", "finger1-2.L", "finger1-3.L"]
+    assert c["index"] == ["finger2-1.L", "finger2-2.L", "finger2-3.L"]
+    assert c["ring"] == ["metacarpal3.L", "finger4-1.L", "finger4-2.L", "finger4-3.L"]
+    assert c["pinky"] == ["metacarpal4.L", "finger5-1.L", "finger5-2.L", "finger5-3.L"]
+
 WEBXR = ["wrist", "thumb-metacarpal", "thumb-phalanx-proximal", "thumb-phalanx-distal", "thumb-tip"] + [
     f"{F}-finger-{s}" for F in ("index", "middle", "ring", "pinky")
     for s in ("metacarpal", "phalanx-proximal", "phalanx-intermediate", "phalanx-distal", "tip")]

@@ -12,8 +12,10 @@ classifies each joint:
   sided ancestor; a hand whose joints carry no side at all (WebXR) takes the
   ``side_hint``, or the side named in the skeleton's name.
 - **finger**: ``thumb``; ``index``/``pointer``/``forefinger``; ``middle``/``mid``;
-  ``ring``; ``pinky``/``pinkie``/``little``; Rokoko's ``Finger1`` … ``Finger5``
-  (thumb … pinky). Names with ``foot``/``toe`` (HumanIK's foot fingers) are no fingers.
+  ``ring``; ``pinky``/``pinkie``/``little``; a number after ``finger``: Rokoko's
+  ``Finger1Proximal`` and MakeHuman's ``finger1-2.L`` count from 1 (thumb … pinky),
+  3ds Max Biped's ``Finger0``, ``Finger01``, ``Finger1`` … from 0 (the skeleton is read
+  as Biped when it has a ``Finger0``). Names with ``foot``/``toe`` (HumanIK's foot fingers) are no fingers.
 - **end joints**, which carry no DOF and are left out of the chains: names with a
   token ``end``, ``nub``, ``tip``, ``leaf``, ``site`` (``*_end``, ``*Nub``,
   ``*-tip``, BVH End Sites read as ``<parent>_end``), and leaf joints numbered 4 or
@@ -113,9 +115,10 @@ def _classify(skeleton: Skeleton) -> list[_Joint]:
     for p in skeleton.parents:
         if p >= 0:
             has_child[p] = True
+    all_tokens = [joint_tokens(n) for n in skeleton.short_names]
+    biped = any(a == "finger" and b == "0" for toks in all_tokens for a, b in zip(toks, toks[1:]))
     out = []
-    for j, name in enumerate(skeleton.short_names):
-        toks = joint_tokens(name)
+    for j, toks in enumerate(all_tokens):
         tokset = set(toks)
         side = None
         if tokset & _LEFT and not tokset & _RIGHT:
@@ -128,17 +131,22 @@ def _classify(skeleton: Skeleton) -> list[_Joint]:
             if t in _FINGER_WORDS:
                 finger = _FINGER_WORDS[t]
                 break
-        rokoko = False
-        if finger is None:  # Rokoko: Finger1 (thumb) ... Finger5 (pinky)
-            for a, b in zip(toks, toks[1:]):
-                if a == "finger" and b.isdigit() and 1 <= int(b) <= 5:
-                    finger, rokoko = FINGERS[int(b) - 1], True
-                    break
+        digits = [int(t) for t in toks if t.isdigit()]
+        if finger is None:
+            for k in range(len(toks) - 1):
+                a, b = toks[k], toks[k + 1]
+                if a != "finger" or not b.isdigit():
+                    continue
+                if biped:  # 3ds Max Biped: Finger0 (thumb) ... Finger4; Finger01, Finger02 the next segments
+                    if int(b[0]) <= 4:
+                        finger, digits = FINGERS[int(b[0])], [len(b) - 1]
+                elif len(b) == 1 and 1 <= int(b) <= 5:  # Rokoko Finger2Proximal, MakeHuman finger2-1
+                    finger = FINGERS[int(b) - 1]
+                    rest = toks[k + 2:]
+                    digits = [int(rest[0])] if rest and rest[0].isdigit() else []
+                break
         if tokset & _NOT_FINGER_WORDS:
             finger = None
-        digits = [int(t) for t in toks if t.isdigit()]
-        if rokoko:
-            digits = digits[1:]
         if digits:
             number = digits[-1]
         rank = 1.5
@@ -152,7 +160,7 @@ def _classify(skeleton: Skeleton) -> list[_Joint]:
             elif number is not None:
                 rank = number
         is_end = bool(tokset & _END_WORDS) or (not has_child[j] and finger is not None
-                                                and not rokoko and number is not None and number >= 4)
+                                                and number is not None and number >= 4)
         is_wrist_name = finger is None and bool(tokset & {"hand", "wrist"}) and not is_end \
             and not tokset & (_HELPER_WORDS | _NOT_FINGER_WORDS)
         core = "".join(t for t in toks if t not in _LEFT and t not in _RIGHT and not t.isdigit())
