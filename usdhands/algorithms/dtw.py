@@ -63,8 +63,9 @@ def check_constraints(constraints: Sequence[Constraint], n: int, m: int) -> list
     ------
     ValueError
         A frame out of range, a negative tolerance, frames that do not both increase
-        from one constraint to the next, or a constraint on the first or last body
-        frame that contradicts the fixed ends of the path.
+        from one constraint to the next, constraints on adjacent body frames that skip
+        hand frames, or a constraint on the first or last body frame that contradicts
+        the fixed ends of the path.
     """
     out = []
     for c in constraints:
@@ -79,6 +80,10 @@ def check_constraints(constraints: Sequence[Constraint], n: int, m: int) -> list
         if out and not (c.body > out[-1].body and c.hand > out[-1].hand):
             raise ValueError(f"constraints out of order: {c} after {out[-1]} "
                              "(body and hand frames must both increase)")
+        if out and c.body == out[-1].body + 1 and c.hand - c.tolerance > out[-1].hand + out[-1].tolerance + 1:
+            raise ValueError(f"constraints {out[-1]} and {c} cannot both hold: hand frames "
+                             f"{out[-1].hand + out[-1].tolerance + 1}..{c.hand - c.tolerance - 1} "
+                             "would match no body frame")
         if c.body == 0 and c.hand > c.tolerance:
             raise ValueError(f"constraint {c} contradicts the start of the path 0:0")
         if c.body == n - 1 and c.hand < m - 1 - c.tolerance:
@@ -201,7 +206,7 @@ class Band:
                 continue
             slope = dy / dx
             delta = W * np.hypot(dx, dy) / dx if np.isfinite(W) else np.inf
-            delta = max(delta, slope / 2.0 + 1.0)  # rows must overlap for a path to exist
+            delta = max(delta, slope + 1.0)  # consecutive rows must overlap for a path to exist
             i = np.arange(x0, x1 + 1)
             c = y0 + slope * (i - x0)
             with np.errstate(invalid="ignore"):

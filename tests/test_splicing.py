@@ -1,0 +1,266 @@
+"""Splicing hand motion onto body motion (seed 001) against ground truth built here.
+
+The hand sessions come from ``splice_synth.make_case``: the body performance replayed
+through a known smooth non-linear monotone time warp, the arm's rotations about the
+shoulder scaled by 0.5-0.8, a still trunk turned by 30 degrees, and 0.5 degrees of noise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from splice_synth import body_handside, leap_handside, make_case
+
+from usdhands.algorithms.dtw import Constraint
+from usdhands.algorithms.splicing import (
+    MarkerOffsets, SpliceOptions, _PassOneInput, align_hands, default_marker_offsets, direction_angle_cost,
+    first_pass_cost, first_pass_cost_naive, hand_angle_cost, hand_angle_cost_naive, hand_directions,
+    markers_from_joints, median_alignment, pair_finger_joints, phase_boundaries, sign_features, splice_clips,
+    transfer_fingers, window_yaw_naive,
+)
+from usdhands.model import Clip, HandSide
+from usdhands.model.rotations import quat_angle_deg
+
+SIDES = ("left", "right")
+
+
+@pytest.fixture(scope="module")
+def case():
+    return make_case(300, seed=1)
+
+
+@pytest.fixture(scope="module")
+def leap_case():
+    return make_case(300, seed=2, style_body="ue", partial=True)
+
+
+def _sides(case, partial=False):
+    body = {s: body_handside(case.body.skeleton, s, case.style_body) for s in SIDES}
+    hands = {s: (leap_handside(s) if partial else body_handside(case.hands.skeleton, s, case.style_hands))
+             for s in SIDES}
+    return body, hands
+
+
+def _finger_error_deg(result, case):
+    errs = []
+    for s in SIDES:
+        j = result.transfers[s].joints
+        errs.append(quat_angle_deg(result.clip.rotations[:, j], case.body.rotations[:, j]))
+    return np.concatenate([e.ravel() for e in errs])
+
+
+# -- cost functions against their naive twins ------------------------------------------
+def _random_pass_one(rng, n, m, trunk):
+    P = rng.normal(size=(n, 4, 3)) * 10
+    Q = rng.normal(size=(m, 4, 3)) * 10
+    vb, ab, evb, eab = sign_features(np.cumsum(P, 0), 30.0)
+    vh, ah, evh, eah = sign_features(np.cumsum(Q, 0), 30.0)
+    yb = rng.uniform(-180, 180, n) if trunk else None
+    yh = rng.uniform(-180, 180, m) if trunk else None
+    return _PassOneInput(P, Q, vb, ab, vh, ah, (evb, eab, evh, eah), 2, yb, yh)
+
+
+@pytest.mark.parametrize("trunk", [False, True])
+def test_first_pass_cost_equals_naive_eq6(trunk):
+    rng = np.random.default_rng(0)
+    inp = _random_pass_one(rng, 17, 23, trunk)
+    full = first_pass_cost_naive(inp)
+    i, j = np.mgrid[0:17, 0:23]
+    fast = first_pass_cost(inp, i.ravel(), j.ravel()).reshape(17, 23)
+    np.testing.assert_allclose(fast, full, atol=1e-9)
+    # values are counts of sign disagreements: 0, 1 or 4 per component
+    assert set(np.unique(full)) <= set(range(0, 97))
+
+
+def test_window_yaw_recovers_a_known_turn():
+    rng = np.random.default_rng(1)
+    P = rng.normal(size=(20, 4, 3)) * 10
+    th = np.radians(37.0)
+    R = np.array([[np.cos(th), 0, np.sin(th)], [0, 1, 0], [-np.sin(th), 0, np.cos(th)]])
+    Q = P @ R + np.array([5.0, 2.0, -3.0])  # rows: p' = R^T p, plus a shift
+    assert np.degrees(window_yaw_naive(P, Q, 10, 10)) == pytest.approx(37.0, abs=1e-9)
+    inp = _PassOneInput(P, Q, *(np.zeros((20, 4, 3)),) * 4, (0.0,) * 4, 2, None, None)
+    assert first_pass_cost(inp, np.array([10]), np.array([10]))[0] == 0.0
+
+
+def test_hand_angle_cost_equals_scipy_alignment():
+    rng = np.random.default_rng(2)
+    unit = lambda v: v / np.linalg.norm(v, axis=-1, keepdims=True)
+    fb, hb, fh, hh = (unit(rng.normal(size=(k, 3))) for k in (9, 9, 11, 11))
+    fh[3] = -fb[2]  # opposite forearms take the half-turn branch
+    i, j = np.mgrid[0:9, 0:11]
+    fast = hand_angle_cost(fb, hb, fh, hh, i.ravel(), j.ravel()).reshape(9, 11)
+    naive = hand_angle_cost_naive(fb, hb, fh, hh)
+    ok = np.ones_like(fast, bool)
+    ok[2, 3] = False  # a half turn about any perpendicular axis aligns opposite vectors: no unique answer
+    np.testing.assert_allclose(fast[ok], naive[ok], atol=1e-6)
+    assert 0.0 <= fast[2, 3] <= 180.0
+
+
+def test_direction_angle_cost_is_the_angle_in_degrees():
+    u = np.array([[1.0, 0, 0], [0, 1.0, 0]])
+    assert direction_angle_cost(u, u, np.array([0, 0, 1]), np.array([0, 1, 1])).tolist() == [0.0, 90.0, 0.0]
+
+
+# -- markers -----------------------------------------------------------------------------
+def test_default_markers_sit_on_wrist_knuckle_and_towards_the_elbow(case):
+    sk = case.body.skeleton
+    side = body_handside(sk, "right")
+    off = default_marker_offsets(sk, side)
+    rest = sk.rest_world_positions()
+    wrist, knuckle, elbow = (rest[sk.index(n)] for n in ("RightHand", "RightHandMiddle1", "RightForeArm"))
+    m = markers_from_joints(Clip(sk, 30.0, np.tile([0.0, 0, 0, 1], (1, sk.num_joints, 1))), side, off)[0]
+    length = np.linalg.norm(knuckle - wrist)
+    np.testing.assert_allclose(m[3], knuckle, atol=1e-9)
+    np.testing.assert_allclose(0.5 * (m[0] + m[1]), wrist, atol=1e-9)
+    assert np.linalg.norm(m[0] - m[1]) == pytest.approx(0.5 * length)
+    np.testing.assert_allclose(m[2], wrist + (elbow - wrist) / np.linalg.norm(elbow - wrist) * length, atol=1e-9)
+
+
+def test_markers_follow_given_offsets(case):
+    sk = case.body.skeleton
+    side = body_handside(sk, "left")
+    off = MarkerOffsets((0, 1, 0), (0, -1, 0), (-10, 0, 0), (8, 0, 0))
+    m = markers_from_joints(case.body, side, off)
+    world = case.body.world_xforms()
+    w = world[:, sk.index("LeftHand")]
+    np.testing.assert_allclose(m[:, 3], (w @ [8.0, 0, 0, 1])[:, :3], atol=1e-9)
+
+
+def test_hand_directions_read_the_same_on_different_rigs(leap_case):
+    body_sides, hand_sides = _sides(leap_case, partial=True)
+    for s in SIDES:
+        ub = hand_directions(leap_case.body, body_sides[s])
+        uh = hand_directions(leap_case.hands, hand_sides[s])
+        # at the true correspondence both rigs give the same wrist bend, noise aside
+        j = np.round(leap_case.truth).astype(int)
+        ang = np.degrees(np.arccos(np.clip(np.sum(ub * uh[j], axis=1), -1, 1)))
+        assert np.median(ang) < 3.0
+    rest = Clip(leap_case.hands.skeleton, 30.0, np.tile([0.0, 0, 0, 1], (1, leap_case.hands.num_joints, 1)))
+    np.testing.assert_allclose(hand_directions(rest, hand_sides["right"]), [[1.0, 0, 0]], atol=1e-9)
+
+
+# -- the splice against ground truth ----------------------------------------------------------
+def test_splice_recovers_the_warp_and_the_fingers_both_hands(case):
+    body_sides, hand_sides = _sides(case)
+    r = splice_clips(case.body, case.hands, body_sides, hand_sides)
+    for s in SIDES:
+        err = np.abs(r.sides[s].alignment - case.truth)
+        assert err.mean() <= 1.5, (s, err.mean())
+        assert r.sides[s].second.cost < r.sides[s].second.cell_costs.mean() * 300
+    fe = _finger_error_deg(r, case)
+    assert fe.mean() < 2.0 and np.percentile(fe, 95) < 5.0
+    # non-finger joints are the body's own
+    fingers = sorted(j for s in SIDES for j in r.transfers[s].joints)
+    others = np.setdiff1d(np.arange(case.body.num_joints), fingers)
+    np.testing.assert_array_equal(r.clip.rotations[:, others], case.body.rotations[:, others])
+    # the phases found are matched near the truth by the first pass
+    ph = r.sides["right"].phases
+    assert len(ph) >= 5
+    assert np.median(np.abs(ph[:, 1] - case.truth[ph[:, 0].astype(int)])) < 6.0
+
+
+def test_splice_without_the_second_pass_is_worse(case):
+    """The first pass alone only matches phases; the second pass is what gets within 1.5 frames."""
+    body_sides, hand_sides = _sides(case)
+    r = splice_clips(case.body, case.hands, {"right": body_sides["right"]}, {"right": hand_sides["right"]})
+    first = median_alignment(r.sides["right"].first.path, case.body.num_frames)
+    assert np.abs(first - case.truth).mean() > np.abs(r.sides["right"].alignment - case.truth).mean() + 1.0
+
+
+def test_splice_onto_partial_hand_skeleton_with_other_joint_names(leap_case):
+    body_sides, hand_sides = _sides(leap_case, partial=True)
+    assert body_sides["left"].wrist == "hand_l" and hand_sides["left"].wrist == "lHand"
+    r = splice_clips(leap_case.body, leap_case.hands, body_sides, hand_sides)
+    for s in SIDES:
+        assert np.abs(r.sides[s].alignment - leap_case.truth).mean() <= 1.5
+        assert ("index_02_l" if s == "left" else "index_02_r", f"{s[0]}Index2") in r.pairs[s]
+    fe = _finger_error_deg(r, leap_case)
+    assert fe.mean() < 2.0
+
+
+def test_paper_forearm_vector_alignment_and_trunk_yaw_options(case):
+    body_sides, hand_sides = _sides(case)
+    one = lambda d: {"left": d["left"]}
+    vec = splice_clips(case.body, case.hands, one(body_sides), one(hand_sides),
+                       options=SpliceOptions(forearm_align="vector"))
+    assert np.abs(vec.sides["left"].alignment - case.truth).mean() <= 2.5
+    trunk = splice_clips(case.body, case.hands, one(body_sides), one(hand_sides),
+                         options=SpliceOptions(yaw="trunk"))
+    assert np.abs(trunk.sides["left"].alignment - case.truth).mean() <= 1.5
+
+
+def test_constraints_hold_exactly_and_within_tolerance(case):
+    body_sides, hand_sides = _sides(case)
+    # pairs away from the truth, so the warp has to bend to meet them
+    t = case.truth
+    cons = [Constraint(60, int(round(t[60])) + 8), Constraint(150, int(round(t[150])) - 6, 0),
+            Constraint(240, int(round(t[240])) + 9, 3)]
+    r = splice_clips(case.body, case.hands, {"right": body_sides["right"]}, {"right": hand_sides["right"]},
+                     constraints=cons)
+    a = r.sides["right"]
+    for c in cons:
+        for path in (a.first.path, a.second.path):
+            cols = path[path[:, 0] == c.body, 1]
+            assert np.all(np.abs(cols - c.hand) <= c.tolerance), (c, cols)
+        assert abs(a.alignment[c.body] - c.hand) <= c.tolerance
+    assert a.alignment[60] == t[60].round() + 8
+
+
+def test_median_alignment_takes_the_median_of_matched_columns():
+    path = np.array([[0, 0], [0, 1], [0, 2], [1, 3], [2, 3], [2, 4], [3, 5]])
+    np.testing.assert_array_equal(median_alignment(path, 4), [1.0, 3.0, 3.5, 5.0])
+
+
+def test_phase_boundaries_where_the_velocity_sign_pattern_changes():
+    v = np.zeros((40, 3))
+    v[:10, 0] = 5.0   # out
+    v[10:12, 0] = -5  # a two-frame blip: too short to be a phase
+    v[12:20, 0] = 5.0
+    v[20:30, 0] = -5.0  # back
+    # 30..39: hold
+    np.testing.assert_array_equal(phase_boundaries(v, 1.0, 4), [20, 30])
+
+
+def test_transfer_fingers_is_relative_to_rest_and_blends_jumps(case):
+    body, hands = case.body, case.hands
+    pairs = [("RightHandIndex2", "RightHandIndex2")]
+    n = body.num_frames
+    ident = np.arange(n, dtype=float)
+    tr = transfer_fingers(body, hands.slice(0, n), pairs, ident, blend_window=0)
+    j = hands.skeleton.index("RightHandIndex2")
+    assert quat_angle_deg(tr.rotations[:, 0], hands.rotations[:n, j]).max() < 1e-6
+    # a jump of 20 hand frames at body frame 100 is cross-faded over the window
+    a = ident.copy()
+    a[101:] += 20
+    hard = transfer_fingers(body, hands, pairs, a, blend_window=0)
+    soft = transfer_fingers(body, hands, pairs, a, blend_window=6)
+    assert soft.seams.tolist() == [100] and hard.seams.tolist() == [100]
+    step = lambda r: quat_angle_deg(r.rotations[1:, 0], r.rotations[:-1, 0])
+    assert step(soft)[94:107].max() < 0.5 * step(hard)[100]
+    np.testing.assert_allclose(soft.rotations[:94], hard.rotations[:94])
+    np.testing.assert_allclose(soft.rotations[108:], hard.rotations[108:])
+
+
+def test_finger_joints_pair_from_the_fingertip():
+    body = HandSide("left", "hand_l", fingers={"index": ("index_metacarpal_l", "index_01_l", "index_02_l",
+                                                           "index_03_l"), "pinky": ("pinky_01_l",)})
+    hand = HandSide("left", "lHand", fingers={"index": ("lIndex1", "lIndex2", "lIndex3"), "thumb": ("lThumb1",)})
+    pairs, bu, hu = pair_finger_joints(body, hand)
+    assert pairs == [("index_01_l", "lIndex1"), ("index_02_l", "lIndex2"), ("index_03_l", "lIndex3")]
+    assert bu == ["index_metacarpal_l", "pinky_01_l"] and hu == ["lThumb1"]
+
+
+def test_bad_input_is_rejected(case):
+    body_sides, hand_sides = _sides(case)
+    with pytest.raises(ValueError, match=r"Expected clips at the same frame rate, got 30.0 and 60.0"):
+        splice_clips(case.body, case.hands.replace(fps=60.0), body_sides, hand_sides)
+    with pytest.raises(ValueError, match=r"Expected the same non-empty sides, got \['left', 'right'\] and \['left'\]"):
+        splice_clips(case.body, case.hands, body_sides, {"left": hand_sides["left"]})
+    no_forearm = HandSide("right", "RightHand", fingers=body_sides["right"].fingers)
+    with pytest.raises(ValueError, match="hand 'right' has no forearm joint; markers need one"):
+        splice_clips(case.body, case.hands, {"right": body_sides["right"]}, {"right": no_forearm})
+    with pytest.raises(ValueError, match=r"constraint 5:400: hand frame 400 is out of range 0..329"):
+        align_hands(np.zeros((300, 4, 3)), np.zeros((330, 4, 3)), 30.0, constraints=[Constraint(5, 400)])
+    with pytest.raises(ValueError, match="Expected yaw 'window', 'trunk' or 'none', got 'up'"):
+        SpliceOptions(yaw="up")
