@@ -523,3 +523,34 @@ def test_plots_are_written(shared_assets, tmp_path, capsys):
     for p in (tmp_path / "plots").iterdir():
         data = p.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and 5_000 < len(data) < 150_000
+
+
+def test_robot_expressive_two_bone_fingers_without_pinky(shared_assets, tmp_path, capsys, gltf_validator):
+    from usdhands.formats.io import read_clip
+    from usdhands.model.rotations import quat_angle_deg
+
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    reduced, model = tmp_path / "wave.glb", tmp_path / "wave.json"
+    code, out, err = run_cli(capsys, "reduce", src, "--animation", "Wave", "--json", "-o", reduced, "--model", model)
+    assert code == 0, err
+    report = json.loads(out)
+    # thumb: 2 joints; index, middle, ring: palm bone + 2 joints; no pinky; both hands
+    assert report["curves"] == 2 * (2 + 3 * 3) * 3 == 66
+    assert report["steps"][0]["dofs_left_by_hand"] == {"left": 33, "right": 33}
+    assert report["steps"][-1]["dofs_left"] < 66
+    m = ReductionModel.load(model)
+    assert not any("Pinky" in c for c in m.curves)
+    assert m.metadata["paper_names"]["Thumb2.R.z"] == "riThumbIPz"
+    assert m.metadata["paper_names"]["Index2.L.y"] == "leIndexDIPy"
+    # the source itself has validator errors (non-normalised skin weights): the output adds none
+    out_report, src_report = gltf_validator(reduced, src)
+    assert out_report["numErrors"] <= src_report["numErrors"]
+    assert {e["code"] for e in out_report["messages"] if e["severity"] == 0} <= \
+        {e["code"] for e in src_report["messages"] if e["severity"] == 0} == {"ACCESSOR_WEIGHTS_NON_NORMALIZED"}
+    again = tmp_path / "again.glb"
+    assert run_cli(capsys, "expand", reduced, "--animation", "Wave", "--model", model, "-o", again)[0] == 0
+    a, b = read_clip(reduced, animation="Wave"), read_clip(again, animation="Wave")
+    assert quat_angle_deg(a.rotations, b.rotations).max() < 1e-6
+    # one hand only
+    code, out, _ = run_cli(capsys, "reduce", src, "--animation", "Wave", "--hands", "right", "--json")
+    assert code == 0 and json.loads(out)["curves"] == 33
