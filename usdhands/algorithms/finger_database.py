@@ -1,0 +1,333 @@
+"""A finger-motion database: wrist features, finger curves, segments, labels and origins.
+
+Content. Each clip contributes one **track** per hand that has fingers: per frame, the
+wrist features of eq. 1 (position relative to the root in cm, scaled to the
+database's reference body size, and rotation vector in degrees; see
+:mod:`usdhands.algorithms.wrist_features`) and the canonical finger DOF curves
+(degrees; see :mod:`usdhands.algorithms.finger_transfer`), all resampled to one
+frame rate. Tracks are cut into segments by wrist speed (§3.1). With mirroring,
+every track gets a left↔right mirrored twin on the other side.
+
+On disk (format ``usdhands-finger-database``, version 1) a database is a folder::
+
+    DB/manifest.json   metadata, validated by schemas/database.schema.json
+    DB/features.npy    (F, 6) float32   wrist position (cm) and rotation vector (deg)
+    DB/fingers.npy     (F, M) float32   finger DOF curves (deg), the M DOFs of dof_index
+    DB/tracks.npy      (R, 5) int64     start, stop (frames), clip, side (0 left, 1 right), mirrored
+    DB/segments.npy    (N, 3) int64     start, stop (frames), track
+
+Frames of all tracks are concatenated in ``features`` and ``fingers``. The manifest
+lists the clips (name, source file, animation, label), the labels, the frame rate,
+the reference reach, the DOFs stored (``dof_index`` into the canonical layout of 60
+DOFs, names in ``dofs``), the segmentation parameters, and for every array its file,
+shape and dtype. Arrays are loaded memory-mapped, so a large database costs no
+memory until read.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from usdhands import __version__
+from usdhands.algorithms.finger_transfer import (
+    NUM_DOFS, dof_names, hand_rig, canonical_curves, mirror_curves,
+)
+from usdhands.algorithms.segmentation import segment_by_speed, wrist_speed
+from usdhands.algorithms.synthesis_config import SegmentationConfig
+from usdhands.algorithms.wrist_features import mirror_features, reach_cm, wrist_features
+from usdhands.errors import ConfigError
+from usdhands.model.clip import Clip
+from usdhands.model.handmap import SIDES, HandMap
+
+__all__ = ["FORMAT", "VERSION", "DatabaseClip", "FingerDatabase", "build_database", "load_database",
+           "save_database", "segment_track", "database_schema"]
+
+FORMAT = "usdhands-finger-database"
+VERSION = 1
+ARRAYS = ("features", "fingers", "tracks", "segments")
+
+
+@dataclass(frozen=True)
+class DatabaseClip:
+    """One input of :func:`build_database`: a clip with fingers, its hands, label and origin."""
+
+    clip: Clip
+    handmap: HandMap
+    label: str | None = None
+    source: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class FingerDatabase:
+    """A loaded (or freshly built) database; see the module notes for the layout.
+
+    Attributes
+    ----------
+    fps : float
+    reach_cm : float
+        Reference body size the features are scaled to.
+    features : (F, 6) float
+    fingers : (F, M) float
+    dof_index : (M,) int
+        Canonical DOF (0..59) of each column of ``fingers``.
+    tracks : (R, 5) int
+    segments : (N, 3) int
+    clips : list of dict
+        ``{"name", "source", "animation", "label"}``.
+    segmentation : dict
+        The segmentation parameters used.
+    path : Path or None
+    """
+
+    fps: float
+    reach_cm: float
+    features: np.ndarray
+    fingers: np.ndarray
+    dof_index: np.ndarray
+    tracks: np.ndarray
+    segments: np.ndarray
+    clips: list
+    segmentation: dict = field(default_factory=dict)
+    path: Path | None = None
+
+    @property
+    def labels(self) -> list[str]:
+        """Distinct clip labels, sorted."""
+        return sorted({c["label"] for c in self.clips if c.get("label") is not None})
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.features.shape[0])
+
+    def dof_mask(self) -> np.ndarray:
+        """``(NUM_DOFS,)`` bool: canonical DOFs the database holds."""
+        m = np.zeros(NUM_DOFS, dtype=bool)
+        m[self.dof_index] = True
+        return m
+
+    def segment_side(self) -> np.ndarray:
+        """``(N,)`` int: 0 left, 1 right."""
+        return self.tracks[self.segments[:, 2], 3]
+
+    def segment_clip(self) -> np.ndarray:
+        """``(N,)`` int: clip index of each segment."""
+        return self.tracks[self.segments[:, 2], 2]
+
+    def segment_labels(self) -> list:
+        """Label of each segment's clip (None where unlabelled)."""
+        return [self.clips[c].get("label") for c in self.segment_clip()]
+
+    def full_curves(self, rows: np.ndarray | slice) -> np.ndarray:
+        """Finger rows expanded to the canonical layout, ``(n, NUM_DOFS)`` float64 (zeros elsewhere)."""
+        f = np.asarray(self.fingers[rows], dtype=np.float64)
+        out = np.zeros((len(f), NUM_DOFS))
+        out[:, self.dof_index] = f
+        return out
+
+    def manifest(self) -> dict:
+        """The manifest dict written beside the arrays."""
+        return {
+            "format": FORMAT,
+            "version": VERSION,
+            "created_by": f"usdhands {__version__}",
+            "fps": float(self.fps),
+            "reach_cm": float(self.reach_cm),
+            "feature_names": ["pos.x", "pos.y", "pos.z", "rot.x", "rot.y", "rot.z"],
+            "dofs": [dof_names()[i] for i in self.dof_index],
+            "dof_index": [int(i) for i in self.dof_index],
+            "clips": [dict(c) for c in self.clips],
+            "labels": self.labels,
+            "segmentation": dict(self.segmentation),
+            "counts": {"frames": self.num_frames, "tracks": int(len(self.tracks)),
+                       "segments": int(len(self.segments)), "clips": len(self.clips)},
+            "arrays": {name: {"file": f"{name}.npy", "shape": list(getattr(self, name).shape),
+                              "dtype": str(getattr(self, name).dtype)} for name in ARRAYS},
+        }
+
+
+def segment_track(features: np.ndarray, fps: float, config: SegmentationConfig) -> np.ndarray:
+    """Segment boundaries ``(N+1,)`` of one track from its wrist features ``(T, 6)``."""
+    speed = wrist_speed(features[:, :3], fps, config.speed_smoothing_s)
+    return segment_by_speed(speed, fps, config.speed_threshold_cm_s, config.min_segment_s, config.max_segment_s)
+
+
+def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = False,
+                   segmentation: SegmentationConfig | None = None, progress=None) -> FingerDatabase:
+    """Build a database in memory.
+
+    Parameters
+    ----------
+    items : list of DatabaseClip
+    fps : float
+        Frame rate every clip is resampled to.
+    mirror : bool
+        Add a left↔right mirrored twin of every track.
+    segmentation : SegmentationConfig, optional
+    progress : callable, optional
+        ``progress(done, total, label)``.
+
+    Raises
+    ------
+    ValueError
+        No clip has a hand with fingers.
+    """
+    seg_cfg = segmentation or SegmentationConfig()
+    prepared = []  # (clip index, side, features unscaled (T,6) pos in cm, curves, reach, rig mask)
+    clips_meta = []
+    for ci, item in enumerate(items):
+        clip = item.clip.resample(fps) if abs(item.clip.fps - fps) > 1e-9 else item.clip
+        clips_meta.append({"name": clip.name, "source": str(item.source), "animation": clip.name,
+                           "label": item.label})
+        world = clip.world_xforms()
+        for hand in item.handmap.sides:
+            if not hand.finger_joints:
+                continue
+            rig = hand_rig(clip.skeleton, hand)
+            feats = wrist_features(clip, hand, 1.0, world)
+            curves = canonical_curves(clip, rig)
+            prepared.append((ci, SIDES.index(hand.side), feats, curves, reach_cm(clip.skeleton, hand), rig.present))
+        if progress:
+            progress(ci + 1, len(items), clip.name)
+    if not prepared:
+        raise ValueError("No clip has a hand with finger joints; nothing to put in the database")
+    ref_reach = float(np.median([p[4] for p in prepared]))
+    present = np.logical_and.reduce([p[5] for p in prepared])
+    dof_index = np.nonzero(np.repeat(present, 3))[0]
+    feats_all, fing_all, tracks, segments = [], [], [], []
+    start = 0
+    variants = [False, True] if mirror else [False]
+    for ci, side, feats, curves, reach, _ in prepared:
+        scaled = feats.copy()
+        scaled[:, :3] *= ref_reach / reach
+        bounds = segment_track(scaled, fps, seg_cfg)
+        for mirrored in variants:
+            f = mirror_features(scaled) if mirrored else scaled
+            c = mirror_curves(curves) if mirrored else curves
+            s = 1 - side if mirrored else side
+            T = len(f)
+            ti = len(tracks)
+            tracks.append((start, start + T, ci, s, int(mirrored)))
+            for a, b in zip(bounds[:-1], bounds[1:]):
+                segments.append((start + a, start + b, ti))
+            feats_all.append(f)
+            fing_all.append(c[:, dof_index])
+            start += T
+    return FingerDatabase(
+        fps=float(fps), reach_cm=ref_reach,
+        features=np.concatenate(feats_all).astype(np.float32),
+        fingers=np.concatenate(fing_all).astype(np.float32),
+        dof_index=dof_index.astype(np.int64),
+        tracks=np.array(tracks, dtype=np.int64).reshape(-1, 5),
+        segments=np.array(segments, dtype=np.int64).reshape(-1, 3),
+        clips=clips_meta,
+        segmentation={k: float(v) for k, v in vars(seg_cfg).items()},
+    )
+
+
+def database_schema() -> dict:
+    """The JSON schema of a manifest (shipped in ``usdhands/schemas``)."""
+    from importlib import resources
+
+    return json.loads(resources.files("usdhands").joinpath("schemas/database.schema.json").read_text())
+
+
+def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
+    """Write ``db`` to the folder ``path`` (created; replaced atomically if it exists as a database).
+
+    Raises
+    ------
+    ConfigError
+        ``path`` exists and is not a folder, or is a non-empty folder that is not a database.
+    """
+    path = Path(path)
+    if path.exists():
+        if not path.is_dir():
+            raise ConfigError("exists and is not a folder", path=path)
+        if any(path.iterdir()) and not (path / "manifest.json").exists():
+            raise ConfigError("is a non-empty folder that is not a finger database; refusing to overwrite", path=path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    try:
+        for name in ARRAYS:
+            np.save(tmp / f"{name}.npy", np.ascontiguousarray(getattr(db, name)))
+        (tmp / "manifest.json").write_text(json.dumps(db.manifest(), indent=1) + "\n")
+        if path.exists():
+            old = path.with_name(f".{path.name}.old")
+            os.replace(path, old)
+            os.replace(tmp, path)
+            for f in old.iterdir():
+                f.unlink()
+            old.rmdir()
+        else:
+            os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            for f in tmp.iterdir():
+                f.unlink()
+            tmp.rmdir()
+    return path
+
+
+def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
+    """Load a database folder; arrays memory-mapped unless ``mmap`` is False.
+
+    Raises
+    ------
+    ConfigError
+        Missing folder or manifest, a manifest that fails the schema, an unknown
+        version, or arrays whose shape or dtype differ from the manifest.
+    """
+    import jsonschema
+
+    path = Path(path)
+    mf = path / "manifest.json"
+    if not path.is_dir():
+        raise ConfigError("no such finger database folder", path=path)
+    if not mf.is_file():
+        raise ConfigError("not a finger database: manifest.json is missing", path=path)
+    try:
+        manifest = json.loads(mf.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ConfigError(f"manifest is not valid JSON: {e}", path=mf) from None
+    if isinstance(manifest, dict) and manifest.get("format") == FORMAT and manifest.get("version") != VERSION:
+        raise ConfigError(f"database version {manifest.get('version')!r} is not supported (this usdhands reads {VERSION})",
+                          path=mf)
+    errors = sorted(jsonschema.Draft202012Validator(database_schema()).iter_errors(manifest),
+                    key=lambda e: list(e.absolute_path))
+    if errors:
+        e = errors[0]
+        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
+        raise ConfigError(f"invalid database manifest at {where}: {e.message}", path=mf)
+    arrays = {}
+    for name in ARRAYS:
+        spec = manifest["arrays"][name]
+        f = path / spec["file"]
+        try:
+            a = np.load(f, mmap_mode="r" if mmap else None, allow_pickle=False)
+        except (OSError, ValueError) as e:
+            raise ConfigError(f"cannot read array {name!r}: {e}", path=f) from None
+        if list(a.shape) != spec["shape"] or str(a.dtype) != spec["dtype"]:
+            raise ConfigError(f"array {name!r} has shape {list(a.shape)} and dtype {a.dtype}, "
+                              f"the manifest says {spec['shape']} and {spec['dtype']}", path=f)
+        arrays[name] = a
+    dof_index = np.array(manifest["dof_index"], dtype=np.int64)
+    F = arrays["features"].shape[0]
+    if arrays["fingers"].shape != (F, len(dof_index)) or arrays["features"].shape[1] != 6:
+        raise ConfigError("features and fingers arrays do not match the manifest's DOFs", path=path)
+    tr, sg = arrays["tracks"], arrays["segments"]
+    if len(tr) and (tr[:, 1].max() > F or tr[:, 2].max() >= len(manifest["clips"])):
+        raise ConfigError("tracks refer to frames or clips the database does not have", path=path)
+    if len(sg) and (sg[:, 2].max() >= len(tr) or sg[:, 1].max() > F):
+        raise ConfigError("segments refer to tracks or frames the database does not have", path=path)
+    return FingerDatabase(
+        fps=float(manifest["fps"]), reach_cm=float(manifest["reach_cm"]),
+        features=arrays["features"], fingers=arrays["fingers"], dof_index=dof_index,
+        tracks=np.asarray(tr), segments=np.asarray(sg), clips=manifest["clips"],
+        segmentation=manifest.get("segmentation", {}), path=path,
+    )

@@ -1,0 +1,192 @@
+"""Finger motion in a rig-independent form, and back onto any rig.
+
+Finger motion is kept as **canonical finger DOF curves**: for each finger joint, its
+rotation relative to its rest pose (as in :mod:`usdhands.model.finger_dofs`) but
+expressed in an *anatomical frame* built from the rest geometry instead of the
+joint's own local axes, which differ from rig to rig:
+
+- x: along the bone (from the joint to the next joint of its finger; for the last
+  joint, from its parent to it);
+- y: the palm normal ``f × s``, where ``f`` points from the wrist joint to the
+  fingers and ``s`` from the outermost to the innermost non-thumb finger (pinky side
+  to index side), made orthogonal to x;
+- z: ``x × y``.
+
+With ``C = A⁻¹ · W`` (``A`` the anatomical frame, ``W`` the joint's rest world
+rotation), the canonical rotation is ``C · q_rel · C⁻¹`` and the curves are its Euler
+angles (intrinsic XYZ, degrees, unwrapped over time). Applying them to another rig
+inverts this with that rig's ``C``. Rigs that share a rest pose receive the same
+finger shapes whatever their joint axes.
+
+**Slots.** Every finger has up to four slots counted from the distal end
+(``d0`` distal phalanx, ``d1`` middle, ``d2`` proximal, ``d3`` metacarpal); a chain is
+mapped onto the slots by its position from the distal end, so a two-bone finger
+gets ``d0`` and ``d1``, and a rig with metacarpals fills ``d3``. Curve columns are
+``3 · slot + axis`` with ``slot = 4 · finger + d``.
+
+**Mirroring** left↔right conjugates the canonical rotation by a reflection of the
+y axis, which turns Euler angles ``(a, b, c)`` into ``(−a, b, −c)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from usdhands.model.clip import Clip
+from usdhands.model.handmap import FINGERS, HandSide
+from usdhands.model.rotations import euler_deg_to_quat, quat_conjugate, quat_multiply, quat_to_euler_deg, unwrap_deg
+from usdhands.model.skeleton import Skeleton
+
+__all__ = [
+    "SLOTS_PER_FINGER", "NUM_SLOTS", "NUM_DOFS", "slot_names", "dof_names", "HandRig",
+    "hand_rig", "canonical_curves", "apply_canonical_curves", "mirror_curves", "MIRROR_SIGNS",
+]
+
+SLOTS_PER_FINGER = 4
+NUM_SLOTS = len(FINGERS) * SLOTS_PER_FINGER
+NUM_DOFS = 3 * NUM_SLOTS
+ORDER = "XYZ"
+
+#: Multiply canonical curves column-wise by this to mirror them (see module notes).
+MIRROR_SIGNS = np.tile(np.array([-1.0, 1.0, -1.0]), NUM_SLOTS)
+
+
+def slot_names() -> list[str]:
+    """``"thumb.d0"`` ... ``"pinky.d3"``, length :data:`NUM_SLOTS`."""
+    return [f"{f}.d{d}" for f in FINGERS for d in range(SLOTS_PER_FINGER)]
+
+
+def dof_names() -> list[str]:
+    """``"thumb.d0.x"`` ..., length :data:`NUM_DOFS`."""
+    return [f"{s}.{a}" for s in slot_names() for a in "xyz"]
+
+
+@dataclass(frozen=True)
+class HandRig:
+    """One hand of one skeleton, mapped onto the canonical slots.
+
+    Attributes
+    ----------
+    side : str
+    slot_joint : (NUM_SLOTS,) int
+        Skeleton index of the joint in each slot, -1 where the rig has none.
+    frame : (NUM_SLOTS, 4) float
+        ``C = A⁻¹ W`` per slot, xyzw (identity where empty).
+    unmapped : tuple of str
+        Finger joints beyond four per finger, which get no motion.
+    """
+
+    side: str
+    slot_joint: np.ndarray
+    frame: np.ndarray
+    unmapped: tuple[str, ...] = ()
+
+    @property
+    def present(self) -> np.ndarray:
+        """``(NUM_SLOTS,)`` bool: slots the rig has."""
+        return self.slot_joint >= 0
+
+    def dof_mask(self) -> np.ndarray:
+        """``(NUM_DOFS,)`` bool: curve columns the rig has."""
+        return np.repeat(self.present, 3)
+
+
+def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v)
+    return v / n if n > 1e-9 else fallback
+
+
+def hand_rig(skeleton: Skeleton, hand: HandSide) -> HandRig:
+    """Map a hand's finger chains onto the slots and compute their anatomical frames."""
+    rest = skeleton.rest_world_xforms()
+    pos = rest[:, :3, 3]
+    rot = rest[:, :3, :3] / np.linalg.norm(rest[:, :3, :3], axis=-2, keepdims=True)
+    w = skeleton.index(hand.wrist)
+    chains = {f: [skeleton.index(j) for j in hand.fingers[f]] for f in FINGERS}
+    non_thumb = [f for f in FINGERS[1:] if chains[f]]
+    centroid = {f: pos[chains[f]].mean(axis=0) for f in FINGERS if chains[f]}
+    if non_thumb:
+        f_dir = _unit(np.mean([centroid[f] for f in non_thumb], axis=0) - pos[w], np.array([1.0, 0, 0]))
+    else:
+        f_dir = _unit(centroid.get("thumb", pos[w] + 1) - pos[w], np.array([1.0, 0, 0]))
+    if len(non_thumb) >= 2:
+        s_dir = centroid[non_thumb[0]] - centroid[non_thumb[-1]]
+    elif non_thumb and chains["thumb"]:
+        s_dir = centroid["thumb"] - centroid[non_thumb[0]]
+    else:
+        s_dir = np.array([0.0, 0.0, 1.0])
+    normal = _unit(np.cross(f_dir, s_dir), np.array([0.0, 1.0, 0.0]))
+    slot_joint = np.full(NUM_SLOTS, -1, dtype=np.int64)
+    frame = np.zeros((NUM_SLOTS, 4))
+    frame[:, 3] = 1.0
+    unmapped = []
+    for fi, f in enumerate(FINGERS):
+        chain = chains[f]
+        for d, j in enumerate(reversed(chain)):
+            if d >= SLOTS_PER_FINGER:
+                unmapped.append(skeleton.joint_names[j])
+                continue
+            k = list(chain).index(j)
+            if k + 1 < len(chain):
+                x = pos[chain[k + 1]] - pos[j]
+            else:
+                kids = skeleton.children(j)
+                x = pos[kids[0]] - pos[j] if kids else pos[j] - pos[int(skeleton.parents[j])]
+            x = _unit(x, f_dir)
+            y = _unit(normal - x * np.dot(normal, x), _unit(np.cross(x, [0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])))
+            z = np.cross(x, y)
+            A = np.stack([x, y, z], axis=1)
+            C = A.T @ rot[j]
+            slot = fi * SLOTS_PER_FINGER + d
+            slot_joint[slot] = j
+            frame[slot] = Rotation.from_matrix(C).as_quat()
+    return HandRig(hand.side, slot_joint, frame, tuple(unmapped))
+
+
+def canonical_curves(clip: Clip, rig: HandRig) -> np.ndarray:
+    """Canonical finger DOF curves of a clip.
+
+    Returns
+    -------
+    (T, NUM_DOFS) float
+        Degrees; columns of slots the rig lacks are zero.
+    """
+    T = clip.num_frames
+    out = np.zeros((T, NUM_SLOTS, 3))
+    slots = np.nonzero(rig.present)[0]
+    if len(slots):
+        joints = rig.slot_joint[slots]
+        rest = clip.skeleton.rest_rotations[joints]
+        rel = quat_multiply(quat_conjugate(rest)[None], clip.rotations[:, joints])
+        C = rig.frame[slots]
+        can = quat_multiply(quat_multiply(C[None], rel), quat_conjugate(C)[None])
+        out[:, slots] = unwrap_deg(quat_to_euler_deg(can, ORDER), axis=0)
+    return out.reshape(T, NUM_DOFS)
+
+
+def apply_canonical_curves(clip: Clip, rig: HandRig, curves: np.ndarray) -> Clip:
+    """A copy of ``clip`` whose finger joints follow canonical curves ``(T, NUM_DOFS)`` degrees."""
+    curves = np.asarray(curves, dtype=np.float64)
+    T = clip.num_frames
+    if curves.shape != (T, NUM_DOFS):
+        raise ValueError(f"Expected curves to have shape ({T}, {NUM_DOFS}), got {curves.shape}")
+    slots = np.nonzero(rig.present)[0]
+    if not len(slots):
+        return clip
+    joints = rig.slot_joint[slots]
+    can = euler_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots], ORDER)
+    C = rig.frame[slots]
+    rel = quat_multiply(quat_multiply(quat_conjugate(C)[None], can), C[None])
+    local = quat_multiply(clip.skeleton.rest_rotations[joints][None], rel)
+    return clip.with_joint_rotations([int(j) for j in joints], local)
+
+
+def mirror_curves(curves: np.ndarray) -> np.ndarray:
+    """Canonical curves ``(T, NUM_DOFS)`` of the other hand doing the mirrored motion."""
+    curves = np.asarray(curves, dtype=np.float64)
+    if curves.ndim != 2 or curves.shape[1] != NUM_DOFS:
+        raise ValueError(f"Expected curves to have shape (T, {NUM_DOFS}), got {curves.shape}")
+    return curves * MIRROR_SIGNS

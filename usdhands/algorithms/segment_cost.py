@@ -1,0 +1,248 @@
+"""The DTW-aligned segment cost of seed 000 (eq. 1) and the k-nearest search over a database.
+
+Eq. 1 adapts the database segment ``S_D`` to the input segment ``S_I``'s length with
+dynamic time warping and then averages the weighted squared differences of the wrist
+features over the ``n`` input frames::
+
+    cS = (wP · Σ_t |P_I(t) − P_D(t)|² + wR · Σ_t |R_I(t) − R_D(t)|²) / n
+
+"Same length as the input" is taken literally: the warp maps every input frame ``i``
+to exactly one database frame ``j(i)``, with ``j(0) = 0``, ``j(n−1) = m−1`` and steps
+``j(i) − j(i−1) ∈ {0, 1, 2}`` (the asymmetric step pattern), so the sum has ``n``
+terms. A band of half-width ``band · m`` frames around the diagonal bounds the warp.
+The weights are folded into the features beforehand (:func:`weight_features`), so
+the local cost is a plain squared Euclidean distance.
+
+Search. :func:`knn_segments` compares every input segment with every database
+segment whose length is within ``length_factor`` of it and keeps the ``k`` cheapest.
+It runs in one numba-compiled kernel, parallel over input segments. For each input
+segment it first computes an **LB_Keogh** lower bound for every candidate (the
+squared distance of each input frame to the min/max envelope of the database frames
+its band allows, built with a monotone deque in O(n + m)), visits candidates in order
+of that bound, stops as soon as the bound exceeds the ``k``-th best cost found so far
+(every remaining candidate is **pruned**), and abandons a full alignment early once
+its partial cost plus the bound of the remaining rows exceeds that ``k``-th cost.
+
+:func:`dtw_align` is the plain NumPy twin for one pair (cost and warp path); tests
+check the kernel against it and the benchmark measures the kernel's speed-up over it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "weight_features", "band_window", "dtw_align", "lb_keogh", "knn_segments", "SearchResult",
+]
+
+
+def weight_features(features: np.ndarray, weights) -> np.ndarray:
+    """Multiply columns by ``sqrt(weight)`` so squared distances carry the weights.
+
+    Parameters
+    ----------
+    features : (T, D) float
+        Feature columns (for eq. 1: 3 positions in cm, then 3 rotations in degrees).
+    weights : (D,) float
+        Non-negative weight of each column's squared difference.
+
+    Returns
+    -------
+    (T, D) float64, C-contiguous
+    """
+    f = np.asarray(features, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)
+    if f.ndim != 2 or w.shape != (f.shape[1],):
+        raise ValueError(f"Expected features (T, D) and weights (D,), got {f.shape} and {w.shape}")
+    if (w < 0).any():
+        raise ValueError(f"Expected non-negative weights, got {w.tolist()}")
+    return np.ascontiguousarray(f * np.sqrt(w))
+
+
+def band_window(n: int, m: int, band: float) -> tuple[np.ndarray, np.ndarray]:
+    """Database frames each input frame may align to: ``lo (n,)``, ``hi (n,)`` inclusive.
+
+    Empty windows (``lo > hi``) mean the pair cannot be aligned (``m > 2n − 1``).
+    """
+    n, m = int(n), int(m)
+    if n < 1 or m < 1:
+        raise ValueError(f"Expected n, m >= 1, got {n} and {m}")
+    i = np.arange(n)
+    if n == 1:
+        ok = m == 1
+        return np.zeros(1, dtype=np.int64), np.full(1, 0 if ok else -1, dtype=np.int64)
+    c = i * (m - 1) / (n - 1)
+    r = max(band * m, 1.0)
+    lo = np.maximum.reduce([np.zeros(n), (m - 1) - 2 * (n - 1 - i), np.ceil(c - r - 1e-9)]).astype(np.int64)
+    hi = np.minimum.reduce([np.full(n, m - 1), 2 * i, np.floor(c + r + 1e-9)]).astype(np.int64)
+    return lo, hi
+
+
+def dtw_align(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> tuple[float, np.ndarray]:
+    """Eq. 1 for one pair with the asymmetric DTW, in plain NumPy.
+
+    Parameters
+    ----------
+    query : (n, D) float
+        Input segment features, already weighted (:func:`weight_features`).
+    cand : (m, D) float
+        Database segment features, weighted alike.
+    band : float
+        Half-width of the band as a fraction of ``m`` (1: unconstrained).
+
+    Returns
+    -------
+    cost : float
+        ``Σ_i |query[i] − cand[j(i)]|² / n``; ``inf`` when no warp fits.
+    path : (n,) int
+        ``j(i)``, the database frame aligned to each input frame (empty when no warp fits).
+    """
+    q = np.asarray(query, dtype=np.float64)
+    c = np.asarray(cand, dtype=np.float64)
+    n, m = len(q), len(c)
+    if n == 0 or m == 0:
+        raise ValueError(f"Expected non-empty segments, got lengths {n} and {m}")
+    lo, hi = band_window(n, m, band)
+    if (lo > hi).any():
+        return float("inf"), np.zeros(0, dtype=np.int64)
+    local = ((q[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)  # (n, m)
+    acc = np.full((n, m), np.inf)
+    step = np.zeros((n, m), dtype=np.int8)
+    acc[0, 0] = local[0, 0]
+    for i in range(1, n):
+        prev = acc[i - 1]
+        opts = np.stack([prev, np.concatenate([[np.inf], prev[:-1]]),
+                         np.concatenate([[np.inf, np.inf], prev[:-2]])])
+        best = np.argmin(opts, axis=0)
+        row = opts[best, np.arange(m)] + local[i]
+        inside = np.zeros(m, dtype=bool)
+        inside[lo[i]:hi[i] + 1] = True
+        acc[i] = np.where(inside, row, np.inf)
+        step[i] = best
+    if not np.isfinite(acc[n - 1, m - 1]):
+        return float("inf"), np.zeros(0, dtype=np.int64)
+    path = np.empty(n, dtype=np.int64)
+    j = m - 1
+    for i in range(n - 1, -1, -1):
+        path[i] = j
+        if i:
+            j -= int(step[i, j])
+    return float(acc[n - 1, m - 1] / n), path
+
+
+def lb_keogh(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> float:
+    """The LB_Keogh lower bound of :func:`dtw_align`'s cost, plain NumPy (for tests)."""
+    q = np.asarray(query, dtype=np.float64)
+    c = np.asarray(cand, dtype=np.float64)
+    n, m = len(q), len(c)
+    lo, hi = band_window(n, m, band)
+    if (lo > hi).any():
+        return float("inf")
+    total = 0.0
+    for i in range(n):
+        w = c[lo[i]:hi[i] + 1]
+        up, dn = w.max(axis=0), w.min(axis=0)
+        total += float((np.maximum(q[i] - up, 0) ** 2 + np.maximum(dn - q[i], 0) ** 2).sum())
+    return total / n
+
+
+@dataclass(frozen=True)
+class SearchResult:
+    """The k cheapest database segments of every input segment.
+
+    Attributes
+    ----------
+    index : (Q, k) int
+        Database segment indices, cheapest first; -1 where fewer than k qualified.
+    cost : (Q, k) float
+        Their segment costs (eq. 1); inf where index is -1.
+    candidates : (Q,) int
+        Database segments within the length factor (and not excluded) per input segment.
+    aligned : (Q,) int
+        Candidates whose full alignment was started (the rest were pruned by the bound).
+    abandoned : (Q,) int
+        Alignments stopped early by the bound on the remaining rows.
+    """
+
+    index: np.ndarray
+    cost: np.ndarray
+    candidates: np.ndarray
+    aligned: np.ndarray
+    abandoned: np.ndarray
+
+    @property
+    def pruned_share(self) -> float:
+        """Share of candidate pairs never aligned in full (pruned or abandoned)."""
+        total = int(self.candidates.sum())
+        if total == 0:
+            return 0.0
+        return 1.0 - float((self.aligned - self.abandoned).sum()) / total
+
+
+def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
+                 db_features: np.ndarray, db_segments: np.ndarray, k: int = 5,
+                 length_factor: float = 1.5, band: float = 1.0,
+                 query_groups: np.ndarray | None = None, db_groups: np.ndarray | None = None,
+                 prune: bool = True) -> SearchResult:
+    """The ``k`` database segments of least eq. 1 cost for every input segment.
+
+    Parameters
+    ----------
+    query_features : (T, D) float
+        Weighted input features (:func:`weight_features`).
+    query_bounds : (Q, 2) int
+        ``[start, stop)`` frame ranges of the input segments in ``query_features``.
+    db_features : (F, D) float
+        Weighted database features, all tracks concatenated.
+    db_segments : (N, 2) int
+        ``[start, stop)`` frame ranges of the database segments in ``db_features``.
+    k : int
+        Segments kept per input segment.
+    length_factor : float
+        A candidate's length ``m`` must satisfy ``n / f <= m <= n * f``.
+    band : float
+        DTW band half-width as a fraction of the candidate's length.
+    query_groups : (Q,) int, optional
+    db_groups : (N,) int, optional
+        A database segment whose group equals the input segment's is skipped
+        (leave-one-out); -1 matches nothing.
+    prune : bool
+        Use the lower bound (True) or align every candidate in full (False).
+
+    Returns
+    -------
+    SearchResult
+        Ties in cost go to the lower database index; the result does not depend on
+        ``prune`` or on the number of threads.
+    """
+    from usdhands.algorithms import _dtw_kernel as kern
+
+    qf = np.ascontiguousarray(query_features, dtype=np.float64)
+    df = np.ascontiguousarray(db_features, dtype=np.float64)
+    qb = np.ascontiguousarray(query_bounds, dtype=np.int64).reshape(-1, 2)
+    ds = np.ascontiguousarray(db_segments, dtype=np.int64).reshape(-1, 2)
+    if qf.ndim != 2 or df.ndim != 2 or qf.shape[1] != df.shape[1]:
+        raise ValueError(f"Expected query and database features (T, D) with equal D, got {qf.shape} and {df.shape}")
+    if int(k) < 1:
+        raise ValueError(f"Expected k >= 1, got {k}")
+    if not length_factor >= 1:
+        raise ValueError(f"Expected length_factor >= 1, got {length_factor}")
+    if not 0 < band <= 1:
+        raise ValueError(f"Expected 0 < band <= 1, got {band}")
+    for name, b, total in (("query_bounds", qb, len(qf)), ("db_segments", ds, len(df))):
+        if len(b) and ((b[:, 0] < 0).any() or (b[:, 1] > total).any() or (b[:, 1] <= b[:, 0]).any()):
+            raise ValueError(f"{name} must hold non-empty ranges inside 0..{total}")
+    Q, N = len(qb), len(ds)
+    qg = np.full(Q, -1, dtype=np.int64) if query_groups is None else np.ascontiguousarray(query_groups, dtype=np.int64)
+    dg = np.full(N, -2, dtype=np.int64) if db_groups is None else np.ascontiguousarray(db_groups, dtype=np.int64)
+    if qg.shape != (Q,) or dg.shape != (N,):
+        raise ValueError(f"Expected query_groups ({Q},) and db_groups ({N},), got {qg.shape} and {dg.shape}")
+    out_idx = np.full((Q, int(k)), -1, dtype=np.int64)
+    out_cost = np.full((Q, int(k)), np.inf)
+    stats = np.zeros((Q, 3), dtype=np.int64)
+    if Q and N:
+        kern.search(qf, qb, qg, df, ds, dg, int(k), float(length_factor), float(band), bool(prune),
+                    out_idx, out_cost, stats)
+    return SearchResult(out_idx, out_cost, stats[:, 0], stats[:, 1], stats[:, 2])

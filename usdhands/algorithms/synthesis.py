@@ -1,0 +1,278 @@
+"""Finger-motion synthesis from wrist motion (Jörg, Hodgins, Safonova 2012, §3).
+
+For each hand independently:
+
+1. segment the input by wrist speed (:mod:`~usdhands.algorithms.segmentation`);
+2. find the ``k`` database segments of least DTW-aligned segment cost (eq. 1,
+   :mod:`~usdhands.algorithms.segment_cost`);
+3. compute transition costs between the candidates of consecutive segments (eq. 2)
+   and take the least-cost path through the layered graph (eq. 3,
+   :mod:`~usdhands.algorithms.motion_graph`);
+4. time-warp each chosen segment's finger curves onto its input segment along the
+   DTW alignment, and stitch them with offsets and blends
+   (:mod:`~usdhands.algorithms.stitching`).
+
+:func:`synthesize_hand` runs this on arrays (wrist features in, canonical finger
+curves out); :func:`synthesize_clip` does it on a :class:`~usdhands.model.Clip`,
+changing nothing but the finger joints' rotations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from usdhands.algorithms.finger_database import FingerDatabase, segment_track
+from usdhands.algorithms.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
+from usdhands.algorithms.motion_graph import least_cost_path, transition_costs
+from usdhands.algorithms.segment_cost import SearchResult, dtw_align, knn_segments, weight_features
+from usdhands.algorithms.stitching import SeamReport, stitch_fragments
+from usdhands.algorithms.synthesis_config import SynthesisConfig
+from usdhands.algorithms.wrist_features import reach_cm, wrist_features
+from usdhands.model.clip import Clip
+from usdhands.model.handmap import SIDES, HandMap
+
+__all__ = ["HandSynthesis", "ClipSynthesis", "synthesize_hand", "synthesize_clip", "db_side_segments",
+           "resample_rows"]
+
+
+@dataclass(frozen=True, eq=False)
+class HandSynthesis:
+    """Everything synthesis decided for one hand.
+
+    Attributes
+    ----------
+    side : str
+    bounds : (N+1,) int
+        Input segment boundaries (frames at the database's rate).
+    speed : (T,) float
+        Wrist speed, cm/s (body-size scaled).
+    candidates : (N, k) int
+        Database segment indices per input segment, cheapest first (-1: none).
+    segment_costs : (N, k) float
+        Their eq. 1 costs.
+    transitions : list of (k, k) float
+        Eq. 2 costs between consecutive rows.
+    path : (N,) int
+        Chosen node per row.
+    chosen : (N,) int
+        Chosen database segment per input segment.
+    curves : (T, 60) float
+        Canonical finger curves, degrees.
+    seams : SeamReport
+    search : SearchResult
+    """
+
+    side: str
+    bounds: np.ndarray
+    speed: np.ndarray
+    candidates: np.ndarray
+    segment_costs: np.ndarray
+    transitions: list
+    path: np.ndarray
+    chosen: np.ndarray
+    curves: np.ndarray
+    seams: SeamReport
+    search: SearchResult
+
+
+@dataclass(frozen=True, eq=False)
+class ClipSynthesis:
+    """Result of :func:`synthesize_clip`: the new clip and a per-hand account."""
+
+    clip: Clip
+    hands: dict = field(default_factory=dict)  # side -> HandSynthesis
+    mapping: dict = field(default_factory=dict)  # side -> {"mapped": [...], "no_source": [...], "dropped": [...]}
+    scale: dict = field(default_factory=dict)  # side -> body-size factor
+
+
+def db_side_segments(db: FingerDatabase, side: str, exclude_clips=()) -> np.ndarray:
+    """Indices of the database segments of one side, leaving out some clips."""
+    s = SIDES.index(side)
+    keep = db.segment_side() == s
+    if len(exclude_clips):
+        keep &= ~np.isin(db.segment_clip(), np.asarray(list(exclude_clips), dtype=np.int64))
+    return np.nonzero(keep)[0]
+
+
+def _finger_velocity(db: FingerDatabase, frame: int, track_start: int, track_stop: int, forward: bool) -> np.ndarray:
+    if forward:
+        a, b = (frame, frame + 1) if frame + 1 < track_stop else (frame - 1, frame)
+    else:
+        a, b = (frame - 1, frame) if frame - 1 >= track_start else (frame, frame + 1)
+    a, b = max(a, track_start), min(b, track_stop - 1)
+    if a == b:
+        return np.zeros(len(db.dof_index))
+    return (np.asarray(db.fingers[b], dtype=np.float64) - np.asarray(db.fingers[a], dtype=np.float64)) * db.fps
+
+
+def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config: SynthesisConfig | None = None,
+                    exclude_clips=(), db_weighted: np.ndarray | None = None) -> HandSynthesis:
+    """Synthesize one hand's canonical finger curves from its wrist features.
+
+    Parameters
+    ----------
+    features : (T, 6) float
+        Wrist position (cm, scaled to the database's body size) and rotation vector
+        (degrees) at the database's frame rate.
+    db : FingerDatabase
+    side : {"left", "right"}
+        Which of the database's tracks to search.
+    config : SynthesisConfig, optional
+    exclude_clips : sequence of int
+        Database clips not to use (leave-one-out).
+    db_weighted : (F, 6) float, optional
+        ``weight_features(db.features, ...)`` when already computed.
+
+    Raises
+    ------
+    ValueError
+        The database has no segment for this side.
+    """
+    cfg = config or SynthesisConfig()
+    feats = np.asarray(features, dtype=np.float64)
+    if feats.ndim != 2 or feats.shape[1] != 6 or len(feats) == 0:
+        raise ValueError(f"Expected features to have shape (T, 6) with T > 0, got {feats.shape}")
+    sc = cfg.segment_cost
+    weights = [sc.w_position] * 3 + [sc.w_rotation] * 3
+    qw = weight_features(feats, weights)
+    dw = weight_features(db.features, weights) if db_weighted is None else db_weighted
+    seg_idx = db_side_segments(db, side, exclude_clips)
+    if not len(seg_idx):
+        raise ValueError(f"The database has no {side}-hand segments to choose from")
+    bounds = segment_track(feats, db.fps, cfg.segmentation)
+    from usdhands.algorithms.segmentation import wrist_speed
+
+    speed = wrist_speed(feats[:, :3], db.fps, cfg.segmentation.speed_smoothing_s)
+    qb = np.stack([bounds[:-1], bounds[1:]], axis=1)
+    dsegs = db.segments[seg_idx, :2]
+    res = knn_segments(qw, qb, dw, dsegs, k=sc.k, length_factor=sc.length_factor, band=sc.dtw_band)
+    cand_local = res.index.copy()
+    costs = res.cost.copy()
+    missing = np.nonzero(cand_local[:, 0] < 0)[0]
+    if len(missing):
+        # no segment of a compatible length: widen the length factor for these only
+        wide = knn_segments(qw, qb[missing], dw, dsegs, k=sc.k, length_factor=1e6, band=1.0)
+        cand_local[missing] = wide.index
+        costs[missing] = wide.cost
+    if (cand_local[:, 0] < 0).any():
+        raise ValueError(f"No database segment can be aligned to input segments {np.nonzero(cand_local[:, 0] < 0)[0].tolist()}")
+    cand = np.where(cand_local >= 0, seg_idx[np.maximum(cand_local, 0)], -1)
+    N, k = cand.shape
+    C = len(db.dof_index)
+    starts = np.zeros((N, k, C))
+    ends = np.zeros((N, k, C))
+    vstart = np.zeros((N, k, C))
+    vend = np.zeros((N, k, C))
+    for i in range(N):
+        for j in range(k):
+            s = cand[i, j]
+            if s < 0:
+                continue
+            a, b, t = (int(x) for x in db.segments[s])
+            ta, tb = int(db.tracks[t, 0]), int(db.tracks[t, 1])
+            starts[i, j] = db.fingers[a]
+            ends[i, j] = db.fingers[b - 1]
+            vstart[i, j] = _finger_velocity(db, a, ta, tb, True)
+            vend[i, j] = _finger_velocity(db, b - 1, ta, tb, False)
+    tc = cfg.transition
+    transitions = [transition_costs(ends[i], vend[i], starts[i + 1], vstart[i + 1], tc.w_joint, tc.w_velocity)
+                   for i in range(N - 1)]
+    path, _ = least_cost_path(costs, transitions, cfg.path.w_segment, cfg.path.w_transition)
+    chosen = cand[np.arange(N), path]
+    fragments = []
+    for i in range(N):
+        a, b = int(db.segments[chosen[i], 0]), int(db.segments[chosen[i], 1])
+        q0, q1 = int(bounds[i]), int(bounds[i + 1])
+        band = sc.dtw_band if sc.length_factor * (b - a) >= (q1 - q0) and (b - a) <= sc.length_factor * (q1 - q0) else 1.0
+        _, warp = dtw_align(qw[q0:q1], dw[a:b], band)
+        if len(warp) == 0:  # only for widened candidates that cannot be warped: stretch linearly
+            warp = np.round(np.linspace(0, b - a - 1, q1 - q0)).astype(np.int64)
+        fragments.append(np.asarray(db.fingers[a + warp], dtype=np.float64))
+    st = cfg.stitching
+    compact, seams = stitch_fragments(fragments, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s)
+    curves = np.zeros((len(feats), NUM_DOFS))
+    curves[:, db.dof_index] = compact
+    return HandSynthesis(side, bounds, speed, cand, costs, transitions, path, chosen, curves, seams, res)
+
+
+def resample_rows(values: np.ndarray, fps_from: float, fps_to: float, n_to: int) -> np.ndarray:
+    """Linear resampling of rows ``(T, C)`` from one frame rate to ``n_to`` rows at another."""
+    values = np.asarray(values, dtype=np.float64)
+    t_from = np.arange(len(values)) / fps_from
+    t_to = np.arange(n_to) / fps_to
+    out = np.empty((n_to, values.shape[1]))
+    for c in range(values.shape[1]):
+        out[:, c] = np.interp(t_to, t_from, values[:, c])
+    return out
+
+
+def _mapping(rig: HandRig, db: FingerDatabase, skeleton) -> tuple[HandRig, dict]:
+    db_slots = db.dof_mask().reshape(-1, 3).all(axis=1)
+    names = slot_names()
+    mapped, no_source, dropped = [], [], []
+    keep = rig.slot_joint.copy()
+    for s, j in enumerate(rig.slot_joint):
+        if j >= 0 and db_slots[s]:
+            mapped.append([skeleton.joint_names[j], names[s]])
+        elif j >= 0:
+            no_source.append(skeleton.joint_names[j])
+            keep[s] = -1
+        elif db_slots[s]:
+            dropped.append(names[s])
+    no_source.extend(rig.unmapped)
+    return (HandRig(rig.side, keep, rig.frame, rig.unmapped),
+            {"mapped": mapped, "no_source": no_source, "dropped": dropped})
+
+
+def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: SynthesisConfig | None = None,
+                    hands: tuple[str, ...] = SIDES, exclude_clips=()) -> ClipSynthesis:
+    """Give a clip finger motion from the database; every other joint is left as it was.
+
+    Parameters
+    ----------
+    clip : Clip
+    handmap : HandMap
+    db : FingerDatabase
+    config : SynthesisConfig, optional
+    hands : tuple of {"left", "right"}
+        Hands to synthesize (those the hand map lacks are skipped).
+    exclude_clips : sequence of int
+        Database clips not to use.
+
+    Returns
+    -------
+    ClipSynthesis
+        ``mapping[side]`` lists the joints mapped (with their slot), the character's
+        finger joints with no counterpart in the database (left as they were), and
+        the database slots the character has no joint for.
+    """
+    cfg = config or SynthesisConfig()
+    for h in hands:
+        if h not in SIDES:
+            raise ValueError(f"Expected hands among {SIDES}, got {h!r}")
+    world = clip.world_xforms()
+    out = clip
+    results, mapping, scales = {}, {}, {}
+    sc = cfg.segment_cost
+    dw = weight_features(db.features, [sc.w_position] * 3 + [sc.w_rotation] * 3)
+    for side in hands:
+        hand = handmap[side]
+        if hand is None or not hand.finger_joints:
+            continue
+        rig, mapping[side] = _mapping(hand_rig(clip.skeleton, hand), db, clip.skeleton)
+        scale = db.reach_cm / reach_cm(clip.skeleton, hand)
+        scales[side] = scale
+        feats = wrist_features(clip, hand, scale, world)
+        resampled = abs(clip.fps - db.fps) > 1e-9
+        if resampled:
+            n = int(np.floor(clip.duration * db.fps + 1e-6)) + 1
+            feats = resample_rows(feats, clip.fps, db.fps, n)
+        res = synthesize_hand(feats, db, side, cfg, exclude_clips, dw)
+        curves = res.curves
+        if resampled:
+            curves = resample_rows(curves, db.fps, clip.fps, clip.num_frames)
+        results[side] = res
+        out = apply_canonical_curves(out, rig, curves)
+    return ClipSynthesis(out, results, mapping, scales)
