@@ -1,10 +1,10 @@
 """glTF 2.0 writers: a new file from an :class:`~usdhands.model.asset.Asset`, and a
 source file with one animation's channels added or replaced (everything else kept).
 
-glTF is metres and +Y up: skeletons in other units are rescaled
-(:meth:`Clip.with_meters_per_unit`), and Z-up skeletons get a -90° rotation about X
-folded into their root joints (rest pose, bind transforms and every frame), so no
-extra node appears.
+glTF is metres and +Y up: assets in other units or Z up are converted with
+:mod:`usdhands.model.units` (translations rescaled; a -90° rotation about X folded
+into the root joints' rest pose and every frame, and into bind and mesh
+transforms), so no extra node appears.
 """
 
 from __future__ import annotations
@@ -24,10 +24,11 @@ from usdhands.formats.gltf_read import (
 )
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
-from usdhands.model.rotations import quat_angle_deg, quat_multiply
-from usdhands.model.skeleton import Skeleton, short_joint_name
+from usdhands.model.rotations import quat_angle_deg
+from usdhands.model.skeleton import short_joint_name
+from usdhands.model.units import asset_to, clip_to, skeleton_to
 
-__all__ = ["write_gltf", "write_clip_gltf", "to_gltf_space", "ROTATION_TOLERANCE_DEG", "TRANSLATION_TOLERANCE_M"]
+__all__ = ["write_gltf", "write_clip_gltf", "clip_to_gltf_space", "ROTATION_TOLERANCE_DEG", "TRANSLATION_TOLERANCE_M"]
 
 ARRAY_BUFFER = 34962
 ELEMENT_ARRAY_BUFFER = 34963
@@ -38,57 +39,16 @@ ROTATION_TOLERANCE_DEG = 1e-3
 TRANSLATION_TOLERANCE_M = 1e-6
 SCALE_TOLERANCE = 1e-6
 
-_Z_TO_Y = np.array([-np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5)])  # -90° about X: +Z up becomes +Y up
-_Z_TO_Y_M = np.array([[1.0, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]])
 
 
 # -- units and axes ------------------------------------------------------------
 
-def _fold_root(skel: Skeleton, rot: np.ndarray, tra: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Apply the Z→Y rotation to the root joints of local rotations ``(..., J, 4)`` and translations."""
-    roots = skel.parents < 0
-    rot = np.array(rot)
-    tra = np.array(tra)
-    rot[..., roots, :] = quat_multiply(_Z_TO_Y, rot[..., roots, :])
-    tra[..., roots, :] = tra[..., roots, :] @ _Z_TO_Y_M[:3, :3].T
-    return rot, tra
-
-
-def to_gltf_space(skeleton: Skeleton) -> tuple[Skeleton, np.ndarray]:
-    """The skeleton in metres and +Y up, and the 4x4 map from its old space to the new one.
-
-    Returns
-    -------
-    skeleton : Skeleton
-    space : (4, 4) float
-        ``new_point = space @ old_point`` for points in the old skeleton's space
-        (scale to metres, then the up-axis rotation).
-    """
-    space = np.diag([skeleton.meters_per_unit] * 3 + [1.0])
-    sk = skeleton.with_meters_per_unit(1.0) if skeleton.meters_per_unit != 1.0 else skeleton
-    bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
-    if skeleton.up_axis == "Z":
-        rot, tra = _fold_root(sk, sk.rest_rotations, sk.rest_translations)
-        bind = _Z_TO_Y_M @ bind
-        space = _Z_TO_Y_M @ space
-        sk = Skeleton(sk.joint_names, sk.parents, tra, rot, sk.rest_scales, bind, 1.0, "Y", sk.name)
-    elif sk.bind_xforms is None:
-        sk = Skeleton(sk.joint_names, sk.parents, sk.rest_translations, sk.rest_rotations, sk.rest_scales,
-                      bind, 1.0, "Y", sk.name)
-    return sk, space
-
-
-def clip_to_gltf_space(clip: Clip, skeleton: Skeleton | None = None) -> Clip:
-    """``clip`` in metres and +Y up (on ``skeleton``, the converted skeleton, when given)."""
-    src = clip.skeleton
-    if src.meters_per_unit == 1.0 and src.up_axis == "Y":
-        return clip if skeleton is None else clip.replace(skeleton=skeleton)
-    c = clip.with_meters_per_unit(1.0) if src.meters_per_unit != 1.0 else clip
-    rot, tra = c.rotations, c.translations
-    if src.up_axis == "Z":
-        rot, tra = _fold_root(src, rot, tra)
-    sk = skeleton if skeleton is not None else to_gltf_space(src)[0]
-    return Clip(sk, c.fps, rot, tra, c.scales, c.name, c.start_time)
+def clip_to_gltf_space(clip: Clip) -> Clip:
+    """``clip`` in metres and +Y up (roots re-oriented, see :mod:`usdhands.model.units`)."""
+    sk = clip.skeleton
+    if sk.meters_per_unit == 1.0 and sk.up_axis == "Y":
+        return clip
+    return clip_to(clip, skeleton_to(sk, 1.0, "Y"))
 
 
 # -- animation data ----------------------------------------------------------------
@@ -181,17 +141,16 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
     if options:
         raise TypeError(f"unexpected options for glTF write: {sorted(options)}")
     path = Path(path)
+    if any(sk.meters_per_unit != 1.0 or sk.up_axis != "Y" for sk in asset.skeletons):
+        asset = asset_to(asset, 1.0, "Y")
     gltf = pygltflib.GLTF2(asset=pygltflib.Asset(generator="usdhands", version="2.0"))
     gltf.buffers = [pygltflib.Buffer(byteLength=0)]
     app = BinaryAppender(gltf, 0)
     scene_nodes: list[int] = []
     skel_nodes: list[list[int]] = []
     skel_skins: list[int] = []
-    converted: list[tuple[Skeleton, np.ndarray]] = []
     index_of = {id(s): i for i, s in enumerate(asset.skeletons)}
-    for skel in asset.skeletons:
-        sk, space = to_gltf_space(skel)
-        converted.append((sk, space))
+    for sk in asset.skeletons:
         base = len(gltf.nodes)
         nodes = list(range(base, base + sk.num_joints))
         for j in range(sk.num_joints):
@@ -205,7 +164,8 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
                 scene_nodes.append(nodes[j])
             else:
                 gltf.nodes[nodes[p]].children.append(nodes[j])
-        ibm = np.linalg.inv(sk.bind_xforms).transpose(0, 2, 1).reshape(-1, 16).astype(np.float32)
+        bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
+        ibm = np.linalg.inv(bind).transpose(0, 2, 1).reshape(-1, 16).astype(np.float32)
         acc = app.add_accessor(ibm, "MAT4")
         roots = [nodes[j] for j in range(sk.num_joints) if sk.parents[j] < 0]
         gltf.skins.append(pygltflib.Skin(name=sk.name.rsplit("/", 1)[-1] or None, joints=nodes,
@@ -217,8 +177,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
         si = mesh.skeleton_index
         if not 0 <= si < len(asset.skeletons):
             raise ValueError(f"mesh {mesh.name!r} has skeleton_index {si}, the asset has {len(asset.skeletons)}")
-        sk, space = converted[si]
-        mi = _add_mesh(gltf, app, mesh, space, sk.num_joints)
+        mi = _add_mesh(gltf, app, mesh, asset.skeletons[si].num_joints)
         gltf.nodes.append(pygltflib.Node(name=mesh.name, mesh=mi, skin=skel_skins[si]))
         scene_nodes.append(len(gltf.nodes) - 1)
 
@@ -228,8 +187,8 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
             si = next((i for i, s in enumerate(asset.skeletons) if s.joint_names == clip.skeleton.joint_names), None)
         if si is None:
             raise ValueError(f"clip {clip.name!r} is on a skeleton that is not in the asset")
-        sk = converted[si][0]
-        c = clip_to_gltf_space(clip, sk)
+        sk = asset.skeletons[si]
+        c = clip_to_gltf_space(clip)
         anim = pygltflib.Animation(name=clip.name)
         w = _AnimationWriter(app, anim, _key_times(c))
         J = sk.num_joints
@@ -308,10 +267,9 @@ def _clean_influences(ji: np.ndarray, jw: np.ndarray, num_joints: int) -> tuple[
     return ji, w32
 
 
-def _add_mesh(gltf: pygltflib.GLTF2, app: BinaryAppender, mesh: SkinnedMesh, space: np.ndarray,
-              num_joints: int) -> int:
-    """Append one skinned mesh (points put in the skeleton's glTF space); returns the mesh index."""
-    xf = space @ np.asarray(mesh.geom_bind_xform, dtype=np.float64)
+def _add_mesh(gltf: pygltflib.GLTF2, app: BinaryAppender, mesh: SkinnedMesh, num_joints: int) -> int:
+    """Append one skinned mesh (points moved by its geom bind transform); returns the mesh index."""
+    xf = np.asarray(mesh.geom_bind_xform, dtype=np.float64)
     pts = np.asarray(mesh.points, dtype=np.float64)
     pts = pts @ xf[:3, :3].T + xf[:3, 3]
     attrs = {"POSITION": app.add_accessor(pts.astype(np.float32), "VEC3", target=ARRAY_BUFFER, min_max=True)}
