@@ -59,10 +59,10 @@ from scipy.spatial.transform import Rotation
 from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.model.asset import Asset
 from usdhands.model.clip import Clip
-from usdhands.model.rotations import quat_identity, unwrap_deg
+from usdhands.model.rotations import quat_identity, quat_multiply, unwrap_deg
 from usdhands.model.skeleton import Skeleton
 
-__all__ = ["HANDLER", "BvhHandler", "UNITS", "units_to_meters", "parse_bvh", "BvhFile"]
+__all__ = ["HANDLER", "BvhHandler", "UNITS", "units_to_meters", "parse_bvh", "BvhFile", "euler_channels_to_quat"]
 
 UNITS = {"cm": 0.01, "m": 1.0, "mm": 0.001, "dm": 0.1, "in": 0.0254, "inch": 0.0254, "ft": 0.3048}
 DEFAULT_ORDER = "ZXY"
@@ -296,38 +296,53 @@ def _parse_motion(lines: list[str], motion_line: int, C: int, path) -> tuple[np.
     except ValueError:
         raise AssetReadError(f"expected a positive frame time, found {ft_text!r}", path=path,
                              location=f"line {ft_line}") from None
-    rows = []
-    row_lines = []
-    for k in range(i, n):
-        parts = lines[k].split()
-        if not parts:
-            continue
-        if len(parts) != C:
-            raise AssetReadError(f"expected {C} values, found {len(parts)}", path=path, location=f"line {k + 1}")
-        rows.append(parts)
-        row_lines.append(k + 1)
-    if len(rows) == frames + 1 and all(float(v) == 0.0 for v in rows[0]):
-        # the Leap Motion exporter (jaanga) writes an all-zero rest line before the frames
-        rows, row_lines = rows[1:], row_lines[1:]
-    if len(rows) != frames:
-        where = row_lines[frames] if len(rows) > frames else n
-        raise AssetReadError(f"'Frames: {frames}' (line {frames_line}) but {len(rows)} frames of motion follow",
-                             path=path, location=f"line {where}")
+    counts = _tokens_per_line(lines[i:])
+    filled = np.nonzero(counts)[0]
+    bad = filled[counts[filled] != C]
+    if len(bad):
+        k = int(bad[0])
+        raise AssetReadError(f"expected {C} values, found {counts[k]}", path=path, location=f"line {i + k + 1}")
+    row_lines = (filled + i + 1).tolist()
+    text = "\n".join(lines[k - 1] for k in row_lines)
     try:
-        values = np.array(rows, dtype=np.float64).reshape(frames, C)
-    except ValueError:
-        for r, ln in zip(rows, row_lines):
-            for v in r:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            flat = np.fromstring(text, dtype=np.float64, sep=" ") if text else np.zeros(0)
+    except ValueError:  # numpy >= 2.x raises on a token that is not a number
+        flat = np.zeros(0)
+    if flat.size != len(row_lines) * C:  # a token that is not a number: find it
+        for ln in row_lines:
+            for v in lines[ln - 1].split():
                 try:
                     float(v)
                 except ValueError:
                     raise AssetReadError(f"not a number: {v!r}", path=path, location=f"line {ln}") from None
-        raise
+        raise AssetReadError("unreadable motion values", path=path, location=f"line {row_lines[0]}")
+    values = flat.reshape(len(row_lines), C)
+    if len(row_lines) == frames + 1 and not values[0].any():
+        # the Leap Motion exporter (jaanga) writes an all-zero rest line before the frames
+        values, row_lines = values[1:], row_lines[1:]
+    if len(row_lines) != frames:
+        where = row_lines[frames] if len(row_lines) > frames else n
+        raise AssetReadError(f"'Frames: {frames}' (line {frames_line}) but {len(row_lines)} frames of motion follow",
+                             path=path, location=f"line {where}")
     if not np.all(np.isfinite(values)):
         r, c = np.argwhere(~np.isfinite(values))[0]
-        raise AssetReadError(f"value {c + 1} is not finite: {rows[r][c]!r}", path=path,
+        raise AssetReadError(f"value {c + 1} is not finite: {lines[row_lines[r] - 1].split()[c]!r}", path=path,
                              location=f"line {row_lines[r]}")
     return values, frame_time
+
+
+def _tokens_per_line(lines: list[str]) -> np.ndarray:
+    """Number of whitespace-separated tokens on each line, ``(len(lines),)`` int (vectorised)."""
+    if not lines:
+        return np.zeros(0, dtype=np.int64)
+    b = np.frombuffer("\n".join(lines).encode("utf-8", errors="replace"), dtype=np.uint8)
+    ws = (b == 32) | (b == 9) | (b == 10) | (b == 13) | (b == 11) | (b == 12)
+    starts = ~ws
+    starts[1:] &= ws[:-1]
+    line_of = np.searchsorted(np.flatnonzero(b == 10), np.flatnonzero(starts))
+    return np.bincount(line_of, minlength=len(lines))
 
 
 def _fps(frame_time: float) -> float:
@@ -348,6 +363,7 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     rot = np.tile(quat_identity(), (T, J, 1))
     trans = np.tile(offsets, (T, 1, 1))
     col = 0
+    groups: dict[tuple, list] = {}  # rotation axes -> [(joint, columns)]
     for k, j in enumerate(bvh.joints):
         raxes, rcols = [], []
         for c in j.channels:
@@ -355,27 +371,47 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
             if kind == "p":
                 trans[:, k, axis] = bvh.values[:, col]
             else:
-                raxes.append(_AXES[axis])
+                raxes.append(axis)
                 rcols.append(col)
             col += 1
-        if raxes and T:
-            angles = bvh.values[:, rcols]
-            if len(raxes) < 3:  # pad to three axes with zero angles (scipy wants 1-D angles otherwise)
-                pad = [a for a in _AXES if a not in raxes][: 3 - len(raxes)]
-                if len(pad) + len(raxes) == 3:
-                    raxes = raxes + pad
-                    angles = np.concatenate([angles, np.zeros((T, len(pad)))], axis=1)
-                else:  # e.g. "XX": compose one axis at a time
-                    r = Rotation.identity(T)
-                    for a, c in zip(raxes, rcols):
-                        r = r * Rotation.from_euler(a, bvh.values[:, c], degrees=True)
-                    rot[:, k] = r.as_quat()
-                    continue
-            rot[:, k] = Rotation.from_euler("".join(raxes), angles, degrees=True).as_quat()
+        if raxes:
+            groups.setdefault(tuple(raxes), []).append((k, rcols))
+    if T:
+        for axes, members in groups.items():
+            ks = [k for k, _ in members]
+            cols = np.array([c for _, c in members])  # (Jg, n)
+            rot[:, ks] = euler_channels_to_quat(bvh.values[:, cols], axes)
     clip = Clip(sk, _fps(bvh.frame_time), rot, trans, name=path.stem)
     if fps is not None and T:
         clip = clip.resample(fps)
     return Asset(str(path), (sk,), (clip,), ())
+
+
+def euler_channels_to_quat(angles_deg: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
+    """Rotations of BVH rotation channels: the product of axis rotations in channel order.
+
+    Parameters
+    ----------
+    angles_deg : (..., n) float
+        Degrees, one per channel, in channel order.
+    axes : tuple of int, length n
+        Axis of each channel (0 = X, 1 = Y, 2 = Z); any number and order (``"ZXY"``
+        is ``(2, 0, 1)``), which for three distinct axes is scipy's intrinsic
+        ``from_euler("ZXY", ...)``.
+
+    Returns
+    -------
+    (..., 4) float
+        Quaternions xyzw.
+    """
+    half = np.radians(np.asarray(angles_deg, dtype=np.float64)) * 0.5
+    q = quat_identity(half.shape[:-1])
+    for i, a in enumerate(axes):
+        qa = np.zeros(half.shape[:-1] + (4,))
+        qa[..., a] = np.sin(half[..., i])
+        qa[..., 3] = np.cos(half[..., i])
+        q = quat_multiply(q, qa)
+    return q
 
 
 def _euler(q: np.ndarray, axes: str) -> np.ndarray:
