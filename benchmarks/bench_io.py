@@ -101,7 +101,86 @@ def bench_usd(clip, folder: Path, repeat: int) -> list[tuple]:
     return rows
 
 
-BENCHES = {"usd": bench_usd}
+# -------------------------------------------------------------------------- glTF
+def bench_gltf(clip, folder: Path, repeat: int) -> list[tuple]:
+    """usdhands' glTF write/read (.glb) against pygltflib building and loading the same accessors.
+
+    The baseline writes one input accessor and one rotation and one translation
+    accessor per joint (what usdhands writes for this clip: scales stay at rest and
+    are left out), saves with ``save_binary`` and reads back with ``GLTF2.load`` and
+    ``np.frombuffer`` per accessor, with no sampling.
+    """
+    import pygltflib
+
+    from usdhands.formats.gltf import HANDLER
+    from usdhands.model.asset import Asset
+
+    ours = folder / "ours.glb"
+    bare = folder / "bare.glb"
+    asset = Asset("bench", (clip.skeleton,), (clip,))
+    T, J = clip.num_frames, clip.num_joints
+    times = (np.arange(T) / clip.fps).astype(np.float32)
+    rot32 = np.ascontiguousarray(clip.rotations.transpose(1, 0, 2), dtype=np.float32)
+    tr32 = np.ascontiguousarray(clip.translations.transpose(1, 0, 2) * clip.skeleton.meters_per_unit,
+                                dtype=np.float32)
+
+    def write_ours():
+        HANDLER.write(asset, ours)
+
+    def write_bare():
+        g = pygltflib.GLTF2()
+        blob = bytearray()
+
+        def accessor(arr, type_):
+            g.bufferViews.append(pygltflib.BufferView(buffer=0, byteOffset=len(blob), byteLength=arr.nbytes))
+            blob.extend(arr.tobytes())
+            g.accessors.append(pygltflib.Accessor(bufferView=len(g.bufferViews) - 1, componentType=pygltflib.FLOAT,
+                                                  count=arr.shape[0], type=type_))
+            return len(g.accessors) - 1
+
+        inp = accessor(times, "SCALAR")
+        g.accessors[inp].min, g.accessors[inp].max = [float(times[0])], [float(times[-1])]
+        anim = pygltflib.Animation(name=clip.name)
+        for j in range(J):
+            g.nodes.append(pygltflib.Node(name=f"j{j}"))
+            for path, arr, type_ in (("rotation", rot32[j], "VEC4"), ("translation", tr32[j], "VEC3")):
+                anim.samplers.append(pygltflib.AnimationSampler(input=inp, output=accessor(arr, type_)))
+                anim.channels.append(pygltflib.AnimationChannel(
+                    sampler=len(anim.samplers) - 1, target=pygltflib.AnimationChannelTarget(node=j, path=path)))
+        g.animations.append(anim)
+        g.buffers.append(pygltflib.Buffer(byteLength=len(blob)))
+        g.set_binary_blob(bytes(blob))
+        g.save_binary(str(bare))
+
+    def read_ours():
+        return HANDLER.read(ours)
+
+    def read_bare():
+        g = pygltflib.GLTF2().load(str(bare))
+        blob = g.binary_blob()
+        out_r = np.empty((T, J, 4), np.float32)
+        out_t = np.empty((T, J, 3), np.float32)
+        anim = g.animations[0]
+        for ch in anim.channels:
+            acc = g.accessors[anim.samplers[ch.sampler].output]
+            view = g.bufferViews[acc.bufferView]
+            n = 4 if ch.target.path == "rotation" else 3
+            arr = np.frombuffer(blob, np.float32, acc.count * n, view.byteOffset + (acc.byteOffset or 0))
+            (out_r if n == 4 else out_t)[:, ch.target.node] = arr.reshape(-1, n)
+        return out_r, out_t
+
+    rows = []
+    w_ours, w_bare = best_of(repeat, write_ours), best_of(repeat, write_bare)
+    rows.append(("gltf", "write", w_ours, w_bare))
+    r_ours, r_bare = best_of(repeat, read_ours), best_of(repeat, read_bare)
+    rows.append(("gltf", "read", r_ours, r_bare))
+    back = read_ours().clips[0]
+    err = float(np.abs(np.abs((back.rotations * clip.rotations).sum(-1)) - 1).max())
+    rows.append(("gltf", f"check: max |1-|q.q'|| = {err:.1e}", None, None))
+    return rows
+
+
+BENCHES = {"usd": bench_usd, "gltf": bench_gltf}
 
 
 def main(argv=None) -> int:
