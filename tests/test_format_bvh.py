@@ -262,3 +262,29 @@ def test_malformed_hierarchy(tmp_path, edit, message):
     with pytest.raises(AssetReadError) as e:
         parse_bvh(p)
     assert str(e.value) == f"{p}: {message}"
+
+
+def test_write_bakes_scales_into_offsets(tmp_path):
+    # a root scaled 100x (RobotExpressive's armature) and an animated uniform scale below
+    sk = Skeleton(["arm", "arm/a", "arm/a/b", "arm/a/b/c"], [-1, 0, 1, 2],
+                  [[0, 0, 0], [0, 0.02, 0], [0.01, 0, 0], [0, 0.01, 0]],
+                  Rotation.random(4, random_state=8).as_quat(), rest_scales=[[100] * 3, [1] * 3, [1] * 3, [1] * 3],
+                  meters_per_unit=0.01)
+    T = 4
+    scales = np.ones((T, 4, 3))
+    scales[:, 0] = 100
+    scales[:, 1] = np.linspace(1, 2, T)[:, None]
+    clip = Clip(sk, 30, Rotation.random(T * 4, random_state=9).as_quat().reshape(T, 4, 4), scales=scales)
+    out = write_asset(Asset("mem", (sk,), (clip,)), tmp_path / "s.bvh")
+    back = read_asset(out).clip()
+    assert np.abs(back.world_positions() - clip.world_positions()).max() < 1e-5
+    assert np.allclose(back.skeleton.rest_translations[1], [0, 2, 0])
+
+
+def test_euler_channels_to_quat_matches_scipy_for_repeated_axes():
+    from usdhands.formats.bvh import euler_channels_to_quat
+
+    a = np.random.default_rng(2).uniform(-180, 180, (20, 3))
+    for seq, axes in (("ZXZ", (2, 0, 2)), ("YXY", (1, 0, 1)), ("XYZ", (0, 1, 2))):
+        ref = Rotation.from_euler(seq, a, degrees=True).as_quat()
+        assert quat_angle_deg(euler_channels_to_quat(a, axes), ref).max() < 1e-9

@@ -36,7 +36,9 @@ Writing
   away from the rest; rotation order ``order`` (default ``"ZXY"``:
   ``Zrotation Xrotation Yrotation``). A leaf joint named ``<parent>_end`` is written as
   an End Site; other leaves as joints with no End Site. BVH has no rest rotation and no
-  scale: the clip's local rotations are written as they are, and scales are dropped.
+  scale: the clip's local rotations are written as they are, and each joint's scale is
+  baked into the offsets and translations below it (exact for uniform scales, the mean
+  of the components otherwise), so world positions are kept.
   Skeletons in other units or Z-up are converted to the ``units`` (default
   centimetres) and +Y.
 - :meth:`BvhHandler.write_clip` writes the source file's hierarchy text unchanged
@@ -447,6 +449,31 @@ def _clip_in(clip: Clip, meters_per_unit: float) -> Clip:
     return clip_to(clip, skeleton_to(sk, meters_per_unit, "Y"))
 
 
+def _baked_translations(clip: Clip) -> tuple[np.ndarray, np.ndarray]:
+    """Rest offsets ``(J, 3)`` and translations ``(T, J, 3)`` with the scales above each joint baked in.
+
+    BVH has no scale: each joint's translation is multiplied by the accumulated scale
+    of its ancestors (exact for uniform scales; a non-uniform scale counts as the mean
+    of its components).
+    """
+    sk = clip.skeleton
+    rest_s = np.abs(sk.rest_scales).mean(axis=-1)  # (J,)
+    anim_s = np.abs(clip.scales).mean(axis=-1)  # (T, J)
+    if np.allclose(rest_s, 1.0, atol=1e-12) and np.allclose(anim_s, 1.0, atol=1e-12):
+        return np.asarray(sk.rest_translations), np.asarray(clip.translations)
+    J = sk.num_joints
+    rest_w = np.ones(J)
+    anim_w = np.ones(anim_s.shape)
+    rest_par = np.ones(J)
+    anim_par = np.ones(anim_s.shape)
+    for j, p in enumerate(sk.parents):
+        if p >= 0:
+            rest_par[j], anim_par[:, j] = rest_w[p], anim_w[:, p]
+        rest_w[j] = rest_par[j] * rest_s[j]
+        anim_w[:, j] = anim_par[:, j] * anim_s[:, j]
+    return sk.rest_translations * rest_par[:, None], clip.translations * anim_par[..., None]
+
+
 def _bvh_names(sk: Skeleton) -> list[str]:
     shorts = [re.sub(r"\s+", "_", n) for n in sk.short_names]
     if len(set(shorts)) == len(shorts):
@@ -518,7 +545,8 @@ class BvhHandler:
         kids = [sk.children(j) for j in range(J)]
         is_end = [not kids[j] and sk.parents[j] >= 0 and names[j] == names[sk.parents[j]] + END_SUFFIX
                   for j in range(J)]
-        moved = np.abs(clip.translations - sk.rest_translations[None]).max(axis=0).max(axis=-1) > 1e-9 \
+        rest_t, anim_t = _baked_translations(clip)
+        moved = np.abs(anim_t - rest_t[None]).max(axis=0).max(axis=-1) > 1e-9 \
             if clip.num_frames else np.zeros(J, bool)
         rot_ch = " ".join(f"{a}rotation" for a in order)
         lines = ["HIERARCHY"]
@@ -526,7 +554,7 @@ class BvhHandler:
 
         def emit(j: int, depth: int) -> None:
             ind = "\t" * depth
-            off = sk.rest_translations[j]
+            off = rest_t[j]
             if is_end[j]:
                 lines.extend([f"{ind}End Site", f"{ind}{{", f"{ind}\tOFFSET {_FMT % off[0]} {_FMT % off[1]} "
                               f"{_FMT % off[2]}", f"{ind}}}"])
@@ -550,7 +578,7 @@ class BvhHandler:
         parts = []
         for j, kind in columns:
             if kind == "p":
-                parts.append(clip.translations[:, j])
+                parts.append(anim_t[:, j])
             else:
                 parts.append(_euler(clip.rotations[:, j], order) if clip.num_frames else np.zeros((0, 3)))
         values = np.concatenate(parts, axis=1) if parts else np.zeros((clip.num_frames, 0))
@@ -584,6 +612,7 @@ class BvhHandler:
                                      f"{' ...' if len(missing) > 10 else ''} of the source hierarchy",
                                      path=source)
         T = clip.num_frames
+        _, anim_t = _baked_translations(clip)
         parts = []
         for bj in bvh.joints:
             if not bj.channels:
@@ -595,7 +624,7 @@ class BvhHandler:
             ri = 0
             for kind, a in kinds:
                 if kind == "p":
-                    parts.append(clip.translations[:, k, a][:, None])
+                    parts.append(anim_t[:, k, a][:, None])
                 else:
                     parts.append(e[:, ri:ri + 1])
                     ri += 1
