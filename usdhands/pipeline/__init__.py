@@ -1,0 +1,1 @@
+"""Pipeline integration: USD schema plugin registration and hooks for host applications."""
