@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from usdhands.algorithms.reduction import (
-    RangeRule, RmsdRule, pair_rmsd, paper_style_names, parse_steps, reduce_curves, standardise,
+    RangeRule, RmsdRule, continuous_euler_curves, pair_rmsd, paper_style_names, parse_steps, reduce_curves, standardise,
 )
 from usdhands.algorithms.reduction_model import Constant, ReductionModel, Relation
 from usdhands.errors import ConfigError
@@ -354,6 +354,25 @@ def test_model_apply_reads_only_the_free_curves():
         model.apply(v[:, :2], ["a.x", "b.x"])
 
 
+# ---------------------------------------------------------------------------- Euler branches
+@pytest.mark.parametrize("order", ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"])
+def test_continuous_euler_curves_follow_a_bend_through_the_gimbal(order):
+    from usdhands.model.rotations import euler_deg_to_quat, quat_angle_deg, quat_to_euler_deg, unwrap_deg
+
+    frames = 200
+    truth = np.zeros((frames, 2, 3))
+    truth[:, 0, 1] = np.linspace(0, 130, frames)  # middle angle through 90: the per-frame branch flips
+    truth[:, 0, 0] = 10 * np.sin(np.linspace(0, 3, frames))
+    truth[:, 0, 2] = -5 + 3 * np.cos(np.linspace(0, 2, frames))
+    truth[:, 1] = [20.0, -30.0, 40.0]  # a still joint
+    q = euler_deg_to_quat(truth, order)
+    raw = unwrap_deg(quat_to_euler_deg(q, order), axis=0).reshape(frames, 6)
+    assert np.abs(np.diff(raw, axis=0)).max() > 100  # the jump being fixed
+    cont = continuous_euler_curves(raw)
+    assert np.allclose(cont, truth.reshape(frames, 6), atol=1e-6)
+    assert quat_angle_deg(euler_deg_to_quat(cont.reshape(frames, 2, 3), order), q).max() < 1e-9
+
+
 # ---------------------------------------------------------------------------- naming
 def test_paper_style_names():
     hm = HandMap(
@@ -484,6 +503,7 @@ def test_expand_in_memory_is_exact(shared_assets):
     model = reduce_curves(curves.values, curves.names, groups=sides).final.model
     reduced = apply_finger_curves(clip, curves.with_values(model.apply(curves.values, curves.names)))
     again_curves = finger_curves(reduced, curves.joints)
+    again_curves = again_curves.with_values(continuous_euler_curves(again_curves.values))
     again = apply_finger_curves(reduced, again_curves.with_values(model.apply(again_curves.values, curves.names)))
     assert quat_angle_deg(reduced.rotations, again.rotations).max() < 1e-9
 

@@ -65,7 +65,7 @@ from usdhands.model.skeleton import short_joint_name
 __all__ = [
     "DEFAULT_STEPS", "DEGENERATE_RANGE_DEG", "RangeRule", "RmsdRule", "parse_steps", "format_steps",
     "curve_statistics", "standardise", "pair_rmsd", "StepResult", "ReductionResult", "reduce_curves",
-    "paper_style_names",
+    "paper_style_names", "continuous_euler_curves",
 ]
 
 DEFAULT_STEPS = "range<1,rmsd<0.3,range<5,rmsd<0.5"
@@ -514,6 +514,49 @@ def _group_items(labels, codes):
     for lab, c in zip(labels, codes):
         seen.setdefault(int(c), str(lab))
     return [(c, seen[c]) for c in sorted(seen)]
+
+
+# ---------------------------------------------------------------------------- Euler branches
+def continuous_euler_curves(values: np.ndarray) -> np.ndarray:
+    """Euler curves that follow the rotation through gimbal regions without jumps.
+
+    Every rotation has two Tait-Bryan triples, ``(a, b, c)`` and
+    ``(a + 180, 180 - b, c + 180)`` (any order with three distinct axes); a per-frame
+    conversion keeps ``|b| <= 90`` and so jumps by 180 degrees on two axes whenever the
+    middle angle passes 90 degrees (a finger bent about the middle axis of the order).
+    Starting from the first frame as given, this picks at each frame the triple (each
+    angle shifted by a multiple of 360) nearest to the previous frame's, so the curves
+    stay continuous and the rotations unchanged.
+
+    Parameters
+    ----------
+    values : (T, 3N) float
+        Degrees; columns ``3i, 3i+1, 3i+2`` are the three angles of joint ``i`` in the
+        order's sequence (the layout of :class:`~usdhands.model.finger_dofs.FingerCurves`).
+
+    Returns
+    -------
+    (T, 3N) float64
+        Degrees; the same rotations frame by frame.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] % 3:
+        raise ValueError(f"Expected values to have shape (T, 3N), got {v.shape}")
+    T = v.shape[0]
+    e = v.reshape(T, -1, 3)
+    alt = np.stack([e[..., 0] + 180.0, 180.0 - e[..., 1], e[..., 2] + 180.0], axis=-1)
+    out = np.empty_like(e)
+    if T == 0:
+        return out.reshape(v.shape)
+    out[0] = e[0]
+    prev = e[0]
+    for t in range(1, T):
+        a = e[t] + 360.0 * np.round((prev - e[t]) / 360.0)
+        b = alt[t] + 360.0 * np.round((prev - alt[t]) / 360.0)
+        use_b = np.abs(b - prev).sum(axis=-1) < np.abs(a - prev).sum(axis=-1)
+        prev = np.where(use_b[:, None], b, a)
+        out[t] = prev
+    return out.reshape(v.shape)
 
 
 # ---------------------------------------------------------------------------- naming

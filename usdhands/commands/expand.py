@@ -38,6 +38,7 @@ def model_joints(model) -> list[str]:
 
 
 def run(args) -> int:
+    from usdhands.algorithms.reduction import continuous_euler_curves
     from usdhands.algorithms.reduction_model import ReductionModel
     from usdhands.formats.io import read_clip, write_clip
     from usdhands.model.finger_dofs import apply_finger_curves, finger_curves
@@ -52,6 +53,7 @@ def run(args) -> int:
             raise JointMismatchError(f"joint {name!r} of the reduction model {args.model.name} is not in the file",
                                      path=args.file) from None
     curves = finger_curves(clip, joints, model.order)
+    curves = curves.with_values(continuous_euler_curves(curves.values))  # as 'reduce' reads them
     missing = [c for c in model.curves if c not in set(curves.names)]
     if missing:  # only when the model's axis letters do not match its Euler order
         raise UsdHandsError(f"curves {missing[:3]} of the model do not match its Euler order {model.order}",

@@ -47,8 +47,11 @@ def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | Non
     """Read a clip and the finger curves of the chosen hands.
 
     Returns ``(clip, handmap, curves, sides)``: ``curves`` a FingerCurves over the chosen
-    hands' finger joints (left first), ``sides`` the side of each curve.
+    hands' finger joints (left first), kept continuous through gimbal regions
+    (:func:`~usdhands.algorithms.reduction.continuous_euler_curves`); ``sides`` the side
+    of each curve.
     """
+    from usdhands.algorithms.reduction import continuous_euler_curves
     from usdhands.formats.io import read_clip
     from usdhands.model.finger_dofs import finger_curves
     from usdhands.model.hand_detection import resolve_handmap
@@ -70,6 +73,7 @@ def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | Non
             joints.append(clip.skeleton.index(name))
             sides += [side] * 3
     curves = finger_curves(clip, joints, order.upper())
+    curves = curves.with_values(continuous_euler_curves(curves.values))
     return clip, handmap, curves, sides
 
 
