@@ -264,3 +264,124 @@ def test_bad_input_is_rejected(case):
         align_hands(np.zeros((300, 4, 3)), np.zeros((330, 4, 3)), 30.0, constraints=[Constraint(5, 400)])
     with pytest.raises(ValueError, match="Expected yaw 'window', 'trunk' or 'none', got 'up'"):
         SpliceOptions(yaw="up")
+
+
+# -- command line -----------------------------------------------------------------------------
+def _write_bvh(clip, path):
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+
+    write_asset(Asset("synthetic", (clip.skeleton,), (clip,), ()), path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def bvh_case(tmp_path_factory):
+    d = tmp_path_factory.mktemp("splice")
+    c = make_case(240, seed=3, partial=True)
+    return c, _write_bvh(c.body, d / "body.bvh"), _write_bvh(c.hands, d / "hands.bvh"), d
+
+
+def _run(argv, capsys):
+    from usdhands.cli import main
+
+    status = main(argv)
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
+def test_cli_splices_bvh_files_against_the_known_warp(bvh_case, capsys):
+    import json
+
+    from usdhands.formats.io import read_clip
+
+    c, body, hands, d = bvh_case
+    out = d / "out.bvh"
+    status, stdout, err = _run(["splice", str(body), str(hands), "-o", str(out), "--json",
+                                "--plot", str(d / "plots")], capsys)
+    assert status == 0, err
+    rep = json.loads(stdout)
+    for s in SIDES:
+        a = np.array(rep["alignment"][s])
+        assert a.shape == (240,) and np.abs(a - c.truth).mean() <= 1.5
+        assert rep["costs"][s]["second_pass_mean_deg"] < 5.0 and rep["phases"][s]
+    assert ["RightHandIndex2", "rIndex2"] in rep["pairs"]["right"]
+    assert (d / "plots" / "splice_left.png").stat().st_size > 10_000
+    spliced = read_clip(out)
+    names = [n for n in spliced.skeleton.joint_names if "Hand" in n and n[-1] in "123" and "_end" not in n]
+    bj = [spliced.skeleton.index(n) for n in names]
+    oj = [c.body.skeleton.index(n) for n in names]
+    err_deg = quat_angle_deg(spliced.rotations[:, bj], c.body.rotations[:, oj])
+    assert len(names) == 30 and err_deg.mean() < 2.0
+
+
+def test_cli_real_leap_recording_onto_a_body_resamples_and_transfers_relative_to_rest(bvh_case, shared_assets,
+                                                                                      capsys):
+    import json
+
+    from usdhands.formats.io import read_clip
+    from usdhands.model.rotations import quat_conjugate, quat_multiply
+
+    c, body, _, d = bvh_case
+    leap = shared_assets / "leap_hands" / "gesture-typing.bvh"
+    out = d / "leap_out.bvh"
+    status, stdout, err = _run(["splice", str(body), str(leap), "-o", str(out), "--json"], capsys)
+    assert status == 0, err
+    assert "HANDS is at 37.04 fps and BODY at 30 fps: HANDS resampled to 30 fps (317 -> 256 frames)" in err
+    assert "HANDS finger joints without a counterpart" not in err
+    rep = json.loads(stdout)
+    assert list(rep["alignment"]) == ["right"]  # the recording has a right hand only
+    a = np.array(rep["alignment"]["right"])
+    assert a[0] == 0 and a[-1] == pytest.approx(255 * 37.037037 / 30, abs=0.01) and np.all(np.diff(a) >= 0)
+    # where the aligned frame is a whole frame of the resampled clip, the finger equals
+    # rest_body * rest_hand^-1 * q_hand
+    hands = read_clip(leap).resample(30.0)
+    spliced = read_clip(out)
+    r = a * 30 / 37.037037  # frames of the resampled recording
+    seams = np.array(rep["seams"]["right"] or [-100])
+    whole = [i for i in range(240) if abs(r[i] - round(r[i])) < 1e-3 and np.abs(seams - i).min() > 5]
+    assert whole
+    k = whole[len(whole) // 2]
+    t = int(round(r[k]))
+    hj = hands.skeleton.index("rIndex2")
+    bj = spliced.skeleton.index("RightHandIndex2")
+    want = quat_multiply(spliced.skeleton.rest_rotations[bj],
+                         quat_multiply(quat_conjugate(hands.skeleton.rest_rotations[hj]), hands.rotations[t, hj]))
+    assert quat_angle_deg(spliced.rotations[k, bj], want) < 0.5
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--match", "10:400"], "--match: constraint 10:400: hand frame 400 is out of range 0..263 "
+                            "(BODY has 240 frames, HANDS 264)"),
+    (["--match", "250:10"], "--match: constraint 250:10: body frame 250 is out of range 0..239"),
+    (["--match", "50:60", "--match", "40:70"], "--match: constraints out of order: 40:70 after 50:60"),
+    (["--match", "50-60"], "bad --match '50-60': expected BODY_FRAME:HAND_FRAME[:TOLERANCE] with 0-based"),
+    (["--band", "0.3"], "bad --band '0.3': expected two positive fractions W1,W2 such as 0.3,0.1"),
+    (["--side", "left", "--hands-handmap", "{right_only}"], "HANDS has no left hand (found: right)"),
+])
+def test_cli_bad_input_exits_2_with_one_line(bvh_case, capsys, extra, message):
+    import json
+
+    c, body, hands, d = bvh_case
+    right_only = d / "right_only.json"
+    right_only.write_text(json.dumps({"left": None, "right": leap_handside("right").to_dict()}))
+    extra = [e.replace("{right_only}", str(right_only)) for e in extra]
+    status, stdout, err = _run(["splice", str(body), str(hands), "-o", str(d / "bad.bvh"), *extra], capsys)
+    assert status == 2
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not (d / "bad.bvh").exists()
+
+
+def test_cli_hands_without_forearm_is_an_error(bvh_case, capsys):
+    import json
+
+    c, body, hands, d = bvh_case
+    hm = d / "no_forearm.json"
+    side = leap_handside("right").to_dict()
+    side["forearm"] = None
+    hm.write_text(json.dumps({"left": None, "right": side}))
+    status, _, err = _run(["splice", str(body), str(hands), "-o", str(d / "bad.bvh"), "--hands-handmap", str(hm)],
+                          capsys)
+    assert status == 2
+    assert f"{hands}: HANDS: the right hand (wrist 'rHand') has no forearm joint; splicing needs a forearm and " \
+           "a wrist" in err

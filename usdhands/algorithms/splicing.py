@@ -932,8 +932,10 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         href = _ref(hands, hs, wh)
         yb = yh = None
         if options.yaw == "trunk":
-            yb = trunk_yaw_deg(body, body.skeleton.index(bs.root), wb) if bs.root else np.zeros(body.num_frames)
-            yh = trunk_yaw_deg(hands, hands.skeleton.index(hs.root), wh) if hs.root else None
+            # a root counts as a trunk only on rigs with a shoulder (a hand-only rig's root is its forearm)
+            yb = (trunk_yaw_deg(body, body.skeleton.index(bs.root), wb) if bs.root and bs.shoulder
+                  else np.zeros(body.num_frames))
+            yh = trunk_yaw_deg(hands, hands.skeleton.index(hs.root), wh) if hs.root and hs.shoulder else None
         al = align_hands(bm, hm, body.fps, body_ref=bref, hand_ref=href, constraints=constraints,
                          options=options, body_yaw_deg=yb, hand_yaw_deg=yh,
                          body_hand_dirs=hand_directions(body, bs, bo, wb),

@@ -1,0 +1,222 @@
+"""``usdhands splice BODY HANDS -o OUT``: put separately captured hand motion onto a body clip.
+
+Majkowska, Zordan and Faloutsos 2006: two-pass DTW (phases by the signs of marker
+derivatives, then the forearm-aligned hand angle inside a narrow band), user
+constraints ``--match BODY_FRAME:HAND_FRAME[:TOLERANCE]`` (0-based, in each file's own
+frames), then the hand's finger rotations, relative to rest, written onto BODY's
+finger joints. See docs/splicing.md.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from pathlib import Path
+
+from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.errors import UsdHandsError
+
+MATCH_RE = re.compile(r"^(\d+):(\d+)(?::(\d+))?$")
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "splice", help="splice separately captured hand motion onto a body clip (two-pass DTW)",
+        description="Align a hand capture (HANDS: forearm, wrist and fingers; a partial skeleton is fine) "
+                    "to a full-body clip (BODY) in time with two-pass dynamic time warping (Majkowska et al. "
+                    "2006) and write BODY with the hand capture's finger motion. Frame numbers are 0-based.")
+    p.add_argument("body", type=Path, help="full-body animation (.usd/.usda/.usdc/.usdz, .gltf/.glb, .bvh)")
+    p.add_argument("hands", type=Path, help="hand animation with forearm, wrist and fingers")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output file (same format as BODY)")
+    p.add_argument("--side", choices=("left", "right", "both"), default="both",
+                   help="hands to splice (default both: every hand found in both files)")
+    p.add_argument("--match", action="append", default=[], metavar="BODY_FRAME:HAND_FRAME[:TOLERANCE]",
+                   help="make body frame and hand frame match, exactly or within TOLERANCE hand frames; repeatable, "
+                        "in increasing order")
+    p.add_argument("--band", default="0.3,0.1", metavar="W1,W2",
+                   help="band half-widths of the two passes as fractions of the body length (default 0.3,0.1)")
+    p.add_argument("--yaw", choices=("window", "trunk", "none"), default="window",
+                   help="turn about the vertical axis: eq. 7 over 5-frame windows (default), trunk headings, or none")
+    p.add_argument("--hand-yaw", type=float, default=0.0, metavar="DEG",
+                   help="with --yaw trunk: heading of the hand capture when HANDS has no trunk (default 0)")
+    p.add_argument("--forearm-align", choices=("frame", "vector"), default="frame",
+                   help="second pass: align forearm joint frames (default) or forearm marker vectors as in the paper")
+    p.add_argument("--blend", type=int, default=4, metavar="N",
+                   help="frames on each side of a jump in hand timing to cross-fade (default 4)")
+    p.add_argument("--json", action="store_true", help="print the alignment, phases and costs as JSON")
+    p.add_argument("--plot", type=Path, default=None, metavar="DIR",
+                   help="draw the cost matrices with band and path (splice_<side>.png) into DIR")
+    p.add_argument("--animation", default=None, help="BODY animation name or index (default the first)")
+    p.add_argument("--hands-animation", default=None, help="HANDS animation name or index (default the first)")
+    p.add_argument("--body-handmap", type=Path, default=None, help="hand map JSON for BODY (overrides detection)")
+    p.add_argument("--hands-handmap", type=Path, default=None, help="hand map JSON for HANDS (overrides detection)")
+    p.add_argument("--layer", action="store_true", help="USD: write a sparse override layer over BODY")
+    p.set_defaults(func=run)
+
+
+def parse_match(text: str):
+    """``"12:30"`` or ``"12:30:2"`` → Constraint; UsdHandsError otherwise."""
+    from usdhands.algorithms.dtw import Constraint
+
+    mt = MATCH_RE.match(text.strip())
+    if not mt:
+        raise UsdHandsError(f"bad --match {text!r}: expected BODY_FRAME:HAND_FRAME[:TOLERANCE] "
+                            "with 0-based frame numbers")
+    return Constraint(int(mt.group(1)), int(mt.group(2)), int(mt.group(3) or 0))
+
+
+def parse_band(text: str) -> tuple[float, float]:
+    """``"0.3,0.1"`` → (0.3, 0.1); UsdHandsError otherwise."""
+    parts = text.split(",")
+    try:
+        vals = tuple(float(p) for p in parts)
+    except ValueError:
+        vals = ()
+    if len(vals) != 2 or not all(0 < v and math.isfinite(v) for v in vals):
+        raise UsdHandsError(f"bad --band {text!r}: expected two positive fractions W1,W2 such as 0.3,0.1")
+    return vals
+
+
+def _sides(args, body_map, hand_map) -> list[str]:
+    have_b = [h.side for h in body_map.sides]
+    have_h = [h.side for h in hand_map.sides]
+    if args.side != "both":
+        if args.side not in have_b:
+            raise UsdHandsError(f"BODY has no {args.side} hand (found: {', '.join(have_b) or 'none'})",
+                                path=args.body)
+        if args.side not in have_h:
+            raise UsdHandsError(f"HANDS has no {args.side} hand (found: {', '.join(have_h) or 'none'})",
+                                path=args.hands)
+        return [args.side]
+    common = [s for s in have_b if s in have_h]
+    if not common:
+        raise UsdHandsError(f"no hand in common: BODY has {', '.join(have_b) or 'none'}, "
+                            f"HANDS has {', '.join(have_h) or 'none'}")
+    return common
+
+
+def _check_side(side, path, role: str) -> None:
+    if side.forearm is None:
+        raise UsdHandsError(f"{role}: the {side.side} hand (wrist {side.wrist!r}) has no forearm joint; "
+                            "splicing needs a forearm and a wrist", path=path)
+    if not side.finger_joints:
+        raise UsdHandsError(f"{role}: the {side.side} hand has no finger joints", path=path)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from usdhands.algorithms.dtw import Constraint, check_constraints
+    from usdhands.algorithms.splicing import SpliceOptions, default_marker_offsets, splice_clips
+    from usdhands.formats.io import read_clip, write_clip
+    from usdhands.formats.registry import check_output_path
+    from usdhands.model.hand_detection import resolve_handmap
+
+    constraints = [parse_match(t) for t in args.match]
+    band1, band2 = parse_band(args.band)
+    if args.blend < 0:
+        raise UsdHandsError(f"bad --blend {args.blend}: expected a number of frames >= 0")
+    check_output_path(args.output, args.body, args.hands)
+    body = read_clip(args.body, animation=args.animation)
+    hands = read_clip(args.hands, animation=args.hands_animation)
+    n, m0, hand_fps = body.num_frames, hands.num_frames, hands.fps
+    for clip, path, role in ((body, args.body, "BODY"), (hands, args.hands, "HANDS")):
+        if clip.num_frames < 5:
+            raise UsdHandsError(f"{role} has {clip.num_frames} frames; splicing needs at least 5", path=path)
+    try:
+        check_constraints(constraints, n, m0)
+    except ValueError as e:
+        raise UsdHandsError(f"--match: {e} (BODY has {n} frames, HANDS {m0})") from None
+
+    body_map = resolve_handmap(body.skeleton, args.body_handmap)
+    hand_map = resolve_handmap(hands.skeleton, args.hands_handmap)
+    sides = _sides(args, body_map, hand_map)
+    for s in sides:
+        _check_side(body_map[s], args.body, "BODY")
+        _check_side(hand_map[s], args.hands, "HANDS")
+        for clip, side, path, role in ((body, body_map[s], args.body, "BODY"),
+                                       (hands, hand_map[s], args.hands, "HANDS")):
+            try:
+                default_marker_offsets(clip.skeleton, side)
+            except ValueError as e:
+                raise UsdHandsError(f"{role}: {e}", path=path) from None
+
+    ratio = 1.0
+    resampled = abs(hand_fps - body.fps) > 1e-6 * body.fps
+    if resampled:
+        ratio = body.fps / hand_fps
+        hands = hands.resample(body.fps)
+        print(f"usdhands: note: HANDS is at {hand_fps:.4g} fps and BODY at {body.fps:.4g} fps: HANDS resampled "
+              f"to {body.fps:.4g} fps ({m0} -> {hands.num_frames} frames); --match and the reported alignment "
+              "use HANDS's own frame numbers", file=sys.stderr)
+        m = hands.num_frames
+        conv = [Constraint(c.body, min(int(round(c.hand * ratio)), m - 1), int(math.ceil(c.tolerance * ratio)))
+                for c in constraints]
+        try:
+            check_constraints(conv, n, m)
+        except ValueError as e:
+            raise UsdHandsError(f"--match after resampling HANDS to {body.fps:.4g} fps: {e}") from None
+        constraints = conv
+
+    options = SpliceOptions(band1=band1, band2=band2, yaw=args.yaw, hand_trunk_yaw_deg=args.hand_yaw,
+                            forearm_align=args.forearm_align, blend_window=args.blend)
+    progress = Progress("splice")
+    try:
+        result = splice_clips(body, hands, {s: body_map[s] for s in sides}, {s: hand_map[s] for s in sides},
+                              constraints=constraints, options=options, progress=progress)
+    except ValueError as e:  # a band without a path and the like: the user's numbers
+        raise UsdHandsError(str(e)) from None
+    opts = {"as_layer": True} if args.layer else {}
+    if args.layer and args.output.suffix.lower() not in (".usd", ".usda", ".usdc"):
+        raise UsdHandsError("--layer needs a USD output (.usd, .usda, .usdc)", path=args.output)
+    write_clip(args.body, result.clip, args.output, **opts)
+
+    for s in sides:
+        if result.body_unmatched[s]:
+            print(f"usdhands: note: {s} hand: BODY finger joints without a counterpart in HANDS keep their "
+                  f"own motion: {', '.join(result.body_unmatched[s])}", file=sys.stderr)
+        if result.hand_unmatched[s]:
+            print(f"usdhands: note: {s} hand: HANDS finger joints without a counterpart in BODY are not used: "
+                  f"{', '.join(result.hand_unmatched[s])}", file=sys.stderr)
+
+    to_hand = lambda a: np.asarray(a, dtype=float) / ratio  # back to HANDS's own frame numbers
+    if args.plot is not None:
+        from usdhands.commands._splice_plots import plot_alignment
+
+        for s in sides:
+            plot_alignment(result.sides[s], args.plot / f"splice_{s}.png", constraints=constraints,
+                           title=f"{args.body.name} + {args.hands.name}: {s} hand")
+    if args.json:
+        out = {
+            "body": str(args.body), "hands": str(args.hands), "output": str(args.output),
+            "body_frames": n, "hand_frames": m0, "fps": body.fps, "hand_fps": hand_fps, "resampled": resampled,
+            "alignment": {s: [round(float(v), 3) for v in to_hand(result.sides[s].alignment)] for s in sides},
+            "phases": {s: [{"body_frame": int(b), "hand_frame": round(float(to_hand(h)), 3)}
+                           for b, h in result.sides[s].phases] for s in sides},
+            "costs": {s: _costs(result.sides[s]) for s in sides},
+            "seams": {s: [int(v) for v in result.transfers[s].seams] for s in sides},
+            "pairs": {s: [list(p) for p in result.pairs[s]] for s in sides},
+            "body_unmatched": result.body_unmatched, "hands_unmatched": result.hand_unmatched,
+            "constraints": [str(c) for c in (parse_match(t) for t in args.match)],
+        }
+        print_json(out)
+        return 0
+    rows = []
+    for s in sides:
+        a = result.sides[s]
+        c = _costs(a)
+        rows.append([s, n, m0, len(a.phases), c["first_pass"], c["second_pass_mean_deg"],
+                     len(result.transfers[s].seams), len(result.pairs[s])])
+    print_table(rows, ["hand", "body frames", "hand frames", "phases", "pass-1 cost", "pass-2 mean deg",
+                       "blended jumps", "finger joints"])
+    print(f"wrote {args.output}")
+    return 0
+
+
+def _costs(a) -> dict:
+    k1 = len(a.first.path)
+    k2 = len(a.second.path)
+    return {"first_pass": round(a.first.cost, 3), "first_pass_mean": round(a.first.cost / k1, 4),
+            "second_pass_deg": round(a.second.cost, 3), "second_pass_mean_deg": round(a.second.cost / k2, 4),
+            "first_band_cells": a.first.band.num_cells, "second_band_cells": a.second.band.num_cells}
