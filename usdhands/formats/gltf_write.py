@@ -128,7 +128,8 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
 
     Every skeleton becomes a node tree with a skin (inverse bind matrices), every
     skinned mesh a triangle mesh, every clip an animation with LINEAR samplers keyed
-    at its frames. Translation and scale channels that never leave the node's rest
+    at its frames (animation names are the clip names' last path element, unless two
+    clips share it). Translation and scale channels that never leave the node's rest
     value are left out (a reader falls back to the node, so the motion is the same);
     rotation channels are written for every joint.
 
@@ -181,7 +182,8 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
         gltf.nodes.append(pygltflib.Node(name=mesh.name, mesh=mi, skin=skel_skins[si]))
         scene_nodes.append(len(gltf.nodes) - 1)
 
-    for clip in asset.clips:
+    shorts = [c.name.rsplit("/", 1)[-1] for c in asset.clips]  # USD prim paths -> their last element
+    for clip, short in zip(asset.clips, shorts):
         si = index_of.get(id(clip.skeleton))
         if si is None:
             si = next((i for i, s in enumerate(asset.skeletons) if s.joint_names == clip.skeleton.joint_names), None)
@@ -189,7 +191,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
             raise ValueError(f"clip {clip.name!r} is on a skeleton that is not in the asset")
         sk = asset.skeletons[si]
         c = clip_to_gltf_space(clip)
-        anim = pygltflib.Animation(name=clip.name)
+        anim = pygltflib.Animation(name=short if shorts.count(short) == 1 else clip.name)
         w = _AnimationWriter(app, anim, _key_times(c))
         J = sk.num_joints
         nodes = skel_nodes[si]
