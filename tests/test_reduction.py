@@ -373,6 +373,29 @@ def test_continuous_euler_curves_follow_a_bend_through_the_gimbal(order):
     assert quat_angle_deg(euler_deg_to_quat(cont.reshape(frames, 2, 3), order), q).max() < 1e-9
 
 
+def _continuous_naive(values):
+    """Frame by frame: of the two triples (each angle moved by 360s), the one nearest the previous frame."""
+    e = values.reshape(len(values), -1, 3)
+    out = e.copy()
+    for t in range(1, len(e)):
+        for j in range(e.shape[1]):
+            a = e[t, j]
+            cands = [a, np.array([a[0] + 180, 180 - a[1], a[2] + 180])]
+            cands = [c + 360 * np.round((out[t - 1, j] - c) / 360) for c in cands]
+            dists = [np.abs(c - out[t - 1, j]).sum() for c in cands]
+            out[t, j] = cands[int(dists[1] < dists[0])]
+    return out.reshape(values.shape)
+
+
+def test_continuous_euler_curves_match_the_frame_by_frame_twin():
+    rng = np.random.default_rng(5)
+    from usdhands.model.rotations import euler_deg_to_quat, quat_to_euler_deg
+
+    walk = np.cumsum(rng.normal(0, 6, size=(400, 4, 3)), axis=0)  # wanders through gimbal regions
+    raw = quat_to_euler_deg(euler_deg_to_quat(walk, "XYZ"), "XYZ").reshape(400, 12)
+    assert np.allclose(continuous_euler_curves(raw), _continuous_naive(raw), atol=1e-9)
+
+
 # ---------------------------------------------------------------------------- naming
 def test_paper_style_names():
     hm = HandMap(

@@ -543,20 +543,24 @@ def continuous_euler_curves(values: np.ndarray) -> np.ndarray:
     if v.ndim != 2 or v.shape[1] % 3:
         raise ValueError(f"Expected values to have shape (T, 3N), got {v.shape}")
     T = v.shape[0]
+    if T == 0:
+        return v.copy()
     e = v.reshape(T, -1, 3)
     alt = np.stack([e[..., 0] + 180.0, 180.0 - e[..., 1], e[..., 2] + 180.0], axis=-1)
-    out = np.empty_like(e)
-    if T == 0:
-        return out.reshape(v.shape)
-    out[0] = e[0]
-    prev = e[0]
-    for t in range(1, T):
-        a = e[t] + 360.0 * np.round((prev - e[t]) / 360.0)
-        b = alt[t] + 360.0 * np.round((prev - alt[t]) / 360.0)
-        use_b = np.abs(b - prev).sum(axis=-1) < np.abs(a - prev).sum(axis=-1)
-        prev = np.where(use_b[:, None], b, a)
-        out[t] = prev
-    return out.reshape(v.shape)
+
+    def dist(a, b):  # L1 distance of triples, each angle modulo 360
+        return np.abs((a - b + 180.0) % 360.0 - 180.0).sum(axis=-1)
+
+    # (a, b, c) -> (a+180, 180-b, c+180) preserves these distances, so whether frame t
+    # switches branch relative to frame t-1 does not depend on the branch t-1 is on:
+    # the branch of each frame is the parity of the switches so far (no loop over frames)
+    switch = dist(alt[1:], e[:-1]) < dist(e[1:], e[:-1])  # (T-1, N)
+    parity = np.concatenate([np.zeros((1, e.shape[1]), dtype=np.int64), np.cumsum(switch, axis=0)]) % 2
+    chosen = np.where(parity[..., None] == 1, alt, e)
+    # remove 360-degree steps (whole multiples of 360 added: values otherwise untouched)
+    steps = np.round(np.diff(chosen, axis=0) / 360.0)
+    shift = np.concatenate([np.zeros((1,) + chosen.shape[1:]), -360.0 * np.cumsum(steps, axis=0)])
+    return (chosen + shift).reshape(v.shape)
 
 
 # ---------------------------------------------------------------------------- naming
