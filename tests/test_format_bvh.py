@@ -288,3 +288,19 @@ def test_euler_channels_to_quat_matches_scipy_for_repeated_axes():
     for seq, axes in (("ZXZ", (2, 0, 2)), ("YXY", (1, 0, 1)), ("XYZ", (0, 1, 2))):
         ref = Rotation.from_euler(seq, a, degrees=True).as_quat()
         assert quat_angle_deg(euler_channels_to_quat(a, axes), ref).max() < 1e-9
+
+
+def test_names_with_spaces_and_crlf(tmp_path):
+    p = tmp_path / "biped.bvh"
+    p.write_bytes(b"HIERARCHY\r\nROOT Bip01 Pelvis\r\n{\r\n\tOFFSET 0 0 0\r\n\tCHANNELS 6 Xposition Yposition "
+                  b"Zposition Zrotation Xrotation Yrotation\r\n\tJOINT Bip01 L Hand {\r\n\t\tOFFSET 1 0 0\r\n"
+                  b"\t\tCHANNELS 3 Zrotation Xrotation Yrotation\r\n\t\tEnd Site\r\n\t\t{\r\n\t\t\tOFFSET 0 1 0\r\n"
+                  b"\t\t}\r\n\t}\r\n}\r\nMOTION\r\nFrames: 1\r\nFrame Time: 0.1\r\n1 2 3 0 0 90 0 45 0\r\n")
+    clip = read_asset(p).clip()
+    assert list(clip.skeleton.joint_names) == ["Bip01 Pelvis", "Bip01 L Hand", "Bip01 L Hand_end"]
+    assert clip.fps == 10.0
+    ref = Rotation.from_euler("ZXY", [[0, 45, 0]], degrees=True).as_quat()
+    assert quat_angle_deg(clip.rotations[:, 1], ref).max() < 1e-9
+    out = write_asset(read_asset(p), tmp_path / "out.bvh")
+    assert "JOINT Bip01_L_Hand" in out.read_text()
+    assert list(read_asset(out).skeletons[0].joint_names) == ["Bip01_Pelvis", "Bip01_L_Hand", "Bip01_L_Hand_end"]

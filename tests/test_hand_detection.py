@@ -454,3 +454,24 @@ def test_handmap_command_errors(shared_assets, tmp_path, capsys):
     bvh = shared_assets / "leap_hands" / "fingers-ok.bvh"
     assert main(["handmap", str(bvh), "-o", str(bvh)]) == 2
     assert "output path equals the input" in capsys.readouterr().err
+
+
+def test_sideless_finger_names_inherit_the_side_of_their_hand():
+    # USD paths make the short names repeat: "Index1" under both hands
+    pairs = [("Hips", None), ("Hips/Spine", "Hips")]
+    for S in ("Left", "Right"):
+        arm_ = f"Hips/Spine/{S}Arm"
+        pairs += [(arm_, "Hips/Spine"), (f"{arm_}/{S}ForeArm", arm_), (f"{arm_}/{S}ForeArm/{S}Hand", f"{arm_}/{S}ForeArm"),
+                  (f"{arm_}/{S}ForeArm/{S}HandProp", f"{arm_}/{S}ForeArm")]
+        for F in ("Thumb", "Index"):
+            parent = f"{arm_}/{S}ForeArm/{S}Hand"
+            for k in (1, 2):
+                pairs.append((f"{parent}/{F}{k}", parent))
+                parent = f"{parent}/{F}{k}"
+    hm = detect_hands(make_skeleton(pairs))
+    base = "Hips/Spine/RightArm/RightForeArm/RightHand"
+    assert hm.right.wrist == base  # not the RightHandProp sibling
+    assert chains(hm.right)["index"] == [f"{base}/Index1", f"{base}/Index1/Index2"]
+    assert chains(hm.left)["thumb"] == ["Hips/Spine/LeftArm/LeftForeArm/LeftHand/Thumb1",
+                                        "Hips/Spine/LeftArm/LeftForeArm/LeftHand/Thumb1/Thumb2"]
+    assert chains(hm.left)["middle"] == []

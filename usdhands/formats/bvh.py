@@ -2,7 +2,9 @@
 
 Reading
 -------
-- Every ``ROOT`` and ``JOINT`` becomes a joint named as in the file. An ``End Site``
+- Every ``ROOT`` and ``JOINT`` becomes a joint named as in the file (the rest of the
+  line, so ``JOINT Bip01 L Hand`` is ``"Bip01 L Hand"``; the writer puts ``_`` for
+  whitespace). An ``End Site``
   becomes a leaf joint named ``<parent>_end`` (``rThumb3_end``), with its offset as rest
   translation and no DOF, so the skeleton keeps the shape of the file (finger tips
   included) and writing gives the End Sites back.
@@ -227,6 +229,8 @@ def _parse_joint(tok: _Tokens, joints: list, names: set, parent: int) -> None:
         name, nline = tok.next("a joint name")
         if name in "{}":
             tok.error(nline, f"expected a joint name after {kw!r}, found {name!r}")
+        while tok.peek()[1] == nline and tok.peek()[0] not in (None, "{", "}"):  # "JOINT Bip01 L Hand"
+            name += " " + tok.next("a joint name")[0]
         if name in names:
             tok.error(nline, f"joint name {name!r} is used twice")
         end = False
