@@ -448,3 +448,56 @@ def test_cesium_man_write_clip(shared_assets, tmp_path):
         back = read_asset(out)
         assert_rotations_close(back.clips[0].rotations, new.rotations)
         assert back.meshes[0].points.shape == (3273, 3)
+
+
+# --------------------------------------------------------------------------- schema data
+def test_hand_map_and_finger_motion_recorded_in_layer(tmp_path):
+    from usdhands.formats.usd_schema_data import read_finger_motion, read_hand_maps
+    from usdhands.model.handmap import HandMap, HandSide
+
+    src = build_stage(tmp_path / "char.usda")
+    clip = read_clip(src)
+    hm = HandMap(left=HandSide("left", wrist="Hand", forearm="Hips/Spine", root="Hips",
+                               fingers={"index": ("Hips/Spine/Hand/Index1",)}))
+    out = write_clip(src, clip, tmp_path / "marked.usda", as_layer=True, hand_map=hm,
+                     finger_motion={"method": "synthesis", "database": "db/gestures.npz",
+                                    "parameters": {"k": 5, "wP": 1.0}})
+    layer = Sdf.Layer.FindOrOpen(str(out))
+    specs = []
+    layer.Traverse(layer.pseudoRoot.path, specs.append)
+    assert all(layer.GetPrimAtPath(p).specifier == Sdf.SpecifierOver for p in specs if p.IsPrimPath())
+    maps = read_hand_maps(out)
+    assert list(maps) == ["/Char/Skel"]
+    left = maps["/Char/Skel"].left
+    assert maps["/Char/Skel"].right is None
+    assert (left.wrist, left.forearm, left.shoulder, left.root) == ("Hips/Spine/Hand", "Hips/Spine", None, "Hips")
+    assert left.fingers["index"] == ("Hips/Spine/Hand/Index1",) and left.fingers["thumb"] == ()
+    stage = Usd.Stage.Open(str(out))
+    motion = read_finger_motion(stage.GetPrimAtPath("/Char/Skel/Anim"))
+    assert motion == {"method": "synthesis", "database": "db/gestures.npz", "parameters": {"k": 5, "wP": 1.0},
+                      "version": "0.1.0"}
+    assert read_hand_maps(src) == {}
+    assert usd_compliance_errors(out) == []
+
+
+def test_hand_map_naming_a_missing_joint(tmp_path):
+    from usdhands.errors import ConfigError
+    from usdhands.formats.usd_schema_data import read_hand_maps
+
+    p = build_stage(tmp_path / "char.usda")
+    stage = Usd.Stage.Open(str(p))
+    prim = stage.GetPrimAtPath("/Char/Skel")
+    prim.AddAppliedSchema("UsdHandsHandMapAPI:right")
+    prim.CreateAttribute("usdhands:hand:right:wrist", Sdf.ValueTypeNames.Token).Set("Hips/Spine/Claw")
+    stage.Save()
+    with pytest.raises(ConfigError) as e:
+        read_hand_maps(p)
+    assert str(e.value) == f"{p}: /Char/Skel: UsdHandsHandMapAPI names joint 'Hips/Spine/Claw', which the skeleton " \
+                           "does not have"
+
+
+def test_finger_motion_method_checked(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    with pytest.raises(ValueError, match=r"Expected method in .*, got 'magic'"):
+        write_clip(src, read_clip(src), tmp_path / "x.usda", finger_motion={"method": "magic"})
+    assert not (tmp_path / "x.usda").exists()

@@ -90,7 +90,7 @@ def test_register_is_explicit_idempotent_and_schemas_apply():
     assert lines[3] == ["True", "True", "False"]
     assert lines[4] == ["True", "False"]
     assert lines[5] == ["True", "token", "token[]", "False"]
-    assert lines[6][0] == "none" and "synthesis" in out.stdout and lines[6][-1] == "asset"
+    assert lines[6][0] == "none" and "synthesis" in out.stdout and lines[6][-1] == "string"
 
 
 def test_plugin_path_on_pxr_pluginpath_name():
@@ -128,3 +128,35 @@ def test_generated_files_match_the_schema_source():
                          capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.strip() == "up to date"
+
+
+def test_authored_hand_map_is_the_registered_schema():
+    out = run_python("""
+        from usdhands.pipeline import usd_plugin
+        usd_plugin.register()
+        from pxr import Usd, UsdSkel
+        from usdhands.formats.usd_schema_data import write_finger_motion, write_hand_map, read_hand_map
+        from usdhands.model.handmap import HandMap, HandSide
+        stage = Usd.Stage.CreateInMemory()
+        skel = UsdSkel.Skeleton.Define(stage, "/Skel")
+        skel.CreateJointsAttr().Set(["Hips", "Hips/Hand_R", "Hips/Hand_R/Thumb1"])
+        write_hand_map(skel.GetPrim(), HandMap(right=HandSide("right", wrist="Hand_R",
+                                                              fingers={"thumb": ("Thumb1",)})))
+        anim = UsdSkel.Animation.Define(stage, "/Anim").GetPrim()
+        write_finger_motion(anim, "reduction", parameters={"range_deg": 5})
+        hand = Usd.SchemaRegistry.GetTypeFromSchemaTypeName("UsdHandsHandMapAPI")
+        motion = Usd.SchemaRegistry.GetTypeFromSchemaTypeName("UsdHandsFingerMotionAPI")
+        prim = skel.GetPrim()
+        print(prim.HasAPI(hand, "right"), prim.HasAPI(hand, "left"), anim.HasAPI(motion))
+        # every authored property is one the schema defines, with the schema's type
+        defn = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition("UsdHandsHandMapAPI")
+        names = [n.replace("__INSTANCE_NAME__", "right") for n in defn.GetPropertyNames()]
+        authored = [a.GetName() for a in prim.GetAuthoredAttributes() if a.GetName().startswith("usdhands:")]
+        print(sorted(authored) == sorted(names),
+              all(prim.GetAttribute(n).GetTypeName() == defn.GetSchemaAttributeSpec(
+                  n.replace("right", "__INSTANCE_NAME__")).typeName for n in authored))
+        print(read_hand_map(prim).right.fingers["thumb"])
+    """)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.strip().splitlines()
+    assert lines == ["True False True", "True True", "('Hips/Hand_R/Thumb1',)"]

@@ -36,11 +36,13 @@ class UsdHandler:
         write_usd(asset, path)
 
     def write_clip(self, source: Path, clip: Clip, path: Path, *, final_path: str | os.PathLike | None = None,
-                   animation: str | None = None, as_layer: bool = False, **options) -> None:
+                   animation: str | None = None, as_layer: bool = False, hand_map=None, finger_motion=None,
+                   **options) -> None:
         """``source`` with ``clip`` put into its animation (:func:`write_usd_clip`)."""
         if options:
             raise TypeError(f"Unexpected options for USD write_clip: {sorted(options)}")
-        write_usd_clip(source, clip, path, final_path=final_path, animation=animation, as_layer=as_layer)
+        write_usd_clip(source, clip, path, final_path=final_path, animation=animation, as_layer=as_layer,
+                       hand_map=hand_map, finger_motion=finger_motion)
 
 
 HANDLER = UsdHandler()

@@ -28,8 +28,10 @@ from usdhands.formats.usd_common import (
     valid_identifier,
 )
 from usdhands.formats.usd_read import read_skeleton
+from usdhands.formats.usd_schema_data import write_finger_motion, write_hand_map
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
+from usdhands.model.handmap import HandMap
 from usdhands.model.rotations import quat_angle_deg
 from usdhands.model.skeleton import Skeleton
 
@@ -261,7 +263,8 @@ def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMe
 # --------------------------------------------------------------------------- into a source
 def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLike, *,
                    final_path: str | os.PathLike | None = None, animation: str | None = None,
-                   as_layer: bool = False) -> None:
+                   as_layer: bool = False, hand_map: HandMap | None = None,
+                   finger_motion: dict | None = None) -> None:
     """Write ``source`` with ``clip``'s animation values put into one of its SkelAnimations.
 
     Which animation: ``animation`` (a prim path) if given, else the prim ``clip.name``
@@ -287,6 +290,13 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
         (meshes, materials and every other prim kept). True: a sparse layer that
         sublayers ``source`` and holds only ``over``s of the changed animation
         attributes (plus a new SkelAnimation where the skeleton had none).
+    hand_map : HandMap, optional
+        Recorded on the Skeleton prim with ``UsdHandsHandMapAPI`` (joint names as the
+        clip's skeleton has them).
+    finger_motion : dict, optional
+        ``{"method": ..., "database": ..., "parameters": {...}}`` recorded on the
+        SkelAnimation with ``UsdHandsFingerMotionAPI``
+        (:func:`usdhands.formats.usd_schema_data.write_finger_motion`).
 
     Raises
     ------
@@ -313,7 +323,15 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
             layer = src_stage.Flatten()
             stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
         stage.SetEditTarget(Usd.EditTarget(layer))
-        codes = _put_clip(stage, clip, animation, source, only_changed=as_layer)
+        codes, skel_prim, anim_prim = _put_clip(stage, clip, animation, source, only_changed=as_layer)
+        if hand_map is not None:
+            write_hand_map(skel_prim, hand_map)
+        if finger_motion is not None:
+            fm = dict(finger_motion)
+            unknown = set(fm) - {"method", "database", "parameters", "version"}
+            if unknown or "method" not in fm:
+                raise ValueError(f"Expected finger_motion keys method, database, parameters, version; got {sorted(fm)}")
+            write_finger_motion(anim_prim, fm.pop("method"), **fm)
         _set_time_range(layer, codes, extend=True)
         if as_layer:
             rel = _relative_asset_path(source, final_path.parent)
@@ -364,7 +382,7 @@ def _differs_from_rest(clip: Clip, rest: Skeleton, j: int, rj: int) -> bool:
 
 
 def _put_clip(stage: Usd.Stage, clip: Clip, animation: str | None, source: Path, *,
-              only_changed: bool = False) -> np.ndarray:
+              only_changed: bool = False) -> tuple[np.ndarray, Usd.Prim, Usd.Prim]:
     wanted = animation if animation is not None else clip.name
     anim_prim = None
     if isinstance(wanted, str) and wanted.startswith("/") and Sdf.Path.IsValidPathString(wanted):
@@ -422,4 +440,4 @@ def _put_clip(stage: Usd.Stage, clip: Clip, animation: str | None, source: Path,
     tcps = float(stage.GetTimeCodesPerSecond())
     codes = frame_time_codes(clip, tcps)
     author_animation(UsdSkel.Animation(anim_prim), clip, cols, new_tokens, codes, only_changed=only_changed)
-    return codes
+    return codes, skel_prim, anim_prim
