@@ -134,11 +134,7 @@ class Band:
 
     def cells(self) -> tuple[np.ndarray, np.ndarray]:
         """Row and column of every cell, in flat (row-major) order: two ``(num_cells,)`` int64."""
-        widths = np.maximum(self.hi - self.lo + 1, 0)
-        rows = np.repeat(np.arange(self.n, dtype=np.int64), widths)
-        start = np.repeat(self.offsets[:-1], widths)
-        cols = np.arange(rows.shape[0], dtype=np.int64) - start + np.repeat(self.lo, widths)
-        return rows, cols
+        return _cells(self.lo, self.hi, self.offsets)
 
     def mask(self) -> np.ndarray:
         """The band as an ``(n, m)`` bool matrix."""
@@ -285,6 +281,19 @@ class WarpResult:
 
 
 # -- numba kernels ------------------------------------------------------------------
+@njit(cache=True)
+def _cells(lo, hi, off):  # pragma: no cover - compiled
+    N = off[-1]
+    rows = np.empty(N, dtype=np.int64)
+    cols = np.empty(N, dtype=np.int64)
+    for i in range(lo.shape[0]):
+        for j in range(lo[i], hi[i] + 1):
+            k = off[i] + j - lo[i]
+            rows[k] = i
+            cols[k] = j
+    return rows, cols
+
+
 @njit(cache=True)
 def _accumulate(vals, off, lo, hi):  # pragma: no cover - compiled
     n = lo.shape[0]

@@ -44,7 +44,7 @@ from scipy.signal import savgol_filter
 from usdhands.algorithms.dtw import Band, Constraint, WarpResult, check_constraints, dtw
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
-from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_slerp
+from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_slerp, trs_to_xform
 
 __all__ = [
     "MarkerOffsets", "SpliceOptions", "SideAlignment", "FingerTransfer",
@@ -52,7 +52,7 @@ __all__ = [
     "sign_features", "first_pass_cost", "first_pass_cost_naive", "hand_angle_cost",
     "hand_angle_cost_naive", "window_yaw_naive", "align_hands", "median_alignment",
     "phase_boundaries", "pair_finger_joints", "transfer_fingers", "forearm_hand_vectors",
-    "SpliceResult", "splice_clips", "hand_directions", "direction_angle_cost",
+    "SpliceResult", "splice_clips", "partial_world_xforms", "hand_directions", "direction_angle_cost",
 ]
 
 
@@ -269,7 +269,8 @@ def _sgn(x, eps):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _window_yaw(P, Q, i, j, half):  # pragma: no cover - compiled
+def _window_cos_sin(P, Q, i, j, half):  # pragma: no cover - compiled
+    """cos and sin of eq. 7's angle without evaluating atan2 (num and den normalised)."""
     n = P.shape[0]
     m = Q.shape[0]
     K = P.shape[1]
@@ -299,7 +300,10 @@ def _window_yaw(P, Q, i, j, half):  # pragma: no cover - compiled
             cnt += 1
     num = sxz - (bx * hz - hx * bz) / cnt
     den = sxx - (bx * hx + bz * hz) / cnt
-    return np.arctan2(num, den)
+    r = np.sqrt(num * num + den * den)
+    if r == 0.0:
+        return 1.0, 0.0  # atan2(0, 0) = 0
+    return den / r, num / r
 
 
 @njit(cache=True)
@@ -313,10 +317,10 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
         j = cols[c]
         if use_trunk:
             th = yaw_b[i] - yaw_h[j]
+            co = np.cos(th)
+            si = np.sin(th)
         else:
-            th = _window_yaw(P, Q, i, j, half)
-        co = np.cos(th)
-        si = np.sin(th)
+            co, si = _window_cos_sin(P, Q, i, j, half)
         d = 0.0
         for mk in range(K):
             # R_y(θ) applied to the hand's derivatives: x' = c x + s z, z' = -s x + c z
@@ -646,14 +650,18 @@ class SideAlignment:
 
 
 def median_alignment(path: np.ndarray, n: int) -> np.ndarray:
-    """For each of ``n`` rows the median column the path visits, ``(n,)`` float."""
+    """For each of ``n`` rows the median column the path visits, ``(n,)`` float.
+
+    A monotone path visits consecutive columns within a row, so the median is the
+    mean of the row's first and last column.
+    """
     path = np.asarray(path)
-    out = np.empty(n)
-    starts = np.searchsorted(path[:, 0], np.arange(n), side="left")
-    stops = np.searchsorted(path[:, 0], np.arange(n), side="right")
-    for i in range(n):
-        out[i] = np.median(path[starts[i]:stops[i], 1])
-    return out
+    rows = np.arange(n)
+    starts = np.searchsorted(path[:, 0], rows, side="left")
+    stops = np.searchsorted(path[:, 0], rows, side="right")
+    if np.any(stops <= starts):
+        raise ValueError(f"Expected a path that visits every row 0..{n - 1}")
+    return 0.5 * (path[starts, 1] + path[stops - 1, 1])
 
 
 def phase_boundaries(vel: np.ndarray, eps: float, min_phase: int) -> np.ndarray:
@@ -917,8 +925,8 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         raise ValueError(f"Expected clips at the same frame rate, got {body.fps} and {hands.fps}")
     if set(body_sides) != set(hand_sides) or not body_sides:
         raise ValueError(f"Expected the same non-empty sides, got {sorted(body_sides)} and {sorted(hand_sides)}")
-    wb = body.world_xforms()
-    wh = hands.world_xforms()
+    wb = partial_world_xforms(body, [j for s in body_sides.values() for j in _side_joints(body.skeleton, s)])
+    wh = partial_world_xforms(hands, [j for s in hand_sides.values() for j in _side_joints(hands.skeleton, s)])
     out = body
     sides, transfers, pairs_all, bun, hun = {}, {}, {}, {}, {}
     order = [s for s in ("left", "right") if s in body_sides]
@@ -949,6 +957,27 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         if progress is not None:
             progress(k + 1, len(order), s)
     return SpliceResult(out, sides, transfers, pairs_all, bun, hun)
+
+
+def partial_world_xforms(clip: Clip, joints: Sequence[int]) -> np.ndarray:
+    """World transforms ``(T, J, 4, 4)`` computed only for ``joints`` and their ancestors.
+
+    Other joints are left zero; pass the result as ``world=`` to the marker functions
+    (forward kinematics of a whole 60-joint character costs more than the alignment).
+    """
+    sk = clip.skeleton
+    need = sorted({a for j in joints for a in sk.chain_to_root(int(j))})
+    local = trs_to_xform(clip.translations[:, need], clip.rotations[:, need], clip.scales[:, need])
+    world = np.zeros((clip.num_frames, sk.num_joints, 4, 4))
+    for k, j in enumerate(need):  # parents come before children
+        p = int(sk.parents[j])
+        world[:, j] = local[:, k] if p < 0 else world[:, p] @ local[:, k]
+    return world
+
+
+def _side_joints(skeleton, side: HandSide) -> list[int]:
+    names = [side.wrist, side.forearm, side.shoulder, side.root]
+    return [skeleton.index(n) for n in names if n is not None]
 
 
 def _ref(clip: Clip, side: HandSide, world: np.ndarray) -> np.ndarray | None:
