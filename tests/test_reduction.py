@@ -152,6 +152,9 @@ def test_constants_and_near_constants():
     assert s2.max_error_deg == pytest.approx(np.abs(full).max())
     assert s2.rms_error_deg == pytest.approx(math.sqrt(np.mean(full ** 2)))
     assert np.allclose(s2.curve_rms_error_deg, np.sqrt(np.mean(full ** 2, axis=0)))
+    assert np.allclose(s2.curve_max_error_deg, np.abs(full).max(axis=0))
+    assert s2.worst_curve == names[int(np.argmax(np.abs(full).max(axis=0)))] == "small.x"
+    assert res.to_dict()["steps"][2]["worst_curve"] == "small.x"
 
 
 def test_never_moving_curve_stays_free_without_a_range_rule():

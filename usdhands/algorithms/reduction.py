@@ -257,8 +257,8 @@ class StepResult:
         The same per group label (hand).
     rms_error_deg, max_error_deg : float
         Degrees: RMS and maximum of ``rebuilt - original`` over all curves and frames.
-    curve_rms_error_deg : (D,) float64
-        Degrees: RMS error per curve.
+    curve_rms_error_deg, curve_max_error_deg : (D,) float64
+        Degrees: RMS and maximum error per curve.
     """
 
     rule: RangeRule | RmsdRule
@@ -269,6 +269,13 @@ class StepResult:
     rms_error_deg: float
     max_error_deg: float
     curve_rms_error_deg: np.ndarray
+    curve_max_error_deg: np.ndarray
+
+    @property
+    def worst_curve(self) -> str | None:
+        """The curve with the largest error (None when nothing is rebuilt with an error)."""
+        k = int(np.argmax(self.curve_max_error_deg))
+        return self.model.curves[k] if self.curve_max_error_deg[k] > 0 else None
 
     def to_dict(self) -> dict:
         """The step's line of the JSON report."""
@@ -280,6 +287,7 @@ class StepResult:
             "dofs_left_by_hand": {str(k): int(v) for k, v in self.dofs_left_by_group.items()},
             "num_constants": len(self.model.constants),
             "num_relations": len(self.model.relations),
+            "worst_curve": self.worst_curve,
         }
 
 
@@ -419,8 +427,9 @@ def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None
                                source=source, metadata=metadata)
         free = ~constant & (final < 0)
         by_group = {g: int(np.sum(free[codes == c])) for c, g in _group_items(group_labels, codes)}
-        rms, mx, per_curve = _errors(v, model, names)
-        results.append(StepResult(rule, condition, model, int(free.sum()), by_group, rms, mx, per_curve))
+        rms, mx, per_curve, per_curve_max = _errors(v, model, names)
+        results.append(StepResult(rule, condition, model, int(free.sum()), by_group, rms, mx, per_curve,
+                                  per_curve_max))
     return ReductionResult(names, group_labels, mean, std, rng, rmsd1, rmsd2, tuple(results))
 
 
@@ -456,16 +465,16 @@ def _resolve_relations(rmsd1, rmsd2, thr: dict, active: np.ndarray, rank: np.nda
     return final, sign
 
 
-def _errors(v: np.ndarray, model: ReductionModel, names) -> tuple[float, float, np.ndarray]:
-    """RMS and max over all entries, and RMS per curve, of ``rebuilt - v`` (rebuilt columns only)."""
+def _errors(v: np.ndarray, model: ReductionModel, names):
+    """RMS and max over all entries, and RMS and max per curve, of ``rebuilt - v`` (rebuilt columns only)."""
     T, D = v.shape
     col = {n: k for k, n in enumerate(names)}
     sq = np.zeros(D)
-    mx = 0.0
+    cmax = np.zeros(D)
     for c in model.constants:
         e = v[:, col[c.curve]] - c.value
         sq[col[c.curve]] = float(e @ e)
-        mx = max(mx, float(np.abs(e).max()))
+        cmax[col[c.curve]] = float(np.abs(e).max())
     if model.relations:
         dep = np.array([col[r.dependent] for r in model.relations])
         ctrl = np.array([col[r.controlling] for r in model.relations])
@@ -473,9 +482,9 @@ def _errors(v: np.ndarray, model: ReductionModel, names) -> tuple[float, float, 
         offset = np.array([r.offset for r in model.relations])
         e = v[:, ctrl] * scale + offset - v[:, dep]
         sq[dep] = np.einsum("ij,ij->j", e, e)
-        mx = max(mx, float(np.abs(e).max()))
+        cmax[dep] = np.abs(e).max(axis=0)
     rms = math.sqrt(sq.sum() / (T * D)) if T * D else 0.0
-    return rms, mx, np.sqrt(sq / T)
+    return rms, float(cmax.max()) if D else 0.0, np.sqrt(sq / T), cmax
 
 
 def _condition(range_rule, rmsd_thr: dict) -> str:

@@ -64,16 +64,20 @@ def plot_reduction(result, values: np.ndarray, out_dir: str | Path, *, step: int
     written: list[Path] = []
     dpi = 80
 
-    # figure 4: ranges
+    # figure 4: ranges (log axis: the thresholds of 1 and 5 degrees sit among ranges up to 100s)
     fig, ax = plt.subplots(figsize=(6, 3.2), dpi=dpi)
     rng = result.range
-    top = max(float(rng.max()), 1.0)
-    bins = np.linspace(0, top, 31)
-    ax.hist(rng, bins=bins, color="#4c72b0", edgecolor="white")
+    floor = 1e-3
+    top = max(float(rng.max()), 10.0)
+    bins = np.geomspace(floor, top * 1.01, 31)
+    ax.hist(np.maximum(rng, floor * 1.0001), bins=bins, color="#4c72b0", edgecolor="white")
+    ax.set_xscale("log")
     for thr in sorted({r.threshold for r in rules if isinstance(r, RangeRule)}):
         ax.axvline(thr, color="#c44e52", ls="--", lw=1)
         ax.text(thr, ax.get_ylim()[1] * 0.95, f" {thr:g}", color="#c44e52", va="top", fontsize=8)
-    ax.set_xlabel("range of the curve (degrees)")
+    still = int(np.sum(rng < floor))
+    ax.set_xlabel("range of the curve (degrees, log scale)" + (f"; {still} never moving, drawn at {floor:g}"
+                                                                 if still else ""), fontsize=8)
     ax.set_ylabel("curves")
     ax.set_title(f"Ranges of the {len(names)} finger curves", fontsize=10)
     written.append(_save(fig, out_dir / "reduction_ranges.png"))

@@ -141,12 +141,13 @@ def run(args) -> int:
     by_hand = ", ".join(f"{s} {sides.count(s)}" for s in ("left", "right") if s in sides)
     print(f"{args.file}: {len(curves.names)} finger curves ({by_hand}), {clip.num_frames} frames at {clip.fps:g} fps")
     print()
-    rows = [("original", len(curves.names), 0.0, 0.0)]
-    rows += [(s.condition, s.dofs_left, s.rms_error_deg, s.max_error_deg) for s in result.steps]
-    print_table(rows, ["condition", "DOFs left", "RMS error (deg)", "max error (deg)"])
-
     def pname(c: str) -> str:
         return paper.get(c, "-")
+
+    rows = [("original", len(curves.names), 0.0, 0.0, "-")]
+    rows += [(s.condition, s.dofs_left, s.rms_error_deg, s.max_error_deg,
+              "-" if s.worst_curve is None else f"{s.worst_curve} ({pname(s.worst_curve)})") for s in result.steps]
+    print_table(rows, ["condition", "DOFs left", "RMS error (deg)", "max error (deg)", "max error at"])
 
     # like the paper's tables: the first range step lists its constants (table 1), a later
     # one the curves it adds (table 3); the first rmsd step lists its relations (table 2),
