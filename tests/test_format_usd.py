@@ -501,3 +501,16 @@ def test_finger_motion_method_checked(tmp_path):
     with pytest.raises(ValueError, match=r"Expected method in .*, got 'magic'"):
         write_clip(src, read_clip(src), tmp_path / "x.usda", finger_motion={"method": "magic"})
     assert not (tmp_path / "x.usda").exists()
+
+
+def test_write_matches_clips_to_skeletons_by_joint_names(tmp_path):
+    clip = random_clip(T=4, J=6)
+    twin = Skeleton(clip.skeleton.joint_names, clip.skeleton.parents, clip.skeleton.rest_translations,
+                    clip.skeleton.rest_rotations, meters_per_unit=0.01, up_axis="Z", name="Rig")
+    out = write_asset(Asset("mem", (twin,), (clip,)), tmp_path / "twin.usda")
+    back = read_clip(out)
+    assert back.name == "/Root/Take_1"
+    assert_rotations_close(back.rotations, clip.rotations)
+    stranger = random_clip(T=2, J=3)
+    with pytest.raises(ValueError, match="Expected clip 'Take 1' to animate one of the asset's skeletons"):
+        HANDLER.write(Asset("mem", (twin,), (stranger,)), tmp_path / "bad.usda")

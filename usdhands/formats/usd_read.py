@@ -290,7 +290,7 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
         tr[:, cols] = t_k
     if has["scales"]:
         sc[:, cols] = s_k
-    return Clip(sk, rate if len(times) else tcps, rot, tr, sc, name=where, start_time=start)
+    return Clip(sk, rate if len(times) else float(fps or tcps), rot, tr, sc, name=where, start_time=start)
 
 
 def _flattened(primvar: UsdGeom.Primvar, n_points: int, counts: np.ndarray, where: str, path: Path

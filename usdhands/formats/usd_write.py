@@ -162,6 +162,7 @@ def write_usd(asset: Asset, path: str | os.PathLike) -> None:
     path = Path(path)
     if not asset.skeletons:
         raise ValueError("Expected an asset with at least one skeleton, got none")
+    owner = [_owner(asset.skeletons, c) for c in asset.clips]
     with quiet_diagnostics():
         stage = Usd.Stage.CreateInMemory()
         layer = stage.GetRootLayer()
@@ -201,8 +202,8 @@ def write_usd(asset: Asset, path: str | os.PathLike) -> None:
             skel.CreateBindTransformsAttr().Set(numpy_to_matrices(bind))
             binding = UsdSkel.BindingAPI.Apply(skel.GetPrim())
             bound = False
-            for clip in asset.clips:
-                if clip.skeleton is not sk:
+            for clip, o in zip(asset.clips, owner):
+                if o != k:
                     continue
                 if abs(clip.skeleton.meters_per_unit - mpu) > 1e-12:
                     clip = clip.with_meters_per_unit(mpu)
@@ -222,6 +223,18 @@ def write_usd(asset: Asset, path: str | os.PathLike) -> None:
         if all_codes:
             _set_time_range(layer, np.concatenate(all_codes), extend=False)
         layer.Export(str(path))
+
+
+def _owner(skeletons: Sequence[Skeleton], clip: Clip) -> int:
+    """Index of the skeleton a clip animates: the same object, else the same joint names."""
+    for k, sk in enumerate(skeletons):
+        if clip.skeleton is sk:
+            return k
+    for k, sk in enumerate(skeletons):
+        if sk.joint_names == clip.skeleton.joint_names:
+            return k
+    raise ValueError(f"Expected clip {clip.name!r} to animate one of the asset's skeletons, "
+                     f"got skeleton {clip.skeleton.name!r}")
 
 
 def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMesh, skel_path: Sdf.Path,
