@@ -514,3 +514,25 @@ def test_write_matches_clips_to_skeletons_by_joint_names(tmp_path):
     stranger = random_clip(T=2, J=3)
     with pytest.raises(ValueError, match="Expected clip 'Take 1' to animate one of the asset's skeletons"):
         HANDLER.write(Asset("mem", (twin,), (stranger,)), tmp_path / "bad.usda")
+
+
+@pytest.mark.parametrize("name", ["webxr_hand/left.glb", "robot_expressive/RobotExpressive.glb",
+                                  "leap_hands/fingers-ok.bvh"])
+def test_other_formats_to_usd_and_back(shared_assets, tmp_path, name):
+    """Real glTF and BVH files written as USD: valid, and read back joint for joint."""
+    a = read_asset(shared_assets / name)
+    out = write_asset(a, tmp_path / "out.usdc")
+    assert usd_compliance_errors(out) == []
+    b = read_asset(out)
+    assert [s.joint_names for s in b.skeletons] == [s.joint_names for s in a.skeletons]
+    assert len(b.clips) == len(a.clips) and len(b.meshes) == len(a.meshes)
+    for ca, cb in zip(a.clips, b.clips):
+        assert cb.num_frames == ca.num_frames and cb.fps == pytest.approx(ca.fps)
+        assert quat_angle_deg(ca.rotations, cb.rotations).max() < 1e-4
+        scale = 1.0 + np.abs(ca.translations).max()
+        assert np.abs(ca.translations - cb.translations).max() < 1e-6 * scale
+    for ma, mb in zip(a.meshes, b.meshes):
+        np.testing.assert_allclose(mb.points, ma.points, atol=1e-5)
+        assert (mb.joint_indices == ma.joint_indices).all()
+        np.testing.assert_allclose(mb.joint_weights, ma.joint_weights, atol=1e-7)
+        assert (mb.face_vertex_indices == ma.face_vertex_indices).all()
