@@ -536,3 +536,24 @@ def test_other_formats_to_usd_and_back(shared_assets, tmp_path, name):
         assert (mb.joint_indices == ma.joint_indices).all()
         np.testing.assert_allclose(mb.joint_weights, ma.joint_weights, atol=1e-7)
         assert (mb.face_vertex_indices == ma.face_vertex_indices).all()
+
+
+def test_write_clip_at_another_rate_than_the_stage(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    clip = read_clip(src, fps=60)  # 11 frames on a 30 time-codes-per-second stage
+    out = write_clip(src, clip, tmp_path / "sixty.usda", as_layer=True)
+    stage = Usd.Stage.Open(str(out))
+    attr = stage.GetPrimAtPath("/Char/Skel/Anim").GetAttribute("rotations")
+    assert attr.GetTimeSamples() == [10.0 + 0.5 * i for i in range(11)]
+    back = read_clip(out)
+    assert back.fps == 60 and back.num_frames == 11 and back.start_time == pytest.approx(clip.start_time)
+    assert_rotations_close(back.rotations, clip.rotations)
+
+
+def test_write_clip_as_layer_shorter_clip(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    clip = read_clip(src).slice(1, 4)  # unchanged values, fewer frames
+    out = write_clip(src, clip, tmp_path / "short.usda", as_layer=True)
+    back = read_clip(out)
+    assert back.num_frames == 3 and back.start_time == pytest.approx(11 / 30)
+    assert_rotations_close(back.rotations, clip.rotations)

@@ -98,9 +98,19 @@ def author_animation(anim: UsdSkel.Animation, clip: Clip, cols: Sequence[int], t
 
 
 def _resolves_to(attr: Usd.Attribute, values: np.ndarray, codes: list) -> bool:
-    """Whether ``attr`` already gives ``values`` (T, K, n) at every time code."""
+    """Whether ``attr`` already gives ``values`` (T, K, n) at exactly these time codes.
+
+    The attribute's time samples must be the codes themselves (or, for one constant
+    value, none), so a clip that is shorter or sampled at another rate is written.
+    """
     if not attr or not attr.HasValue():
         return False
+    samples = attr.GetTimeSamples()
+    if samples or len(codes) != 1 or len(values) != 1:
+        wanted = [c.GetValue() for c in codes]
+        if len(samples) != len(wanted) or not np.allclose(samples, wanted, rtol=0, atol=1e-9):
+            if not (not samples and len(values) and (values == values[:1]).all()):
+                return False
     tol = 1e-3 if values.dtype == np.float16 else 1e-6
     for f, tc in enumerate(codes):
         old = attr.Get(tc)
@@ -123,7 +133,10 @@ def frame_time_codes(clip: Clip, tcps: float) -> np.ndarray:
     Codes within 1e-6 of an integer are snapped to it (``start_time`` is a float in
     seconds, so ``0.4 * 30`` would otherwise give 11.999999999999998).
     """
-    codes = (clip.start_time + np.arange(clip.num_frames) / clip.fps) * float(tcps)
+    start = clip.start_time * float(tcps)
+    if abs(start - round(start)) < 1e-6:
+        start = float(round(start))
+    codes = start + np.arange(clip.num_frames) * (float(tcps) / clip.fps)
     near = np.round(codes)
     return np.where(np.abs(codes - near) < 1e-6, near, codes)
 
