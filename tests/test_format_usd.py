@@ -557,3 +557,21 @@ def test_write_clip_as_layer_shorter_clip(tmp_path):
     back = read_clip(out)
     assert back.num_frames == 3 and back.start_time == pytest.approx(11 / 30)
     assert_rotations_close(back.rotations, clip.rotations)
+
+
+def test_animation_without_values_has_zero_frames(tmp_path):
+    from usdhands.errors import InvalidAnimationError
+
+    p = tmp_path / "empty.usda"
+    stage = Usd.Stage.CreateNew(str(p))
+    skel = UsdSkel.Skeleton.Define(stage, "/Skel")
+    skel.CreateJointsAttr().Set(["a"])
+    skel.CreateRestTransformsAttr().Set(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
+    anim = UsdSkel.Animation.Define(stage, "/Skel/Anim")
+    anim.CreateJointsAttr().Set(["a"])
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    stage.Save()
+    assert HANDLER.read(p).clips[0].num_frames == 0
+    with pytest.raises(InvalidAnimationError) as e:
+        read_clip(p)
+    assert str(e.value) == f"{p}: animation '/Skel/Anim' has zero frames"

@@ -284,6 +284,9 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
                                          location=where)
             has[label] = True
             dst[f] = np.asarray(arr)
+    if len(times) == 0 and not any(has.values()):
+        # no value at all: an animation of zero frames (read_asset reports it)
+        rot, tr, sc = rot[:0], tr[:0], sc[:0]
     if has["rotations"]:
         rot[:, cols] = r_k
     if has["translations"]:
