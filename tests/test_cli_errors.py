@@ -1,0 +1,159 @@
+"""Bad input: one line naming the file and what is wrong, exit status 2, nothing written."""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+
+from usdhands.cli import main
+
+
+def sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def run_cli(capsys, *argv) -> tuple[int, str]:
+    code = main([str(a) for a in argv])
+    err = capsys.readouterr().err
+    return code, err
+
+
+def leap_copy(shared_assets: Path, tmp_path: Path) -> Path:
+    dst = tmp_path / "ok.bvh"
+    shutil.copy(shared_assets / "leap_hands" / "fingers-ok.bvh", dst)
+    return dst
+
+
+def edit_motion_line(src: Path, dst: Path, frame: int, edit) -> None:
+    lines = src.read_text().splitlines()
+    first = next(k for k, line in enumerate(lines) if line.startswith("Frame Time")) + 1
+    lines[first + frame] = edit(lines[first + frame])
+    dst.write_text("\n".join(lines) + "\n")
+
+
+def check_error(capsys, tmp_path, argv, message, inputs):
+    before = {p: sha(p) for p in inputs}
+    listing = sorted(p.name for p in tmp_path.iterdir())
+    code, err = run_cli(capsys, *argv)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("usdhands: error: ")
+    assert message in lines[0], lines[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == listing  # no partial output
+    assert {p: sha(p) for p in inputs} == before  # inputs untouched
+
+
+def test_no_skeleton(shared_assets, tmp_path, capsys):
+    teapot = tmp_path / "teapot.usd"
+    shutil.copy(shared_assets / "usd_teapot" / "UtahTeapot.usd", teapot)
+    check_error(capsys, tmp_path, ["convert", teapot, tmp_path / "out.glb"],
+                f"{teapot}: no skeleton in file", [teapot])
+
+
+def test_skeleton_without_hands_lists_joints(shared_assets, tmp_path, capsys):
+    cesium = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    check_error(capsys, tmp_path, ["handmap", cesium, "-o", tmp_path / "map.json"],
+                "no hand found in skeleton", [cesium])
+    code, err = run_cli(capsys, "handmap", cesium)
+    assert "saw 19 joints: " in err and "Skeleton_arm_joint_L__4_" in err
+
+
+def test_missing_file(tmp_path, capsys):
+    check_error(capsys, tmp_path, ["convert", tmp_path / "nope.bvh", tmp_path / "out.glb"],
+                f"{tmp_path / 'nope.bvh'}: no such file", [])
+
+
+def test_output_equals_input(shared_assets, tmp_path, capsys):
+    src = leap_copy(shared_assets, tmp_path)
+    check_error(capsys, tmp_path, ["convert", src, src], "output path equals the input", [src])
+
+
+def test_truncated_glb(shared_assets, tmp_path, capsys):
+    bad = tmp_path / "trunc.glb"
+    bad.write_bytes((shared_assets / "robot_expressive" / "RobotExpressive.glb").read_bytes()[:20000])
+    check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.usda"],
+                f"{bad}: truncated .glb: header says 463988 bytes, file has 20000", [bad])
+
+
+def test_corrupt_glb_header(tmp_path, capsys):
+    bad = tmp_path / "noise.glb"
+    bad.write_bytes(b"not a glb file at all, just text" * 4)
+    check_error(capsys, tmp_path, ["inspect", bad], f"{bad}: ", [bad])
+
+
+def test_bvh_numbers_do_not_match_channels(shared_assets, tmp_path, capsys):
+    src = leap_copy(shared_assets, tmp_path)
+    bad = tmp_path / "short.bvh"
+    edit_motion_line(src, bad, 2, lambda line: " ".join(line.split()[:-3]))
+    check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.glb"],
+                f"{bad}: line 112: expected 54 values, found 51", [bad, src])
+
+
+def test_bvh_nan(shared_assets, tmp_path, capsys):
+    src = leap_copy(shared_assets, tmp_path)
+    bad = tmp_path / "nan.bvh"
+    edit_motion_line(src, bad, 4, lambda line: " ".join(line.split()[:-1] + ["nan"]))
+    check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.usda"],
+                f"{bad}: line 114: value 54 is not finite: 'nan'", [bad])
+
+
+def test_zero_frames(shared_assets, tmp_path, capsys):
+    src = leap_copy(shared_assets, tmp_path)
+    lines = src.read_text().splitlines()
+    i = next(k for k, line in enumerate(lines) if line.startswith("Frame Time"))
+    bad = tmp_path / "zero.bvh"
+    bad.write_text("\n".join(lines[: i - 1] + ["Frames: 0", lines[i]]) + "\n")
+    check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.glb"],
+                f"{bad}: animation 'zero' has zero frames", [bad])
+
+
+USD_HEADER = '#usda 1.0\n(\n    timeCodesPerSecond = 24\n)\n'
+
+
+def usd_skel(joints_anim: str, rotations: str) -> str:
+    return USD_HEADER + f'''
+def SkelRoot "Root"
+{{
+    def Skeleton "Skel" (prepend apiSchemas = ["SkelBindingAPI"])
+    {{
+        uniform token[] joints = ["Hips", "Hips/LeftHand"]
+        uniform matrix4d[] bindTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) ), ( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 1, 0, 1) )]
+        uniform matrix4d[] restTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) ), ( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 1, 0, 1) )]
+        rel skel:animationSource = </Root/Skel/Anim>
+
+        def SkelAnimation "Anim"
+        {{
+            uniform token[] joints = {joints_anim}
+            quatf[] rotations.timeSamples = {{
+                0: {rotations},
+                1: [(1, 0, 0, 0), (1, 0, 0, 0)],
+            }}
+        }}
+    }}
+}}
+'''
+
+
+def test_usd_animation_joints_do_not_match(tmp_path, capsys):
+    bad = tmp_path / "mismatch.usda"
+    bad.write_text(usd_skel('["Hips", "Hips/RightHand"]', "[(1, 0, 0, 0), (1, 0, 0, 0)]"))
+    check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.glb"], "Hips/RightHand", [bad])
+
+
+def test_unknown_output_extension(shared_assets, tmp_path, capsys):
+    src = leap_copy(shared_assets, tmp_path)
+    check_error(capsys, tmp_path, ["convert", src, tmp_path / "out.xyz"],
+                "unknown file extension '.xyz'", [src])
+
+
+def test_exit_status_from_the_installed_command(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "usdhands", "inspect", str(tmp_path / "missing.usda")],
+                         capture_output=True, text=True)
+    assert out.returncode == 2
+    assert out.stderr.strip() == f"usdhands: error: {tmp_path / 'missing.usda'}: no such file"
+    assert "Traceback" not in out.stderr
