@@ -254,6 +254,7 @@ def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
     try:
+        os.chmod(tmp, 0o755)  # mkdtemp makes it private
         for name in ARRAYS:
             np.save(tmp / f"{name}.npy", np.ascontiguousarray(getattr(db, name)))
         (tmp / "manifest.json").write_text(json.dumps(db.manifest(), indent=1) + "\n")

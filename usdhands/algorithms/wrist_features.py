@@ -10,12 +10,19 @@ in degrees. Here, for joint ``j`` at frame ``t``:
 - the **position** is ``B(t)⁻¹ (p_j(t) − p_root(t))`` in centimetres, expressed in
   the rest pose's axes turned Y-up (Z-up assets are rotated), times a body-size
   ``scale``;
-- the **rotation** is the joint's world rotation relative to its own rest world
-  rotation, seen from the body frame, ``B(t)⁻¹ R_j(t) R_j_rest⁻¹``, as a rotation
-  vector in degrees (axis times angle). The paper uses Euler angles and notes any
-  angle representation works; rotation vectors have no order and no gimbal lock and
-  their Euclidean distance is close to the geodesic angle for the small differences
-  that matter here.
+- the **rotation** of the wrist is the orientation of the *hand frame* seen from the
+  body frame, relative to a fixed reference orientation ``G`` (the hand hanging down,
+  palm towards the body, thumb forward): ``B(t)⁻¹ R_w(t) H G⁻¹``. ``H`` is built in the
+  wrist joint's local frame from the local offsets of the finger chains' first joints
+  (forward: towards the fingers; side: pinky side to index side; normal: their cross
+  product), so it depends on the rig's geometry only, not on its rest rotations or
+  joint-axis conventions (a BVH whose zero pose is not the bind pose, a glTF with
+  another bone roll still compare). For the elbow and shoulder (used by
+  ``evaluate``) it is the joint's world rotation relative to its rest world rotation,
+  ``B(t)⁻¹ R_j(t) R_j_rest⁻¹``. Rotations are rotation vectors in degrees (axis times
+  angle): the paper uses Euler angles and notes any angle representation works;
+  rotation vectors have no order and no gimbal lock and their Euclidean distance is
+  close to the geodesic angle for the differences that matter here.
 
 Characters are assumed to face the same way in their rest poses (glTF and Mixamo:
 +Z, Y up); "left/right" mirroring flips the X axis of this frame.
@@ -40,7 +47,7 @@ from usdhands.model.handmap import FINGERS, HandSide
 from usdhands.model.skeleton import Skeleton
 
 __all__ = [
-    "FEATURE_JOINTS", "hand_point", "reach_cm", "arm_features", "wrist_features",
+    "FEATURE_JOINTS", "hand_point", "hand_frame", "REFERENCE_HAND", "reach_cm", "arm_features", "wrist_features",
     "mirror_features", "Z_UP_TO_Y_UP", "world_rotations",
 ]
 
@@ -49,6 +56,11 @@ FEATURE_JOINTS = ("shoulder", "elbow", "wrist")
 
 #: Rotation taking a Z-up frame to Y-up: (x, y, z) → (x, z, −y).
 Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+#: The reference hand orientation G (columns: forward, side, normal), Y up, facing +Z:
+#: hanging down, thumb side forward. The same for both sides (see :func:`hand_frame`).
+REFERENCE_HAND = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
 def _root_index(skeleton: Skeleton, hand: HandSide) -> int:
@@ -90,6 +102,45 @@ def hand_point(skeleton: Skeleton, hand: HandSide) -> tuple[int, np.ndarray]:
         return w, np.zeros(3)
     inv = np.linalg.inv(rest[w])
     return w, (inv @ np.append(base_mean, 1.0))[:3]
+
+
+def hand_frame(skeleton: Skeleton, hand: HandSide) -> np.ndarray:
+    """The hand frame ``H`` in the wrist joint's local frame, ``(3, 3)`` rotation (columns forward, side, normal).
+
+    Forward points from the wrist to the mean of the non-thumb fingers' first joints;
+    side from the outermost to the innermost non-thumb finger (towards the thumb),
+    or from that mean to the thumb where the first joints coincide (RobotExpressive's
+    palms); normal = forward × side. Built from local offsets only (rest
+    translations, and rest rotations of joints between the wrist and a first joint).
+    """
+    w = skeleton.index(hand.wrist)
+    local = skeleton.rest_local_xforms()
+
+    def offset(j: int) -> np.ndarray:
+        m = np.eye(4)
+        while j != w and j >= 0:
+            m = local[j] @ m
+            j = int(skeleton.parents[j])
+        if j != w:
+            raise ValueError(f"Finger joint {skeleton.joint_names[j]!r} does not hang from the wrist {hand.wrist!r}")
+        return m[:3, 3]
+
+    firsts = {f: offset(skeleton.index(hand.fingers[f][0])) for f in FINGERS if hand.fingers[f]}
+    non_thumb = [f for f in FINGERS[1:] if f in firsts]
+    if not firsts:
+        return np.eye(3)
+    mean = np.mean([firsts[f] for f in non_thumb], axis=0) if non_thumb else firsts["thumb"]
+    fwd = mean / max(np.linalg.norm(mean), 1e-12)
+    side = np.zeros(3)
+    if len(non_thumb) >= 2:
+        side = firsts[non_thumb[0]] - firsts[non_thumb[-1]]
+    if np.linalg.norm(side - fwd * np.dot(side, fwd)) < 1e-3 * np.linalg.norm(mean) and "thumb" in firsts:
+        side = firsts["thumb"] - mean
+    side = side - fwd * np.dot(side, fwd)
+    if np.linalg.norm(side) < 1e-12:
+        side = np.cross(fwd, [0.0, 0.0, 1.0]) if abs(fwd[2]) < 0.9 else np.cross(fwd, [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    return np.stack([fwd, side, np.cross(fwd, side)], axis=1)
 
 
 def reach_cm(skeleton: Skeleton, hand: HandSide) -> float:
@@ -171,8 +222,13 @@ def arm_features(clip: Clip, hand: HandSide, scale: float = 1.0,
             p = world[:, j, :3, 3]
         rel = np.einsum("tij,tj->ti", Binv, p - p_root)
         out[f"{role}_pos"] = (rel @ U.T) * cm
-        q = Binv @ world_rotations(world[:, j]) @ world_rotations(rest[j]).T
-        out[f"{role}_rot"] = _rotvec_deg(q) @ U.T
+        if role == "wrist":
+            # U turns the Z-up body frame Y-up before comparing with the Y-up reference
+            q = U @ Binv @ world_rotations(world[:, j]) @ hand_frame(sk, hand) @ REFERENCE_HAND.T
+            out[f"{role}_rot"] = _rotvec_deg(q)
+        else:
+            q = Binv @ world_rotations(world[:, j]) @ world_rotations(rest[j]).T
+            out[f"{role}_rot"] = _rotvec_deg(q) @ U.T
     return out
 
 

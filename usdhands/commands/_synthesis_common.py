@@ -1,0 +1,115 @@
+"""Shared by ``db``, ``synthesize`` and ``evaluate``: inputs, labels, the bundled database."""
+
+from __future__ import annotations
+
+import csv
+import re
+from importlib import resources
+from pathlib import Path
+
+from usdhands.errors import ConfigError, UsdHandsError
+
+EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz", ".gltf", ".glb", ".bvh")
+BUNDLED_NAME = "gesture_db"
+
+
+def bundled_database_path() -> Path:
+    """Folder of the database shipped in the package (built from the generated gesture set)."""
+    return Path(str(resources.files("usdhands").joinpath("data", BUNDLED_NAME)))
+
+
+def expand_inputs(inputs: list[Path]) -> list[Path]:
+    """Files as given; folders replaced by their animation files (sorted)."""
+    out = []
+    for p in inputs:
+        p = Path(p)
+        if p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.suffix.lower() in EXTENSIONS)
+            if not found:
+                raise UsdHandsError(f"no animation files ({', '.join(EXTENSIONS)}) in folder", path=p)
+            out.extend(found)
+        else:
+            out.append(p)
+    if not out:
+        raise UsdHandsError("no input files given")
+    return out
+
+
+def labeller(regex: str | None, labels_file: Path | None):
+    """A function ``label(path) -> str | None`` from ``--labels REGEX`` or ``--labels-file CSV``.
+
+    The regex's first group (or the whole match when it has no group), searched in the
+    file name, is the label. The CSV has rows ``file,label`` (file name or path).
+    """
+    if regex and labels_file:
+        raise UsdHandsError("give --labels or --labels-file, not both")
+    if regex:
+        try:
+            rx = re.compile(regex)
+        except re.error as e:
+            raise UsdHandsError(f"bad --labels regular expression {regex!r}: {e}") from None
+
+        def by_regex(path: Path) -> str:
+            m = rx.search(path.name)
+            if not m:
+                raise UsdHandsError(f"--labels {regex!r} does not match the file name {path.name!r}", path=path)
+            return m.group(1) if rx.groups else m.group(0)
+
+        return by_regex
+    if labels_file:
+        table = {}
+        try:
+            with open(labels_file, newline="") as fh:
+                for n, row in enumerate(csv.reader(fh), 1):
+                    if not row or row[0].startswith("#"):
+                        continue
+                    if len(row) < 2:
+                        raise ConfigError(f"expected 'file,label', got {row!r}", path=labels_file, location=f"line {n}")
+                    table[row[0].strip()] = row[1].strip()
+        except FileNotFoundError:
+            raise ConfigError("no such labels file", path=labels_file) from None
+
+        def by_table(path: Path) -> str:
+            for key in (str(path), path.name, path.stem):
+                if key in table:
+                    return table[key]
+            raise UsdHandsError(f"no label for {path.name!r} in {labels_file}", path=path)
+
+        return by_table
+    return lambda path: None
+
+
+def read_labelled(paths: list[Path], label_of, fps, handmap_path, animation=None, progress=None):
+    """Read clips with their hand maps and labels: list of ``(path, label, clip, handmap)``."""
+    from usdhands.formats.io import read_clip
+    from usdhands.model.hand_detection import resolve_handmap
+
+    out = []
+    for i, p in enumerate(paths):
+        label = label_of(p)
+        clip = read_clip(p, animation=animation, fps=fps)
+        handmap = resolve_handmap(clip.skeleton, handmap_path)
+        out.append((p, label, clip, handmap))
+        if progress:
+            progress(i + 1, len(paths), p.name)
+    return out
+
+
+def load_config(path):
+    from usdhands.algorithms.synthesis_config import SynthesisConfig, load_synthesis_config
+
+    return SynthesisConfig() if path is None else load_synthesis_config(path)
+
+
+def sample_database_items(seed: int = 0):
+    """The generated gesture database as ``DatabaseClip`` items (source ``samples:gestures/<name>``)."""
+    from usdhands.algorithms.finger_database import DatabaseClip
+    from usdhands.model.hand_detection import detect_hands
+    from usdhands.samples.gestures import gesture_database
+
+    items = []
+    handmap = None
+    for label, clip in gesture_database(seed=seed):
+        handmap = handmap or detect_hands(clip.skeleton)
+        items.append(DatabaseClip(clip, handmap, label, f"samples:gestures/{clip.name}"))
+    return items

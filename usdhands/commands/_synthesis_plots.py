@@ -1,0 +1,132 @@
+"""PNG plots for ``synthesize`` and ``evaluate`` (matplotlib, Agg backend, imported on use)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_segmentation(res, fps: float, threshold: float, path: Path, title: str = "") -> Path:
+    """Wrist speed with the threshold and the segment boundaries (the paper's figure 4)."""
+    plt = _plt()
+    t = np.arange(len(res.speed)) / fps
+    fig, ax = plt.subplots(figsize=(8, 2.6), dpi=90)
+    ax.plot(t, res.speed, lw=1, color="k", label="wrist speed")
+    ax.axhline(threshold, color="tab:orange", lw=0.8, ls="--", label=f"threshold {threshold:g} cm/s")
+    for b in res.bounds[1:-1]:
+        ax.axvline(b / fps, color="tab:blue", lw=0.8)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("cm/s")
+    ax.set_title(title or f"{res.side} hand: {len(res.bounds) - 1} segments", fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_graph(res, labels: list, path: Path, max_rows: int = 14, title: str = "") -> Path:
+    """The layered graph: rows = input segments, nodes = k candidates with cS, chosen path in red (figure 3)."""
+    plt = _plt()
+    N, k = res.candidates.shape
+    rows = min(N, max_rows)
+    fig, ax = plt.subplots(figsize=(1.6 * k + 1, 0.55 * rows + 0.8), dpi=90)
+    for i in range(rows):
+        for j in range(k):
+            if res.candidates[i, j] < 0:
+                continue
+            on = res.path[i] == j
+            ax.add_patch(plt.Rectangle((j - 0.42, -i - 0.3), 0.84, 0.6, fill=True,
+                                       fc="mistyrose" if on else "white", ec="red" if on else "0.6", lw=1.5 if on else 0.6))
+            lab = labels[res.candidates[i, j]] or ""
+            ax.text(j, -i, f"{lab[:10]}\n{res.segment_costs[i, j]:.0f}", ha="center", va="center", fontsize=6)
+        if i + 1 < rows:
+            ax.annotate("", xy=(res.path[i + 1], -i - 1 + 0.3), xytext=(res.path[i], -i - 0.3),
+                        arrowprops=dict(arrowstyle="->", color="red", lw=1.2))
+    ax.set_xlim(-0.6, k - 0.4)
+    ax.set_ylim(-rows + 0.4, 0.6)
+    ax.axis("off")
+    more = f" (first {rows} of {N})" if N > rows else ""
+    ax.set_title(title or f"{res.side} hand: k={k} candidates per segment{more}; label and segment cost", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_finger_curves(times: np.ndarray, before: np.ndarray, after: np.ndarray, names: list[str], path: Path,
+                       bounds_s: np.ndarray | None = None, title: str = "") -> Path:
+    """Finger curves of the input (dashed) and the result (solid)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 3), dpi=90)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for c in range(after.shape[1]):
+        col = colors[c % len(colors)]
+        ax.plot(times, before[:, c], ls="--", lw=0.7, color=col)
+        ax.plot(times, after[:, c], lw=1.1, color=col, label=names[c])
+    if bounds_s is not None:
+        for b in bounds_s:
+            ax.axvline(b, color="0.8", lw=0.6, zorder=0)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("degrees")
+    ax.set_title(title or "finger curves: input dashed, synthesized solid", fontsize=9)
+    ax.legend(fontsize=6, ncol=4, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_predictors(result: dict, path: Path) -> Path:
+    """Share of correctly typed neighbours per predictor (the paper's figure 7)."""
+    plt = _plt()
+    names = list(result["predictors"])
+    vals = [100 * result["predictors"][n] for n in names]
+    fig, ax = plt.subplots(figsize=(7, 0.32 * len(names) + 1.2), dpi=90)
+    y = np.arange(len(names))[::-1]
+    ax.barh(y, vals, color=["tab:red" if n == result["best"] else "tab:blue" for n in names])
+    for yy, v in zip(y, vals):
+        ax.text(v + 0.5, yy, f"{v:.0f}%", va="center", fontsize=7)
+    if "chance" in result:
+        ax.axvline(100 * result["chance"], color="0.4", ls="--", lw=0.8, label=f"chance {100 * result['chance']:.0f}%")
+        ax.legend(fontsize=7, loc="lower right")
+    ax.set_yticks(y, names, fontsize=8)
+    ax.set_xlim(0, 105)
+    ax.set_xlabel(f"% of the k={result['k']} closest segments of the right type")
+    ax.set_title(f"leave-one-out over {result['segments']} segments", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_confusion(result: dict, path: Path) -> Path:
+    """Class confusion matrix in percent (the paper's figure 8)."""
+    plt = _plt()
+    labels = result["confusion"]["labels"]
+    m = 100 * np.asarray(result["confusion"]["matrix"])
+    fig, ax = plt.subplots(figsize=(0.6 * len(labels) + 2, 0.55 * len(labels) + 1.5), dpi=90)
+    ax.imshow(m, cmap="Blues", vmin=0, vmax=100)
+    for i in range(len(labels)):
+        for j in range(len(labels)):
+            ax.text(j, i, f"{m[i, j]:.0f}", ha="center", va="center", fontsize=7,
+                    color="white" if m[i, j] > 60 else "black")
+    ax.set_xticks(range(len(labels)), labels, rotation=45, ha="right", fontsize=7)
+    ax.set_yticks(range(len(labels)), labels, fontsize=7)
+    ax.set_xlabel("type of the closest segments")
+    ax.set_ylabel("true type")
+    ax.set_title(f"confusion, {result['confusion']['predictor']} (%)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path

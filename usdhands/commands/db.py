@@ -1,0 +1,109 @@
+"""``usdhands db build`` / ``usdhands db info``: finger-motion databases for ``synthesize``.
+
+``db build INPUTS... -o DB`` reads clips with fingers in any supported format and
+writes a database folder (manifest.json + .npy arrays, see docs/synthesis.md):
+per hand, wrist features, finger DOF curves, segments, labels and where each came
+from. ``--samples`` builds from the generated gesture set instead of files (this is
+how the database bundled in the package is made). ``db info DB`` prints what a
+database holds.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.errors import UsdHandsError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("db", help="build or inspect a finger-motion database for 'synthesize'",
+                       description="Finger-motion databases (Jorg, Hodgins, Safonova 2012).")
+    dsub = p.add_subparsers(dest="db_command", metavar="ACTION")
+    b = dsub.add_parser("build", help="build a database from clips with fingers",
+                        description="Build a finger-motion database folder from clips with finger animation.")
+    b.add_argument("inputs", type=Path, nargs="*", help="animation files or folders (.usd*, .gltf/.glb, .bvh)")
+    b.add_argument("-o", "--output", type=Path, required=True, help="database folder to write")
+    b.add_argument("--labels", default=None, metavar="REGEX",
+                   help="label of a clip: the first group of REGEX searched in its file name")
+    b.add_argument("--labels-file", type=Path, default=None, metavar="CSV", help="rows 'file,label'")
+    b.add_argument("--mirror", action="store_true", help="add left<->right mirrored copies of every hand")
+    b.add_argument("--fps", type=float, default=30.0, help="frame rate of the database (default 30)")
+    b.add_argument("--config", type=Path, default=None, help="synthesis configuration JSON (segmentation values)")
+    b.add_argument("--handmap", type=Path, default=None, help="hand map JSON overriding detection (all inputs)")
+    b.add_argument("--animation", default=None, help="animation name or index in each file (default the first)")
+    b.add_argument("--samples", action="store_true",
+                   help="build from the generated gesture set (usdhands.samples) instead of files")
+    b.add_argument("--json", action="store_true", help="print the manifest's counts as JSON")
+    b.set_defaults(func=run_build)
+    i = dsub.add_parser("info", help="print what a database holds")
+    i.add_argument("database", type=Path, nargs="?", default=None, help="database folder (default: the bundled one)")
+    i.add_argument("--json", action="store_true", help="print the manifest as JSON")
+    i.set_defaults(func=run_info)
+    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
+
+
+def run_build(args) -> int:
+    from usdhands.algorithms.finger_database import DatabaseClip, build_database, save_database
+    from usdhands.commands._synthesis_common import (
+        expand_inputs, labeller, load_config, read_labelled, sample_database_items,
+    )
+
+    cfg = load_config(args.config)
+    if args.samples:
+        if args.inputs:
+            raise UsdHandsError("give input files or --samples, not both")
+        items = sample_database_items()
+    else:
+        if not args.inputs:
+            raise UsdHandsError("no input files given (or use --samples)")
+        paths = expand_inputs(args.inputs)
+        label_of = labeller(args.labels, args.labels_file)
+        read = read_labelled(paths, label_of, None, args.handmap, args.animation, Progress("reading"))
+        items = []
+        for p, label, clip, handmap in read:
+            if not any(h.finger_joints for h in handmap.sides):
+                raise UsdHandsError("no finger joints found: a database needs clips with finger animation", path=p)
+            items.append(DatabaseClip(clip, handmap, label, str(p)))
+    if args.fps <= 0:
+        raise UsdHandsError(f"--fps must be positive, got {args.fps}")
+    db = build_database(items, fps=args.fps, mirror=args.mirror, segmentation=cfg.segmentation,
+                        progress=Progress("building"))
+    path = save_database(db, args.output)
+    m = db.manifest()
+    if args.json:
+        print_json({"path": str(path), **m["counts"], "labels": m["labels"], "dofs": len(m["dofs"])})
+    else:
+        _print_summary(db, path)
+    return 0
+
+
+def _print_summary(db, path) -> None:
+    import numpy as np
+
+    from usdhands.model.handmap import SIDES
+
+    m = db.manifest()
+    print(f"database {path}: {m['counts']['clips']} clips, {m['counts']['tracks']} hand tracks, "
+          f"{m['counts']['segments']} segments, {m['counts']['frames']} frames at {db.fps:g} fps "
+          f"({m['counts']['frames'] / db.fps / 60:.1f} min), {len(m['dofs'])} finger DOFs, reach {db.reach_cm:.1f} cm")
+    labels = db.segment_labels()
+    side = db.segment_side()
+    rows = []
+    for lab in sorted({str(x) for x in labels}):
+        sel = np.array([str(x) == lab for x in labels])
+        rows.append([lab, int((sel & (side == 0)).sum()), int((sel & (side == 1)).sum())])
+    print_table(rows, ["label", f"{SIDES[0]} segments", f"{SIDES[1]} segments"])
+
+
+def run_info(args) -> int:
+    from usdhands.algorithms.finger_database import load_database
+    from usdhands.commands._synthesis_common import bundled_database_path
+
+    path = args.database or bundled_database_path()
+    db = load_database(path)
+    if args.json:
+        print_json(db.manifest())
+    else:
+        _print_summary(db, path)
+    return 0

@@ -1,0 +1,133 @@
+"""``usdhands evaluate``: how well body motion predicts finger motion (seed 000, §4).
+
+``evaluate INPUTS... --labels REGEX`` runs the leave-one-out analysis over labelled
+clips (body motion is enough): for each predictor, the share of the k closest
+segments (DTW-aligned squared differences) that come from a clip of the same label,
+and the confusion matrix of ``wrist_pos+0.5rot`` (P + 0.5·R). ``--holdout``
+synthesizes every clip's fingers from the others instead and reports the finger-angle
+error next to three baselines.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.errors import UsdHandsError
+
+
+def register(sub) -> None:
+    from usdhands.algorithms.gesture_evaluation import DEFAULT_PREDICTORS
+
+    p = sub.add_parser("evaluate", help="leave-one-out: which body features predict finger motion (seed 000, sec. 4)",
+                       description="Leave-one-out analysis of Jorg, Hodgins, Safonova 2012, section 4, on labelled "
+                                   "clips; with --holdout, held-out finger synthesis error against baselines.")
+    p.add_argument("inputs", type=Path, nargs="*", help="animation files or folders")
+    p.add_argument("--labels", default=None, metavar="REGEX",
+                   help="label of a clip: the first group of REGEX searched in its file name")
+    p.add_argument("--labels-file", type=Path, default=None, metavar="CSV", help="rows 'file,label'")
+    p.add_argument("--k", type=int, default=5, help="neighbours per segment (default 5)")
+    p.add_argument("--predictors", default=None,
+                   help="comma-separated predictors, e.g. wrist_rot,wrist_pos+0.5rot,elbow_pos "
+                        f"(default: {','.join(DEFAULT_PREDICTORS)})")
+    p.add_argument("--holdout", action="store_true",
+                   help="synthesize each clip's fingers from the others; error against ground truth and baselines")
+    p.add_argument("--samples", action="store_true", help="use the generated gesture set instead of files")
+    p.add_argument("--fps", type=float, default=None, help="resample clips to this rate (default the first clip's; 30 with --holdout)")
+    p.add_argument("--config", type=Path, default=None, help="synthesis configuration JSON")
+    p.add_argument("--handmap", type=Path, default=None, help="hand map JSON overriding detection (all inputs)")
+    p.add_argument("--animation", default=None, help="animation name or index in each file")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random-segments baseline (default 0)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--plot", type=Path, default=None, metavar="DIR", help="write PNG figures into DIR")
+    p.set_defaults(func=run)
+
+
+def _items(args):
+    from usdhands.commands._synthesis_common import expand_inputs, labeller, read_labelled, sample_database_items
+
+    if args.samples:
+        if args.inputs:
+            raise UsdHandsError("give input files or --samples, not both")
+        return [(it.source, it.label, it.clip, it.handmap) for it in sample_database_items()]
+    if not args.inputs:
+        raise UsdHandsError("no input files given (or use --samples)")
+    paths = expand_inputs(args.inputs)
+    if not args.holdout and not (args.labels or args.labels_file):
+        raise UsdHandsError("evaluate needs --labels REGEX or --labels-file CSV (or --holdout)")
+    return read_labelled(paths, labeller(args.labels, args.labels_file), args.fps, args.handmap, args.animation,
+                         Progress("reading"))
+
+
+def run(args) -> int:
+    from usdhands.commands._synthesis_common import load_config
+
+    if args.k < 1:
+        raise UsdHandsError(f"--k must be at least 1, got {args.k}")
+    cfg = load_config(args.config)
+    items = _items(args)
+    if args.holdout:
+        return _run_holdout(args, items, cfg)
+    from usdhands.algorithms.gesture_evaluation import DEFAULT_PREDICTORS, evaluate_predictors, prepare_eval_set
+    from usdhands.commands._common import parse_list
+
+    predictors = parse_list(args.predictors) or list(DEFAULT_PREDICTORS)
+    unlabeled = [str(p) for p, lab, _, _ in items if lab is None]
+    if unlabeled:
+        raise UsdHandsError(f"clips without a label: {unlabeled[:3]}")
+    try:
+        es = prepare_eval_set([(lab, clip, hm) for _, lab, clip, hm in items], cfg, args.fps)
+        result = evaluate_predictors(es, predictors, args.k, cfg)
+    except ValueError as e:
+        raise UsdHandsError(str(e)) from None
+    result["idle_hands"] = [f"{c}:{s}" for c, s in es.idle]
+    written = []
+    if args.plot is not None:
+        from usdhands.commands._synthesis_plots import plot_confusion, plot_predictors
+
+        args.plot.mkdir(parents=True, exist_ok=True)
+        written = [plot_predictors(result, args.plot / "predictors.png"),
+                   plot_confusion(result, args.plot / "confusion.png")]
+    if args.json:
+        out = dict(result)
+        if written:
+            out["plots"] = [str(w) for w in written]
+        print_json(out)
+        return 0
+    print(f"leave-one-out over {result['segments']} segments of {len(items)} clips, k={result['k']} "
+          f"({len(es.idle)} idle hands left out)")
+    rows = [[name, f"{100 * share:.1f}%"] for name, share in result["predictors"].items()]
+    rows.append(["(chance)", f"{100 * result['chance']:.1f}%"])
+    print_table(rows, ["predictor", "correct type"])
+    print(f"best: {result['best']}")
+    conf = result["confusion"]
+    print(f"\nconfusion ({conf['predictor']}), % of the closest segments by type:")
+    short = [lab[:8] for lab in conf["labels"]]
+    print_table([[lab] + [f"{100 * v:.0f}" for v in row] for lab, row in zip(conf["labels"], conf["matrix"])],
+                ["true \\ found"] + short)
+    for w in written:
+        print(f"wrote {w}")
+    return 0
+
+
+def _run_holdout(args, items, cfg) -> int:
+    from usdhands.algorithms.finger_database import DatabaseClip, build_database
+    from usdhands.algorithms.gesture_evaluation import holdout_evaluation
+
+    dbitems = []
+    for p, lab, clip, hm in items:
+        if not any(h.finger_joints for h in hm.sides):
+            raise UsdHandsError("no finger joints: --holdout needs clips with finger animation", path=p)
+        dbitems.append(DatabaseClip(clip, hm, lab, str(p)))
+    if len(dbitems) < 2:
+        raise UsdHandsError("--holdout needs at least two clips")
+    db = build_database(dbitems, fps=args.fps or 30.0, segmentation=cfg.segmentation)
+    result = holdout_evaluation(db, cfg, seed=args.seed, progress=Progress("holdout"))
+    if args.json:
+        print_json(result)
+        return 0
+    print(f"held-out synthesis over {result['clips']} clips ({result['frames']} hand-frames); "
+          f"ground truth mean angular speed {result['ground_truth_speed_deg_s']:.1f} deg/s")
+    rows = [[m, v["error_deg"], v["speed_deg_s"]] for m, v in result["methods"].items()]
+    print_table(rows, ["method", "finger error (deg)", "angular speed (deg/s)"])
+    return 0

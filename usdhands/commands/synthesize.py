@@ -1,0 +1,152 @@
+"""``usdhands synthesize IN -o OUT``: finger motion for a body clip, from wrist motion (seed 000).
+
+Segments each hand's wrist motion, finds the k most similar database segments
+(eq. 1), picks the least-cost path through the graph of transitions (eq. 2–3),
+stitches the chosen finger motion and writes the input file again with the finger
+animation added; every other joint and everything else in the file stay as they
+were. Without ``--db`` the database bundled in the package is used.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.errors import UsdHandsError
+
+
+def register(sub) -> None:
+    p = sub.add_parser("synthesize", help="give a body clip finger motion from a database (seed 000)",
+                       description="Data-driven finger motion synthesis (Jorg, Hodgins, Safonova 2012).")
+    p.add_argument("file", type=Path, help="input animation (.usd*, .gltf/.glb, .bvh)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output file (same format as the input)")
+    p.add_argument("--db", type=Path, default=None, help="database folder from 'usdhands db build' (default: bundled)")
+    p.add_argument("--k", type=int, default=None, help="candidates per segment (default 5, or the config's)")
+    p.add_argument("--hands", default=None, help="left, right or left,right (default: every hand with fingers)")
+    p.add_argument("--config", type=Path, default=None, help="synthesis configuration JSON (weights, thresholds)")
+    p.add_argument("--handmap", type=Path, default=None, help="hand map JSON overriding detection")
+    p.add_argument("--animation", default=None, help="animation name or index in the file (default the first)")
+    p.add_argument("--layer", action="store_true", help="USD: write a sparse override layer on top of the input")
+    p.add_argument("--plot", type=Path, default=None, metavar="DIR",
+                   help="write PNGs: wrist speed with segments, the graph with the chosen path, finger curves")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from usdhands.algorithms.finger_database import load_database
+    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.commands._common import parse_list
+    from usdhands.commands._synthesis_common import bundled_database_path, load_config
+    from usdhands.formats.io import read_clip, write_clip
+    from usdhands.model.hand_detection import resolve_handmap
+    from usdhands.model.handmap import SIDES
+
+    cfg = load_config(args.config)
+    if args.k is not None:
+        if args.k < 1:
+            raise UsdHandsError(f"--k must be at least 1, got {args.k}")
+        cfg = cfg.with_values(segment_cost={"k": args.k})
+    progress = Progress("synthesize")
+    progress(0, 4, "reading")
+    db = load_database(args.db or bundled_database_path())
+    clip = read_clip(args.file, animation=args.animation)
+    handmap = resolve_handmap(clip.skeleton, args.handmap)
+    wanted = parse_list(args.hands, SIDES) or list(SIDES)
+    with_fingers = [s for s in wanted if handmap[s] is not None and handmap[s].finger_joints]
+    if not with_fingers:
+        found = ", ".join(f"{h.side} (wrist {h.wrist})" for h in handmap.sides) or "none"
+        raise UsdHandsError(f"the skeleton has no finger joints on the {' or '.join(wanted)} hand "
+                            f"(hands found: {found}); synthesis needs a rig with finger joints", path=args.file)
+    if args.hands:
+        missing = [s for s in wanted if s not in with_fingers]
+        if missing:
+            raise UsdHandsError(f"no {', '.join(missing)} hand with finger joints in this skeleton", path=args.file)
+    db_sides = {SIDES[s] for s in np.unique(db.tracks[:, 3])}
+    for s in with_fingers:
+        if s not in db_sides:
+            raise UsdHandsError(f"the database has no {s}-hand motion; rebuild it with --mirror", path=db.path)
+    progress(1, 4, "synthesizing")
+    result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers))
+    progress(2, 4, "writing")
+    options = {"as_layer": True} if args.layer else {}
+    out = write_clip(args.file, result.clip, args.output, **options)
+    report = _report(result, db, cfg)
+    report["output"] = str(out)
+    if args.plot is not None:
+        report["plots"] = [str(p) for p in _plots(args.plot, clip, result, db, cfg)]
+    progress(4, 4, "done")
+    if args.json:
+        print_json(report)
+        return 0
+    rows = []
+    for side, h in report["hands"].items():
+        rows.append([side, h["segments"], h["top_labels"], f"{h['mean_segment_cost']:.1f}",
+                     f"{h['seams_blended']}/{h['seams']}", f"{100 * h['pruned_share']:.0f}%"])
+    print_table(rows, ["hand", "segments", "labels chosen", "mean cS", "seams blended", "pruned"])
+    for side, m in report["mapping"].items():
+        if m["no_source"]:
+            print(f"{side}: no database counterpart, left as they were: {', '.join(m['no_source'])}")
+        if m["dropped"]:
+            print(f"{side}: database slots with no joint in this rig: {', '.join(m['dropped'])}")
+    for p in report.get("plots", []):
+        print(f"wrote {p}")
+    print(f"wrote {out}")
+    return 0
+
+
+def _report(result, db, cfg) -> dict:
+    from collections import Counter
+
+    import numpy as np
+
+    labels = db.segment_labels()
+    hands = {}
+    for side, h in result.hands.items():
+        chosen = [labels[s] for s in h.chosen]
+        counts = Counter(str(c) for c in chosen)
+        hands[side] = {
+            "segments": int(len(h.chosen)),
+            "chosen_labels": [None if c is None else str(c) for c in chosen],
+            "top_labels": ", ".join(f"{lab} {n}" for lab, n in counts.most_common(3)),
+            "mean_segment_cost": float(np.mean(h.segment_costs[np.arange(len(h.path)), h.path])),
+            "seams": int(len(h.seams.frame)),
+            "seams_blended": int(h.seams.blended.sum()),
+            "pruned_share": float(h.search.pruned_share),
+            "body_scale": float(result.scale[side]),
+        }
+    return {"database": str(db.path), "k": cfg.segment_cost.k, "hands": hands, "mapping": result.mapping}
+
+
+def _plots(folder: Path, clip, result, db, cfg) -> list[Path]:
+    import numpy as np
+
+    from usdhands.commands._synthesis_plots import plot_finger_curves, plot_graph, plot_segmentation
+    from usdhands.model.finger_dofs import finger_curves
+
+    folder.mkdir(parents=True, exist_ok=True)
+    labels = db.segment_labels()
+    out = []
+    for side, h in result.hands.items():
+        out.append(plot_segmentation(h, db.fps, cfg.segmentation.speed_threshold_cm_s, folder / f"{side}_segments.png"))
+        out.append(plot_graph(h, labels, folder / f"{side}_graph.png"))
+        mapped = result.mapping[side]["mapped"]
+        # the most proximal phalanx of each finger (slot d2, else the most proximal mapped)
+        pick = []
+        for finger in ("thumb", "index", "middle", "ring", "pinky"):
+            js = sorted((slot, j) for j, slot in mapped if slot.startswith(finger + ".") and slot[-1] != "3")
+            if js:
+                pick.append(js[-1][1])
+        joints = [clip.skeleton.index(j) for j in pick]
+        before = finger_curves(clip, joints)
+        after = finger_curves(result.clip, joints)
+        # per joint, the axis that moves most (the flexion on most rigs)
+        rng = np.ptp(after.values, axis=0).reshape(len(joints), 3)
+        cols = [3 * i + int(np.argmax(rng[i])) for i in range(len(joints))]
+        times = np.arange(clip.num_frames) / clip.fps
+        out.append(plot_finger_curves(times, before.values[:, cols], after.values[:, cols],
+                                      [after.names[c] for c in cols], folder / f"{side}_fingers.png",
+                                      h.bounds[1:-1] / db.fps))
+    return out
