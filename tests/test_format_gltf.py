@@ -239,6 +239,25 @@ def test_step_sampler_snaps_float32_key_times():
     assert sample_channel(times, values, "STEP", at, False)[1, 0] == 0.0  # without snapping: the previous key
 
 
+def test_sparse_accessor_without_buffer_view_and_malformed_json(tmp_path):
+    from usdhands.formats.gltf_container import GltfFile, read_accessor
+
+    g = pygltflib.GLTF2()
+    b = _Blob(g)
+    idx = b.view(np.array([0, 3], np.uint8))
+    val = b.view(np.array([[1, 2], [3, 4]], np.float32))
+    g.accessors.append(pygltflib.Accessor(componentType=pygltflib.FLOAT, count=5, type="VEC2", sparse=pygltflib.Sparse(
+        count=2, indices=pygltflib.AccessorSparseIndices(bufferView=idx, componentType=pygltflib.UNSIGNED_BYTE),
+        values=pygltflib.AccessorSparseValues(bufferView=val))))
+    g.buffers = [pygltflib.Buffer(byteLength=len(b.data))]
+    arr = read_accessor(GltfFile(tmp_path / "x.glb", g, [bytes(b.data)], True), 0)
+    assert np.array_equal(arr, [[1, 2], [0, 0], [0, 0], [3, 4], [0, 0]])
+    bad = tmp_path / "bad.gltf"
+    bad.write_text('{"asset": {"version": "2.0"}, "nodes": [{"children": [5]}]}')
+    with pytest.raises(AssetReadError, match=r"bad.gltf: nodes\[0\]: child 5 out of range \(there are 1 nodes\)$"):
+        read_asset(bad)
+
+
 def test_nan_in_animation_is_reported(tmp_path):
     path = build_test_gltf(tmp_path, "glb", nan=True)
     with pytest.raises(InvalidAnimationError, match=r"animation 'Anim' has NaN or infinite translations "

@@ -20,11 +20,13 @@ Decisions (see docs/format-gltf.md):
 
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from usdhands.errors import AssetReadError
 from usdhands.formats.gltf_container import GltfFile, load_gltf
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
@@ -580,17 +582,29 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
     AssetReadError
         Unreadable, truncated or inconsistent file (one line, with the path).
     """
-    if scene is None:
-        scene = scan_scene(load_gltf(path))
-    doc = scene.doc
-    clips: list[Clip] = []
-    for ai, anim in enumerate(doc.gltf.animations):
-        name = anim.name or f"animation{ai}"
-        k = 0
-        for binding in scene.bindings:
-            clip = sample_animation(doc, ai, binding, fps, name if k == 0 else f"{name}:{binding.skeleton.name}")
-            if clip is not None:
-                clips.append(clip)
-                k += 1
-    meshes = read_meshes(scene)
+    with malformed_as_read_error(path):
+        if scene is None:
+            scene = scan_scene(load_gltf(path))
+        doc = scene.doc
+        clips: list[Clip] = []
+        for ai, anim in enumerate(doc.gltf.animations):
+            name = anim.name or f"animation{ai}"
+            k = 0
+            for binding in scene.bindings:
+                clip = sample_animation(doc, ai, binding, fps, name if k == 0 else f"{name}:{binding.skeleton.name}")
+                if clip is not None:
+                    clips.append(clip)
+                    k += 1
+        meshes = read_meshes(scene)
     return Asset(str(path), tuple(b.skeleton for b in scene.bindings), tuple(clips), tuple(meshes))
+
+
+@contextlib.contextmanager
+def malformed_as_read_error(path):
+    """Turn the type and index errors that JSON of the wrong shape causes into one-line
+    :class:`AssetReadError` (``"malformed glTF (TypeError: ...)"``)."""
+    try:
+        yield
+    except (TypeError, KeyError, IndexError, AttributeError, ValueError) as e:
+        first = str(e).splitlines()[0] if str(e) else ""
+        raise AssetReadError(f"malformed glTF ({type(e).__name__}: {first})", path=path) from e

@@ -20,7 +20,8 @@ import pygltflib
 from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats.gltf_container import BinaryAppender, GltfFile, load_gltf, save_gltf
 from usdhands.formats.gltf_read import (
-    GltfScene, SkeletonBinding, animation_channels, channel_keys, sample_channel, scan_scene, snap_time,
+    GltfScene, SkeletonBinding, animation_channels, channel_keys, malformed_as_read_error, sample_channel, scan_scene,
+    snap_time,
 )
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
@@ -388,7 +389,8 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
     path = Path(path)
     final = Path(final_path) if final_path is not None else path
     doc = load_gltf(source)
-    scene = scan_scene(doc)
+    with malformed_as_read_error(source):
+        scene = scan_scene(doc)
     binding = _find_binding(scene, clip, source)
     g = doc.gltf
     sk = binding.skeleton
