@@ -180,7 +180,50 @@ def bench_gltf(clip, folder: Path, repeat: int) -> list[tuple]:
     return rows
 
 
-BENCHES = {"usd": bench_usd, "gltf": bench_gltf}
+# --------------------------------------------------------------------------- BVH
+def bench_bvh(clip, folder: Path, repeat: int) -> list[tuple]:
+    """usdhands' BVH write/read against numpy writing and reading the same numbers as text.
+
+    The baseline is the motion block alone: ``np.savetxt`` of the (T, C) channel values
+    with the same ``%.6f`` format, and ``np.loadtxt`` of it, so the ratio is what the
+    hierarchy, the Euler <-> quaternion conversions and the checks cost on top of
+    moving the text.
+    """
+    from usdhands.formats.bvh import HANDLER
+    from usdhands.model.asset import Asset
+
+    ours = folder / "ours.bvh"
+    bare = folder / "bare.txt"
+    asset = Asset("bench", (clip.skeleton,), (clip,))
+    HANDLER.write(asset, ours)
+    text = ours.read_text()  # the channel values as written, for the baseline
+    motion = np.loadtxt(text.split("Frame Time:", 1)[1].split("\n", 1)[1].splitlines())
+
+    def write_ours():
+        HANDLER.write(asset, ours)
+
+    def write_bare():
+        np.savetxt(bare, motion, fmt="%.6f")
+
+    def read_ours():
+        return HANDLER.read(ours)
+
+    def read_bare():
+        return np.loadtxt(bare)
+
+    rows = []
+    w_ours, w_bare = best_of(repeat, write_ours), best_of(repeat, write_bare)
+    rows.append(("bvh", "write", w_ours, w_bare))
+    r_ours, r_bare = best_of(repeat, read_ours), best_of(repeat, read_bare)
+    rows.append(("bvh", "read", r_ours, r_bare))
+    back = read_ours().clips[0]
+    order = [back.skeleton.index(n) for n in clip.skeleton.short_names]  # BVH is depth-first
+    err = float(np.abs(np.abs((back.rotations[:, order] * clip.rotations).sum(-1)) - 1).max())
+    rows.append(("bvh", f"check: max |1-|q.q'|| = {err:.1e}", None, None))
+    return rows
+
+
+BENCHES = {"usd": bench_usd, "gltf": bench_gltf, "bvh": bench_bvh}
 
 
 def main(argv=None) -> int:
