@@ -244,3 +244,29 @@ def leap_handside(side: str) -> HandSide:
     return HandSide(side=side, wrist=f"{s}Hand", forearm=f"{s}ForeArm", shoulder=None, root=None,
                     fingers={fl: tuple(f"{s}{lf}{k}" for k in (1, 2, 3))
                              for fl, lf in zip(UE_FINGERS, LEAP_FINGERS)})
+
+
+def write_example(folder, n: int = 300, seed: int = 1) -> None:
+    """Write ``body.bvh`` (Mixamo-style names), ``hands.bvh`` (Leap-style partial rig) and
+    ``truth.json`` (the hand frame belonging to each body frame) into ``folder``."""
+    import json
+    from pathlib import Path
+
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    case = make_case(n, seed=seed, partial=True)
+    for clip, name in ((case.body, "body.bvh"), (case.hands, "hands.bvh")):
+        write_asset(Asset("synthetic", (clip.skeleton,), (clip,), ()), folder / name)
+    (folder / "truth.json").write_text(json.dumps({"hand_frame_of_body_frame": [round(float(v), 3)
+                                                                              for v in case.truth]}))
+
+
+if __name__ == "__main__":
+    import sys
+
+    if len(sys.argv) != 2:
+        sys.exit("usage: python tests/splice_synth.py OUTPUT_FOLDER")
+    write_example(sys.argv[1])

@@ -269,11 +269,15 @@ def _sgn(x, eps):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _window_cos_sin(P, Q, i, j, half):  # pragma: no cover - compiled
-    """cos and sin of eq. 7's angle without evaluating atan2 (num and den normalised)."""
-    n = P.shape[0]
-    m = Q.shape[0]
-    K = P.shape[1]
+def _window_cos_sin(X, Z, Xh, Zh, SX, SZ, SXh, SZh, i, j, half):  # pragma: no cover - compiled
+    """cos and sin of eq. 7's angle (num and den normalised, no atan2).
+
+    ``X, Z`` ``(n, K)`` are the body markers' horizontal coordinates, ``SX, SZ`` ``(n,)``
+    their sums over the markers; ``Xh, Zh, SXh, SZh`` the same for the hand.
+    """
+    n = X.shape[0]
+    m = Xh.shape[0]
+    K = X.shape[1]
     sxz = 0.0
     sxx = 0.0
     bx = 0.0
@@ -287,17 +291,13 @@ def _window_cos_sin(P, Q, i, j, half):  # pragma: no cover - compiled
         if a < 0 or b < 0 or a >= n or b >= m:
             continue
         for mk in range(K):
-            x = P[a, mk, 0]
-            z = P[a, mk, 2]
-            xp = Q[b, mk, 0]
-            zp = Q[b, mk, 2]
-            sxz += x * zp - xp * z
-            sxx += x * xp + z * zp
-            bx += x
-            bz += z
-            hx += xp
-            hz += zp
-            cnt += 1
+            sxz += X[a, mk] * Zh[b, mk] - Xh[b, mk] * Z[a, mk]
+            sxx += X[a, mk] * Xh[b, mk] + Z[a, mk] * Zh[b, mk]
+        bx += SX[a]
+        bz += SZ[a]
+        hx += SXh[b]
+        hz += SZh[b]
+        cnt += K
     num = sxz - (bx * hz - hx * bz) / cnt
     den = sxx - (bx * hx + bz * hz) / cnt
     r = np.sqrt(num * num + den * den)
@@ -312,6 +312,27 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
     N = rows.shape[0]
     K = P.shape[1]
     out = np.empty(N)
+    X = np.ascontiguousarray(P[:, :, 0])
+    Z = np.ascontiguousarray(P[:, :, 2])
+    Xh = np.ascontiguousarray(Q[:, :, 0])
+    Zh = np.ascontiguousarray(Q[:, :, 2])
+    SX = X.sum(axis=1)
+    SZ = Z.sum(axis=1)
+    SXh = Xh.sum(axis=1)
+    SZh = Zh.sum(axis=1)
+    n = vb.shape[0]
+    m = vh.shape[0]
+    SB = np.empty((n, K, 6))  # body signs: v then a, x y z
+    for i in range(n):
+        for mk in range(K):
+            for ax in range(3):
+                SB[i, mk, ax] = _sgn(vb[i, mk, ax], eps_vb)
+                SB[i, mk, 3 + ax] = _sgn(ab[i, mk, ax], eps_ab)
+    SH = np.empty((m, K, 2))  # hand signs of the vertical components
+    for j in range(m):
+        for mk in range(K):
+            SH[j, mk, 0] = _sgn(vh[j, mk, 1], eps_vh)
+            SH[j, mk, 1] = _sgn(ah[j, mk, 1], eps_ah)
     for c in range(N):
         i = rows[c]
         j = cols[c]
@@ -320,29 +341,25 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
             co = np.cos(th)
             si = np.sin(th)
         else:
-            co, si = _window_cos_sin(P, Q, i, j, half)
+            co, si = _window_cos_sin(X, Z, Xh, Zh, SX, SZ, SXh, SZh, i, j, half)
         d = 0.0
         for mk in range(K):
             # R_y(θ) applied to the hand's derivatives: x' = c x + s z, z' = -s x + c z
             x = vh[j, mk, 0]
             z = vh[j, mk, 2]
-            rv0 = co * x + si * z
-            rv2 = -si * x + co * z
+            e = SB[i, mk, 0] - _sgn(co * x + si * z, eps_vh)
+            d += e * e
+            e = SB[i, mk, 2] - _sgn(-si * x + co * z, eps_vh)
+            d += e * e
             x = ah[j, mk, 0]
             z = ah[j, mk, 2]
-            ra0 = co * x + si * z
-            ra2 = -si * x + co * z
-            e = _sgn(vb[i, mk, 0], eps_vb) - _sgn(rv0, eps_vh)
+            e = SB[i, mk, 3] - _sgn(co * x + si * z, eps_ah)
             d += e * e
-            e = _sgn(vb[i, mk, 1], eps_vb) - _sgn(vh[j, mk, 1], eps_vh)
+            e = SB[i, mk, 5] - _sgn(-si * x + co * z, eps_ah)
             d += e * e
-            e = _sgn(vb[i, mk, 2], eps_vb) - _sgn(rv2, eps_vh)
+            e = SB[i, mk, 1] - SH[j, mk, 0]  # vertical components do not turn
             d += e * e
-            e = _sgn(ab[i, mk, 0], eps_ab) - _sgn(ra0, eps_ah)
-            d += e * e
-            e = _sgn(ab[i, mk, 1], eps_ab) - _sgn(ah[j, mk, 1], eps_ah)
-            d += e * e
-            e = _sgn(ab[i, mk, 2], eps_ab) - _sgn(ra2, eps_ah)
+            e = SB[i, mk, 4] - SH[j, mk, 1]
             d += e * e
         out[c] = d
     return out
@@ -847,9 +864,9 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
         return FingerTransfer([], np.zeros((n, 0, 4)), np.zeros(0, np.int64))
     rel = quat_multiply(quat_conjugate(hands.skeleton.rest_rotations[hj])[None], hands.rotations[:, hj])
     # keep consecutive quaternions in one hemisphere so slerp and blends take short arcs
-    for t in range(1, rel.shape[0]):
-        flip = np.sum(rel[t] * rel[t - 1], axis=-1) < 0
-        rel[t, flip] *= -1
+    if rel.shape[0] > 1:
+        step = np.where(np.sum(rel[1:] * rel[:-1], axis=-1) < 0, -1.0, 1.0)
+        rel[1:] *= np.cumprod(step, axis=0)[..., None]
     out = _sample(rel, a)
     rate = (hands.num_frames - 1) / max(n - 1, 1)
     steps = np.diff(a)

@@ -9,7 +9,7 @@ import numpy as np
 
 
 def plot_alignment(alignment, path: str | Path, *, title: str = "", constraints: Sequence = (),
-                   truth: np.ndarray | None = None, dpi: int = 80) -> Path:
+                   truth: np.ndarray | None = None, dpi: int = 64) -> Path:
     """Draw both passes of one hand's alignment into a PNG.
 
     Left: the first-pass cost (eq. 6) inside its band; middle: the second-pass cost
