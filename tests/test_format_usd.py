@@ -575,3 +575,50 @@ def test_animation_without_values_has_zero_frames(tmp_path):
     with pytest.raises(InvalidAnimationError) as e:
         read_clip(p)
     assert str(e.value) == f"{p}: animation '/Skel/Anim' has zero frames"
+
+
+def test_write_clip_copy_keeps_variants_and_reanchors_asset_paths(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    (tmp_path / "tex").mkdir()
+    (tmp_path / "tex" / "skin.png").write_bytes(b"not really a png")
+    stage = Usd.Stage.Open(str(src))
+    looks = stage.GetPrimAtPath("/Char/Looks")
+    vset = looks.GetVariantSets().AddVariantSet("palette")
+    for name in ("warm", "cold"):
+        vset.AddVariant(name)
+        vset.SetVariantSelection(name)
+        with vset.GetVariantEditContext():
+            stage.DefinePrim(f"/Char/Looks/{name.title()}Only", "Scope")
+    vset.SetVariantSelection("warm")
+    tex = stage.GetPrimAtPath("/Char/Looks/Skin").CreateAttribute("file", Sdf.ValueTypeNames.Asset)
+    tex.Set(Sdf.AssetPath("./tex/skin.png"))
+    stage.Save()
+    clip = read_clip(src)
+    new = clip.replace(rotations=random_quats(clip.rotations.shape[:2]))
+    (tmp_path / "out").mkdir()
+    out = write_clip(src, new, tmp_path / "out" / "copy.usda")
+    layer = Sdf.Layer.FindOrOpen(str(out))
+    vspec = layer.GetPrimAtPath("/Char/Looks").variantSets["palette"]
+    assert sorted(v.name for v in vspec.variantList) == ["cold", "warm"]  # the unselected variant is kept
+    assert layer.GetAttributeAtPath("/Char/Looks/Skin.file").default.path == "../tex/skin.png"
+    copied = Usd.Stage.Open(str(out))
+    resolved = copied.GetPrimAtPath("/Char/Looks/Skin").GetAttribute("file").Get().resolvedPath
+    assert Path(resolved) == tmp_path / "tex" / "skin.png"
+    assert_rotations_close(read_clip(out).rotations, new.rotations)
+
+
+def test_write_clip_flattens_a_source_with_sublayers(tmp_path):
+    base = build_stage(tmp_path / "base.usda")
+    top = tmp_path / "shot.usda"
+    layer = Sdf.Layer.CreateNew(str(top))
+    layer.subLayerPaths.append("./base.usda")
+    layer.Save()
+    stage = Usd.Stage.Open(str(top))
+    stage.DefinePrim("/Char/Prop", "Xform")
+    stage.Save()
+    clip = read_clip(top)
+    out = write_clip(top, clip, tmp_path / "flat.usda")
+    flat = Sdf.Layer.FindOrOpen(str(out))
+    assert list(flat.subLayerPaths) == []
+    assert flat.GetPrimAtPath("/Char/Prop") and flat.GetPrimAtPath("/Char/Skel/Anim")
+    assert base.exists()

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
 
 from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats.usd_common import (
@@ -312,8 +312,10 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
     animation : str, optional
         Prim path of the SkelAnimation to replace.
     as_layer : bool
-        False: a flattened copy of the source stage with the animation replaced
-        (meshes, materials and every other prim kept). True: a sparse layer that
+        False: a copy of the source with the animation replaced (meshes, materials
+        and every other prim kept): the root layer as it is when it composes nothing
+        from other files (variants, instancing and layout kept; relative asset paths
+        re-anchored to the output's folder), else the flattened stage. True: a sparse layer that
         sublayers ``source`` and holds only ``over``s of the changed animation
         attributes (plus a new SkelAnimation where the skeleton had none).
     hand_map : HandMap, optional
@@ -346,7 +348,9 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
             layer.subLayerPaths.append(os.path.abspath(source))
             stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
         else:
-            layer = src_stage.Flatten()
+            layer = _copy_self_contained_root(src_stage, source, final_path.parent)
+            if layer is None:
+                layer = src_stage.Flatten()
             stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
         stage.SetEditTarget(Usd.EditTarget(layer))
         codes, skel_prim, anim_prim = _put_clip(stage, clip, animation, source, only_changed=as_layer)
@@ -364,6 +368,32 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
             layer.subLayerPaths.clear()
             layer.subLayerPaths.append(rel)
         layer.Export(str(path))
+
+
+def _copy_self_contained_root(stage: Usd.Stage, source: Path, out_folder: Path) -> Sdf.Layer | None:
+    """A copy of the root layer when it alone is the asset (no sublayers, references or
+    payloads to other files, not inside a package), relative asset paths re-anchored to
+    ``out_folder``; None otherwise."""
+    root = stage.GetRootLayer()
+    if root.subLayerPaths or root.GetCompositionAssetDependencies() or source.suffix.lower() == ".usdz":
+        return None
+    layer = Sdf.Layer.CreateAnonymous(source.suffix or ".usda")
+    layer.TransferContent(root)
+    src_dir = os.path.dirname(os.path.abspath(source))
+    out_dir = os.path.abspath(out_folder)
+    if src_dir != out_dir:
+        def reanchor(asset_path: str) -> str:
+            if not asset_path or os.path.isabs(asset_path) or "://" in asset_path or asset_path.startswith("@"):
+                return asset_path
+            package, bracket, inner = asset_path.partition("[")
+            target = os.path.normpath(os.path.join(src_dir, package))
+            explicit = package.startswith(("./", "../"))
+            if not explicit and not os.path.exists(target):
+                return asset_path  # a search path, not found beside the source: leave it to the resolver
+            return _relative_asset_path(Path(target), Path(out_dir)) + bracket + inner
+
+        UsdUtils.ModifyAssetPaths(layer, reanchor)
+    return layer
 
 
 def _relative_asset_path(target: Path, folder: Path) -> str:
