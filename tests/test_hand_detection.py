@@ -221,6 +221,30 @@ def test_makehuman_numbers_and_shared_carpal():
     assert c["ring"] == ["metacarpal3.L", "finger4-1.L", "finger4-2.L", "finger4-3.L"]
     assert c["pinky"] == ["metacarpal4.L", "finger5-1.L", "finger5-2.L", "finger5-3.L"]
 
+
+def test_daz_genesis_shared_carpals_and_twist_joints():
+    pairs = [("hip", None), ("pelvis", "hip"), ("lThighBend", "pelvis"), ("abdomenLower", "hip"),
+             ("chestUpper", "abdomenLower"), ("lCollar", "chestUpper"), ("lShldrBend", "lCollar"),
+             ("lShldrTwist", "lShldrBend"), ("lForearmBend", "lShldrTwist"), ("lForearmTwist", "lForearmBend"),
+             ("lHand", "lForearmTwist"), ("lThumb1", "lHand"), ("lThumb2", "lThumb1"), ("lThumb3", "lThumb2"),
+             ("lCarpal1", "lHand"), ("lCarpal2", "lHand")]
+    for F, carpal in (("Index", "lCarpal1"), ("Mid", "lCarpal1"), ("Ring", "lCarpal2"), ("Pinky", "lCarpal2")):
+        pairs += [(f"l{F}1", carpal), (f"l{F}2", f"l{F}1"), (f"l{F}3", f"l{F}2")]
+    hm = detect_hands(make_skeleton(pairs))
+    h = hm.left
+    assert (h.wrist, h.forearm, h.shoulder, h.root) == ("lHand", "lForearmBend", "lShldrBend", "hip")
+    assert chains(h) == {f: [f"l{F}{k}" for k in (1, 2, 3)] for f, F in
+                         zip(("thumb", "index", "middle", "ring", "pinky"), ("Thumb", "Index", "Mid", "Ring", "Pinky"))}
+
+
+def test_helper_joint_inside_a_finger_and_a_stray_hand_named_joint():
+    pairs = robot_pairs() + [("HandProp.L", "Torso")]  # wristless rig + a "hand" joint the fingers are not under
+    pairs = [(n, p) if n != "Index2.L" else ("Index2.L", "Index.L_twist") for n, p in pairs]
+    pairs.insert([n for n, _ in pairs].index("Index2.L"), ("Index.L_twist", "Index.L"))
+    hm = detect_hands(make_skeleton(pairs))
+    assert hm.left.wrist == "LowerArm.L"
+    assert chains(hm.left)["index"] == ["Palm1.L", "Index.L", "Index2.L"]
+
 WEBXR = ["wrist", "thumb-metacarpal", "thumb-phalanx-proximal", "thumb-phalanx-distal", "thumb-tip"] + [
     f"{F}-finger-{s}" for F in ("index", "middle", "ring", "pinky")
     for s in ("metacarpal", "phalanx-proximal", "phalanx-intermediate", "phalanx-distal", "tip")]

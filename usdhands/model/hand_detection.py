@@ -26,9 +26,10 @@ classifies each joint:
 Per side, the finger chains are the finger joints ordered from the wrist outwards
 (by depth in the hierarchy, then by the segment the name gives: metacarpal,
 proximal, intermediate/medial, distal, or the joint's number, which orders flat
-hierarchies such as the WebXR hand, where every joint is a sibling). The wrist is
-the named wrist candidate that the most chains hang below (the deepest on a tie);
-chains that do not hang below it are dropped. A rig without a wrist joint takes as
+hierarchies such as the WebXR hand, where every joint is a sibling; helper joints
+inside a finger are skipped). The wrist is the named wrist candidate that the most
+chains hang below (the deepest on a tie); chains that do not hang below it are
+dropped. In a flat hierarchy the wrist-named joint is taken as it is. A rig without a wrist joint takes as
 wrist the lowest common ancestor of its finger chains: on RobotExpressive
 (``LowerArm.L`` → ``Palm1.L`` → ``Index.L`` → ``Index2.L``, thumb directly under
 ``LowerArm.L``) that is ``LowerArm.L``. Unnamed joints between the wrist and one
@@ -38,8 +39,8 @@ of its chain; joints shared by several fingers (a common palm) are not.
 Above the wrist: the **forearm** is the nearest ancestor named ``forearm``,
 ``lowerarm`` or ``elbow`` (twist and roll joints skipped), else the wrist's parent;
 the **shoulder** (upper arm) is the nearest ancestor of the forearm named
-``upperarm``, ``arm``, ``shoulder`` or ``humerus``, else the forearm's parent; the
-**root** is the nearest ancestor named ``hips``/``hip``/``pelvis``, else the topmost
+``upperarm``, ``arm``, ``shoulder``, ``shldr`` (Daz) or ``humerus``, else the
+forearm's parent; the **root** is the nearest ancestor named ``hips``/``hip``/``pelvis``, else the topmost
 ancestor of the wrist (None when that is the wrist itself). On RobotExpressive, whose
 wrist is ``LowerArm.L``, the forearm is therefore ``UpperArm.L`` and the shoulder
 ``Shoulder.L``: the joints above the wrist shift by one, the nearest stand-ins the rig
@@ -173,10 +174,6 @@ def _ancestors(skeleton: Skeleton, j: int) -> list[int]:
     return skeleton.chain_to_root(j)[1:]
 
 
-def _is_ancestor_or_self(skeleton: Skeleton, a: int, j: int) -> bool:
-    return a == j or a in _ancestors(skeleton, j)
-
-
 def _depth(skeleton: Skeleton, j: int) -> int:
     return len(skeleton.chain_to_root(j)) - 1
 
@@ -199,14 +196,13 @@ def _order_chain(skeleton: Skeleton, joints: list[_Joint]) -> list[int]:
     depths = {_depth(skeleton, c.index) for c in js}
     if len(depths) == 1:  # flat hierarchy: the names give the order
         return [c.index for c in js]
-    members = {c.index for c in js}
+    rank = {c.index: c.rank for c in js}
     chain = [js[0].index]
-    while True:
-        kids = [k for k in skeleton.children(chain[-1]) if k in members]
-        if not kids:
+    while True:  # the nearest member below the last one (helper joints in between are skipped)
+        below = [k for k in rank if k not in chain and chain[-1] in _ancestors(skeleton, k)]
+        if not below:
             break
-        kids.sort(key=lambda k: next(c.rank for c in js if c.index == k))
-        chain.append(kids[0])
+        chain.append(min(below, key=lambda k: (_depth(skeleton, k), rank[k], k)))
     return chain
 
 
@@ -299,13 +295,14 @@ def _detect_side(skeleton: Skeleton, joints: list[_Joint], side: list, s: str) -
     if wrist_cands:
         scored = []
         for w in wrist_cands:
-            n = sum(_is_ancestor_or_self(skeleton, w, st) and w != st for st in starts.values())
+            n = sum(w in _ancestors(skeleton, st) for st in starts.values())
             scored.append((n, _depth(skeleton, w), -w, w))
         n, _, _, best = max(scored)
+        flat = all(len({_depth(skeleton, j) for j in c}) == 1 for c in chains.values())
         if n > 0:
             wrist = best
             chains = {f: c for f, c in chains.items() if wrist in _ancestors(skeleton, c[0])}
-        else:  # flat hierarchy (WebXR): the shallowest wrist-named joint
+        elif flat:  # flat hierarchy (WebXR's glTF): the shallowest wrist-named joint
             wrist = min(wrist_cands, key=lambda w: (_depth(skeleton, w), w))
     if wrist is None:
         lca = _lca(skeleton, list(starts.values()))
@@ -363,7 +360,7 @@ def _is_forearm(jt: _Joint) -> bool:
 def _is_upper_arm(jt: _Joint) -> bool:
     c = jt.core
     return not _is_helper(jt) and ("upperarm" in c or c in ("arm", "shoulder") or "humerus" in c
-                                   or c.endswith("shoulder") or c == "uparm")
+                                   or c.endswith("shoulder") or c == "uparm" or c.startswith("shldr"))
 
 
 def _is_hips(jt: _Joint) -> bool:
