@@ -499,3 +499,10 @@ def test_sideless_finger_names_inherit_the_side_of_their_hand():
     assert chains(hm.left)["thumb"] == ["Hips/Spine/LeftArm/LeftForeArm/LeftHand/Thumb1",
                                         "Hips/Spine/LeftArm/LeftForeArm/LeftHand/Thumb1/Thumb2"]
     assert chains(hm.left)["middle"] == []
+
+
+def test_sample_humanoid_matches_its_authored_handmap():
+    from usdhands.samples.humanoid import humanoid_handmap, humanoid_skeleton
+
+    sk = humanoid_skeleton()
+    assert detect_hands(sk) == humanoid_handmap(sk)
