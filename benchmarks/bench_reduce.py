@@ -18,11 +18,20 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import sys
 import time
 
-import numpy as np
+# One BLAS thread unless told otherwise (--blas-threads): on a shared 2-core machine a
+# multi-threaded matrix product competing with other processes swings from 0.03 s to 2 s;
+# one thread is the steady, conservative figure. Must be set before numpy is imported.
+_threads = next((a.split("=", 1)[1] for a in sys.argv if a.startswith("--blas-threads=")), "1")
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, _threads)
 
-from usdhands.algorithms.reduction import DEFAULT_STEPS, pair_rmsd, reduce_curves, standardise
+import numpy as np  # noqa: E402
+
+from usdhands.algorithms.reduction import DEFAULT_STEPS, pair_rmsd, reduce_curves, standardise  # noqa: E402
 
 
 def make_hands(frames: int, curves: int, seed: int = 0):
@@ -86,11 +95,15 @@ def main() -> None:
     ap.add_argument("--curves", type=int, default=50, help="curves per hand")
     ap.add_argument("--sample-pairs", type=int, default=12, help="pairs for the pure-Python loop")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--blas-threads", default="1", help="BLAS threads (give as --blas-threads=N; default 1)")
     args = ap.parse_args()
 
     values, names, groups = make_hands(args.frames, args.curves)
     T, D = values.shape
     pairs = 2 * (args.curves * (args.curves - 1) // 2)
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"machine: {os.cpu_count()} CPUs, load average {load:.1f} at start, BLAS threads "
+          f"{os.environ.get('OPENBLAS_NUM_THREADS')} (ratios are the figure to compare)")
     print(f"data: 2 hands x {args.curves} curves, {T} frames ({values.nbytes / 1e6:.0f} MB float64), "
           f"{pairs} pairs within hands")
 

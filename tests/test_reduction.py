@@ -105,6 +105,12 @@ def test_positive_and_negative_relations_rebuild_by_the_papers_formulas():
         assert rebuilt[:, k].mean() == pytest.approx(v[:, k].mean(), abs=1e-9)
         assert rebuilt[:, k].std() == pytest.approx(v[:, k].std(), rel=1e-9)
     assert np.array_equal(rebuilt[:, 1], b)
+    # the error figures: RMS per curve = std * rmsd (no pass over the data), checked against the rebuild
+    err = rebuilt - v
+    assert np.allclose(res.final.curve_rms_error_deg, np.sqrt(np.mean(err ** 2, axis=0)), rtol=1e-9, atol=1e-12)
+    assert np.allclose(res.final.curve_max_error_deg, np.abs(err).max(axis=0))
+    assert res.final.rms_error_deg == pytest.approx(math.sqrt(np.mean(err ** 2)), rel=1e-9)
+    assert res.final.max_error_deg == pytest.approx(np.abs(err).max())
     # the reported distances are those of the standardised pair
     r1, r2 = naive_rmsd(v)
     assert rel["p.x"].rmsd == pytest.approx(r1[0, 1], abs=1e-9)

@@ -154,8 +154,9 @@ def curve_statistics(values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     mean, std, range : (D,) float64
         Degrees.
     """
-    mean, _, cov, rng = _moments(_check_values(values))
-    return mean, np.sqrt(np.diag(cov)), rng
+    v = _check_values(values)
+    mean, vmin, vmax = _mean_min_max(v)
+    return mean, np.sqrt(np.diag(_covariance(v, mean))), vmax - vmin
 
 
 def standardise(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -200,8 +201,8 @@ def pair_rmsd(values: np.ndarray, groups=None) -> tuple[np.ndarray, np.ndarray]:
         ``rmsd1 = sqrt(2 - 2r)``, ``rmsd2 = sqrt(2 + 2r)`` with ``r`` the correlation.
     """
     v = _check_values(values)
-    _, _, cov, rng = _moments(v)
-    return _rmsd_from_cov(cov, rng, _group_codes(groups, v.shape[1]))
+    mean, vmin, vmax = _mean_min_max(v)
+    return _rmsd_from_cov(_covariance(v, mean), vmax - vmin, _group_codes(groups, v.shape[1]))
 
 
 def _moments(v: np.ndarray):
@@ -210,14 +211,34 @@ def _moments(v: np.ndarray):
     One pass for the mean, one for the centring, one matrix product; the standard
     deviations are the square roots of the covariance's diagonal.
     """
-    T = v.shape[0]
-    mean = v.mean(axis=0)
-    rng = v.max(axis=0) - v.min(axis=0)
-    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(rng))):
-        raise ValueError("Expected finite values, got NaN or infinity")
+    mean, vmin, vmax = _mean_min_max(v)
     centred = v - mean
-    cov = (centred.T @ centred) / T
-    return mean, centred, cov, rng
+    cov = (centred.T @ centred) / v.shape[0]
+    return mean, centred, cov, vmax - vmin
+
+
+def _mean_min_max(v: np.ndarray):
+    mean = v.mean(axis=0)
+    vmin, vmax = v.min(axis=0), v.max(axis=0)
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(vmax - vmin))):
+        raise ValueError("Expected finite values, got NaN or infinity")
+    return mean, vmin, vmax
+
+
+_CHUNK_ROWS = 8192
+
+
+def _covariance(v: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """``C^T C / T`` of the centred curves, centring a block of rows at a time (no (T, D) copy)."""
+    T, D = v.shape
+    cov = np.zeros((D, D))
+    block = np.empty((min(T, _CHUNK_ROWS), D))
+    for a in range(0, T, _CHUNK_ROWS):
+        b = min(a + _CHUNK_ROWS, T)
+        c = block[: b - a]
+        np.subtract(v[a:b], mean, out=c)
+        cov += c.T @ c
+    return cov / T
 
 
 def _valid(std: np.ndarray, rng: np.ndarray) -> np.ndarray:
@@ -337,7 +358,7 @@ class ReductionResult:
         original = {"condition": "original", "dofs_left": len(self.names), "rms_error_deg": 0.0,
                     "max_error_deg": 0.0,
                     "dofs_left_by_hand": {g: sum(1 for x in self.groups if str(x) == g) for g in groups},
-                    "num_constants": 0, "num_relations": 0}
+                    "num_constants": 0, "num_relations": 0, "worst_curve": None}
         return {
             "curves": len(self.names),
             "steps": [original] + [s.to_dict() for s in self.steps],
@@ -392,8 +413,9 @@ def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None
         raise ValueError(f"Expected {D} group labels, got {len(group_labels)}")
     codes = _group_codes(group_labels, D)
 
-    mean, centred, cov, rng = _moments(v)
-    del centred
+    mean, vmin, vmax = _mean_min_max(v)
+    cov = _covariance(v, mean)
+    rng = vmax - vmin
     std = np.sqrt(np.diag(cov))
     rmsd1, rmsd2 = _rmsd_from_cov(cov, rng, codes)
     valid = _valid(std, rng)
@@ -405,6 +427,7 @@ def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None
     rmsd_thr: dict[str, float] = {}
     results = []
     metadata = {"groups": [str(g) for g in group_labels]} if groups is not None else {}
+    max_cache: dict = {}
     for rule in rules:
         if isinstance(rule, RangeRule):
             range_rule, rmsd_thr = rule, {}
@@ -427,7 +450,8 @@ def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None
                                source=source, metadata=metadata)
         free = ~constant & (final < 0)
         by_group = {g: int(np.sum(free[codes == c])) for c, g in _group_items(group_labels, codes)}
-        rms, mx, per_curve, per_curve_max = _errors(v, model, names)
+        rms, mx, per_curve, per_curve_max = _errors(v, constant, final, sign, mean, std, vmin, vmax,
+                                                    rmsd1, rmsd2, model, max_cache)
         results.append(StepResult(rule, condition, model, int(free.sum()), by_group, rms, mx, per_curve,
                                   per_curve_max))
     return ReductionResult(names, group_labels, mean, std, rng, rmsd1, rmsd2, tuple(results))
@@ -465,26 +489,41 @@ def _resolve_relations(rmsd1, rmsd2, thr: dict, active: np.ndarray, rank: np.nda
     return final, sign
 
 
-def _errors(v: np.ndarray, model: ReductionModel, names):
-    """RMS and max over all entries, and RMS and max per curve, of ``rebuilt - v`` (rebuilt columns only)."""
+def _errors(v, constant, final, sign, mean, std, vmin, vmax, rmsd1, rmsd2, model: ReductionModel, max_cache: dict):
+    """RMS and max over all entries, and RMS and max per curve, of ``rebuilt - v``.
+
+    The RMS needs no pass over the data: a constant's error ``v - mean`` has RMS
+    ``std``; a dependent curve's error ``±std_a z_c - std_a z_a`` has RMS
+    ``std_a * rmsd(a, c)`` of its kind. Maxima of constants come from the curves' minima
+    and maxima; those of relations from one pass per relation not seen in an earlier
+    step (``max_cache``, keyed by dependent, controller and sign).
+    """
     T, D = v.shape
-    col = {n: k for k, n in enumerate(names)}
     sq = np.zeros(D)
     cmax = np.zeros(D)
-    for c in model.constants:
-        e = v[:, col[c.curve]] - c.value
-        sq[col[c.curve]] = float(e @ e)
-        cmax[col[c.curve]] = float(np.abs(e).max())
-    if model.relations:
-        dep = np.array([col[r.dependent] for r in model.relations])
-        ctrl = np.array([col[r.controlling] for r in model.relations])
-        scale = np.array([r.scale for r in model.relations])
-        offset = np.array([r.offset for r in model.relations])
-        e = v[:, ctrl] * scale + offset - v[:, dep]
-        sq[dep] = np.einsum("ij,ij->j", e, e)
-        cmax[dep] = np.abs(e).max(axis=0)
-    rms = math.sqrt(sq.sum() / (T * D)) if T * D else 0.0
-    return rms, float(cmax.max()) if D else 0.0, np.sqrt(sq / T), cmax
+    k = np.flatnonzero(constant)
+    sq[k] = std[k] ** 2
+    cmax[k] = np.maximum(vmax[k] - mean[k], mean[k] - vmin[k])
+    dep = np.flatnonzero(final >= 0)
+    if dep.size:
+        ctrl = final[dep]
+        dist = np.where(sign[dep] > 0, rmsd1[dep, ctrl], rmsd2[dep, ctrl])
+        sq[dep] = (std[dep] * dist) ** 2
+        keys = [(int(i), int(f), float(sg)) for i, f, sg in zip(dep, ctrl, sign[dep])]
+        todo = [n for n, key in enumerate(keys) if key not in max_cache]
+        if todo:
+            by_dep = {r.dependent: r for r in model.relations}
+            rel = [by_dep[model.curves[keys[n][0]]] for n in todo]
+            scale = np.array([r.scale for r in rel])
+            offset = np.array([r.offset for r in rel])
+            d_idx, c_idx = dep[todo], ctrl[todo]
+            e = v[:, c_idx] * scale + offset
+            e -= v[:, d_idx]
+            for n, m in zip(todo, np.abs(e).max(axis=0)):
+                max_cache[keys[n]] = float(m)
+        cmax[dep] = [max_cache[key] for key in keys]
+    rms = math.sqrt(sq.sum() / D) if D else 0.0  # sq holds per-curve mean squares
+    return rms, float(cmax.max()) if D else 0.0, np.sqrt(sq), cmax
 
 
 def _condition(range_rule, rmsd_thr: dict) -> str:
