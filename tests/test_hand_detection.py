@@ -344,6 +344,14 @@ def test_no_hands_lists_joints_and_what_was_looked_for():
     assert msg.endswith("Bone37, Bone38 (and 5 more)")
 
 
+def test_side_from_name():
+    from usdhands.model.hand_detection import side_from_name
+
+    assert side_from_name("left.glb") == "left" and side_from_name("webxr/right.glb") == "right"
+    assert side_from_name("hand_L.usd") == "left" and side_from_name("LR.bvh") is None
+    assert side_from_name("/CesiumMan/Skeleton") is None and side_from_name("left_right.bvh") is None
+
+
 def test_tokens():
     assert joint_tokens("mixamorig:LeftHandIndex1") == ["left", "hand", "index", "1"]
     assert joint_tokens("Root/Hips/index_metacarpal_l") == ["index", "metacarpal", "l"]

@@ -10,7 +10,7 @@ from usdhands.commands._common import print_table
 from usdhands.errors import AssetReadError, NoHandsError, NoSkeletonError
 from usdhands.formats.io import read_asset
 from usdhands.formats.registry import atomic_output, check_output_path
-from usdhands.model.hand_detection import joint_tokens, resolve_handmap
+from usdhands.model.hand_detection import resolve_handmap, side_from_name
 from usdhands.model.handmap import FINGERS, SIDES, HandMap
 from usdhands.model.skeleton import short_joint_name
 
@@ -30,12 +30,6 @@ def register(sub) -> None:
     p.add_argument("--handmap", type=Path, default=None,
                    help="check this hand map JSON against the skeleton instead of detecting")
     p.set_defaults(func=run)
-
-
-def _side_from_path(path: Path) -> str | None:
-    toks = set(joint_tokens(path.stem))
-    left, right = bool(toks & {"left", "l"}), bool(toks & {"right", "r"})
-    return "left" if left and not right else "right" if right and not left else None
 
 
 def _pick_skeleton(asset, path: Path, animation, skeleton):
@@ -76,7 +70,7 @@ def run(args) -> int:
         check_output_path(args.output, args.file)
     asset = read_asset(args.file)
     sk = _pick_skeleton(asset, args.file, args.animation, args.skeleton)
-    side_hint = args.side or _side_from_path(args.file)
+    side_hint = args.side or side_from_name(args.file.name)
     try:
         hm = resolve_handmap(sk, args.handmap, side_hint=side_hint)
     except NoHandsError as e:

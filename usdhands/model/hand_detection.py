@@ -64,7 +64,7 @@ from usdhands.model.handmap import FINGERS, SIDES, HandMap, HandSide
 from usdhands.model.skeleton import Skeleton
 
 __all__ = ["detect_hands", "load_handmap", "resolve_handmap", "NoHandsError", "joint_tokens",
-           "handmap_schema"]
+           "handmap_schema", "side_from_name"]
 
 _LEFT = {"left", "l", "lf", "lft"}
 _RIGHT = {"right", "r", "rt", "rgt"}
@@ -206,15 +206,25 @@ def _order_chain(skeleton: Skeleton, joints: list[_Joint]) -> list[int]:
     return chain
 
 
-def _side_of_skeleton_name(skeleton: Skeleton) -> str | None:
+def side_from_name(text: str) -> str | None:
+    """The side a name or path says, e.g. ``"webxr/left.glb"`` → ``"left"``; None if none or both.
+
+    Every path element counts; file extensions are ignored. For commands to pass a
+    ``side_hint`` from a file name.
+    """
     toks = set()
-    for part in re.split(r"[/\\]", skeleton.name):
-        toks.update(joint_tokens(part))
+    for part in re.split(r"[/\\]", str(text)):
+        part = re.sub(r"\.[A-Za-z0-9]+$", "", part)
+        toks.update(joint_tokens(part.replace(":", "_").replace("|", "_")))
     if toks & _LEFT and not toks & _RIGHT:
         return "left"
     if toks & _RIGHT and not toks & _LEFT:
         return "right"
     return None
+
+
+def _side_of_skeleton_name(skeleton: Skeleton) -> str | None:
+    return side_from_name(skeleton.name)
 
 
 def _looked_for() -> str:
