@@ -304,3 +304,18 @@ def test_names_with_spaces_and_crlf(tmp_path):
     out = write_asset(read_asset(p), tmp_path / "out.bvh")
     assert "JOINT Bip01_L_Hand" in out.read_text()
     assert list(read_asset(out).skeletons[0].joint_names) == ["Bip01_Pelvis", "Bip01_L_Hand", "Bip01_L_Hand_end"]
+
+
+def test_two_roots_round_trip(tmp_path):
+    p = tmp_path / "two.bvh"
+    p.write_text("HIERARCHY\nROOT A\n{\nOFFSET 0 0 0\nCHANNELS 6 Xposition Yposition Zposition Xrotation Yrotation "
+                 "Zrotation\nEnd Site\n{\nOFFSET 0 1 0\n}\n}\nROOT B\n{\nOFFSET 5 0 0\nCHANNELS 3 Yrotation Xrotation "
+                 "Zrotation\n}\nMOTION\nFrames: 2\nFrame Time: 0.5\n1 2 3 10 20 30 40 50 60\n4 5 6 70 80 90 -10 -20 -30\n")
+    clip = read_asset(p).clip()
+    assert list(clip.skeleton.joint_names) == ["A", "A_end", "B"] and list(clip.skeleton.parents) == [-1, 0, -1]
+    ref = Rotation.from_euler("YXZ", [[40, 50, 60], [-10, -20, -30]], degrees=True).as_quat()
+    assert quat_angle_deg(clip.rotations[:, 2], ref).max() < 1e-9
+    assert np.allclose(clip.translations[:, 2], [5, 0, 0])
+    out = write_asset(read_asset(p), tmp_path / "out.bvh")
+    assert out.read_text().count("ROOT ") == 2
+    assert_same_motion(clip, read_asset(out).clip())
