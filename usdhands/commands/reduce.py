@@ -172,7 +172,9 @@ def run(args) -> int:
                 changed, what = list(model.relations), "relations"
             else:
                 changed = [r for r in model.relations if prev_relations[1].get(r.dependent) != (r.controlling, r.kind)]
-                what = f"relations added or changed since step {prev_relations[0]} (of {len(model.relations)})"
+                dropped = len(set(prev_relations[1]) - {r.dependent for r in model.relations})
+                what = (f"relations added or changed since step {prev_relations[0]} (of {len(model.relations)}"
+                        + (f"; {dropped} no longer dependent)" if dropped else ")"))
             print(f"\nstep {i} ({s.condition}): {len(changed)} {what}")
             if changed:
                 print_table([(r.dependent, pname(r.dependent), r.controlling, pname(r.controlling),
