@@ -599,6 +599,18 @@ class BvhHandler:
         Every ROOT/JOINT of the source must be in the clip's skeleton (matched by
         short name); channel orders are the source's.
 
+        Parameters
+        ----------
+        source : path-like
+            The BVH file whose hierarchy is kept.
+        clip : Clip
+            Converted to ``units`` and +Y up first when it is in other units or Z-up.
+        path : path-like
+            The file to write.
+        units : str or float, optional
+            The unit of the source's numbers (default centimetres): pass the
+            ``units`` the source was read with.
+
         Raises
         ------
         JointMismatchError
