@@ -622,3 +622,13 @@ def test_write_clip_flattens_a_source_with_sublayers(tmp_path):
     assert list(flat.subLayerPaths) == []
     assert flat.GetPrimAtPath("/Char/Prop") and flat.GetPrimAtPath("/Char/Skel/Anim")
     assert base.exists()
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    import os
+
+    src = build_stage(tmp_path / "char.usda")
+    out = write_clip(src, read_clip(src), tmp_path / "perm.usda", as_layer=True)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert out.stat().st_mode & 0o777 == 0o666 & ~umask
