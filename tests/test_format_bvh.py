@@ -319,3 +319,16 @@ def test_two_roots_round_trip(tmp_path):
     out = write_asset(read_asset(p), tmp_path / "out.bvh")
     assert out.read_text().count("ROOT ") == 2
     assert_same_motion(clip, read_asset(out).clip())
+
+
+def test_write_clip_converts_a_clip_in_metres_back_to_the_source_units(shared_assets, tmp_path):
+    src = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    clip = read_asset(src).clip()
+    in_m = clip.with_meters_per_unit(1.0)
+    assert np.allclose(in_m.translations[0, 0], [0.4997, 3.9564, 2.1554])
+    back = read_asset(write_clip(src, in_m, tmp_path / "m.bvh")).clip()
+    assert_same_motion(clip, back)
+    # a source read in metres is written back in metres when told so
+    m_clip = HANDLER.read(src, units="m").clip()
+    HANDLER.write_clip(src, m_clip, tmp_path / "m2.bvh", units="m")
+    assert_same_motion(clip, read_asset(tmp_path / "m2.bvh").clip())
