@@ -13,7 +13,7 @@ from splice_synth import body_handside, leap_handside, make_case
 
 from usdhands.algorithms.dtw import Constraint
 from usdhands.algorithms.splicing import (
-    MarkerOffsets, SpliceOptions, _PassOneInput, align_hands, default_marker_offsets, direction_angle_cost,
+    MarkerOffsets, SpliceOptions, FirstPassInput, align_hands, default_marker_offsets, direction_angle_cost,
     first_pass_cost, first_pass_cost_naive, hand_angle_cost, hand_angle_cost_naive, hand_directions,
     markers_from_joints, median_alignment, pair_finger_joints, phase_boundaries, sign_features, splice_clips,
     transfer_fingers, window_yaw_naive,
@@ -57,7 +57,7 @@ def _random_pass_one(rng, n, m, trunk):
     vh, ah, evh, eah = sign_features(np.cumsum(Q, 0), 30.0)
     yb = rng.uniform(-180, 180, n) if trunk else None
     yh = rng.uniform(-180, 180, m) if trunk else None
-    return _PassOneInput(P, Q, vb, ab, vh, ah, (evb, eab, evh, eah), 2, yb, yh)
+    return FirstPassInput(P, Q, vb, ab, vh, ah, (evb, eab, evh, eah), 2, yb, yh)
 
 
 @pytest.mark.parametrize("trunk", [False, True])
@@ -79,7 +79,7 @@ def test_window_yaw_recovers_a_known_turn():
     R = np.array([[np.cos(th), 0, np.sin(th)], [0, 1, 0], [-np.sin(th), 0, np.cos(th)]])
     Q = P @ R + np.array([5.0, 2.0, -3.0])  # rows: p' = R^T p, plus a shift
     assert np.degrees(window_yaw_naive(P, Q, 10, 10)) == pytest.approx(37.0, abs=1e-9)
-    inp = _PassOneInput(P, Q, *(np.zeros((20, 4, 3)),) * 4, (0.0,) * 4, 2, None, None)
+    inp = FirstPassInput(P, Q, *(np.zeros((20, 4, 3)),) * 4, (0.0,) * 4, 2, None, None)
     assert first_pass_cost(inp, np.array([10]), np.array([10]))[0] == 0.0
 
 
@@ -385,3 +385,32 @@ def test_cli_hands_without_forearm_is_an_error(bvh_case, capsys):
     assert status == 2
     assert f"{hands}: HANDS: the right hand (wrist 'rHand') has no forearm joint; splicing needs a forearm and " \
            "a wrist" in err
+
+
+def test_cli_hands_file_without_hands_names_the_file(bvh_case, shared_assets, capsys):
+    c, body, hands, d = bvh_case
+    cesium = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    status, _, err = _run(["splice", str(body), str(cesium), "-o", str(d / "bad.bvh")], capsys)
+    assert status == 2
+    assert err.startswith(f"usdhands: error: {cesium}: HANDS: no hand found in skeleton")
+
+
+def test_cli_usd_body_gets_an_override_layer_with_the_spliced_fingers(bvh_case, capsys):
+    from usdhands.formats.io import read_clip, write_asset
+    from usdhands.model.asset import Asset
+
+    c, _, hands, d = bvh_case
+    body_usd = d / "body.usda"
+    write_asset(Asset("synthetic", (c.body.skeleton,), (c.body,), ()), body_usd)
+    out = d / "spliced.usda"
+    status, _, err = _run(["splice", str(body_usd), str(hands), "-o", str(out), "--layer", "--side", "left"],
+                          capsys)
+    assert status == 0, err
+    assert "subLayers" in out.read_text()[:400]
+    spliced = read_clip(out)
+    names = [n for n in spliced.skeleton.joint_names if n.rsplit("/", 1)[-1].startswith("LeftHand")
+             and n[-1] in "123"]
+    bj = [spliced.skeleton.index(n) for n in names]
+    oj = [c.body.skeleton.index(n.rsplit("/", 1)[-1]) for n in names]
+    assert len(names) == 15
+    assert quat_angle_deg(spliced.rotations[:, bj], c.body.rotations[:, oj]).mean() < 2.0

@@ -48,7 +48,7 @@ from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_slerp, 
 
 __all__ = [
     "MarkerOffsets", "SpliceOptions", "SideAlignment", "FingerTransfer",
-    "default_marker_offsets", "markers_from_joints", "yup_cm_positions", "trunk_yaw_deg",
+    "FirstPassInput", "default_marker_offsets", "markers_from_joints", "yup_cm_positions", "trunk_yaw_deg",
     "sign_features", "first_pass_cost", "first_pass_cost_naive", "hand_angle_cost",
     "hand_angle_cost_naive", "window_yaw_naive", "align_hands", "median_alignment",
     "phase_boundaries", "pair_finger_joints", "transfer_fingers", "forearm_hand_vectors",
@@ -366,7 +366,23 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
 
 
 @dataclass(frozen=True)
-class _PassOneInput:
+class FirstPassInput:
+    """What eq. 6 and 7 need of both clips (built by :func:`align_hands`).
+
+    Parameters
+    ----------
+    P, Q : (n, K, 3), (m, K, 3) float
+        Body and hand markers, shoulder subtracted, cm, Y up.
+    vb, ab, vh, ah : (n, K, 3), (n, K, 3), (m, K, 3), (m, K, 3) float
+        Their first (cm/s) and second (cm/s²) derivatives.
+    eps : (4,) float
+        Dead zones of vb, ab, vh, ah.
+    half : int
+        Half-width of eq. 7's window in frames (2 for 5 frames).
+    yaw_b, yaw_h : (n,), (m,) float or None
+        Trunk headings in degrees; None to use eq. 7.
+    """
+
     P: np.ndarray
     Q: np.ndarray
     vb: np.ndarray
@@ -379,7 +395,7 @@ class _PassOneInput:
     yaw_h: np.ndarray | None
 
 
-def first_pass_cost(inp: _PassOneInput, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+def first_pass_cost(inp: FirstPassInput, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Eq. 6 on the given cells (numba); see :func:`first_pass_cost_naive` for the definition."""
     use_trunk = inp.yaw_b is not None
     yb = np.radians(inp.yaw_b) if use_trunk else np.zeros(1)
@@ -411,7 +427,7 @@ def window_yaw_naive(P: np.ndarray, Q: np.ndarray, i: int, j: int, half: int = 2
     return float(np.arctan2(num, den))
 
 
-def first_pass_cost_naive(inp: _PassOneInput) -> np.ndarray:
+def first_pass_cost_naive(inp: FirstPassInput) -> np.ndarray:
     """Eq. 6 on every cell, ``(n, m)``, in plain NumPy (the reference twin).
 
     ``D(i, j) = Σ_markers |sgn(v_i) − sgn(R v'_j)|² + |sgn(a_i) − sgn(R a'_j)|²`` with
@@ -763,7 +779,7 @@ def align_hands(body_markers: np.ndarray, hand_markers: np.ndarray, fps: float, 
                  else np.asarray(hand_yaw_deg, dtype=np.float64))
     elif options.yaw == "none":
         yaw_b, yaw_h = np.zeros(n), np.zeros(m)
-    inp = _PassOneInput(np.ascontiguousarray(P), np.ascontiguousarray(Q), vb, ab, vh, ah,
+    inp = FirstPassInput(np.ascontiguousarray(P), np.ascontiguousarray(Q), vb, ab, vh, ah,
                         (evb, eab, evh, eah), options.yaw_window // 2, yaw_b, yaw_h)
     band1 = Band.diagonal(n, m, options.band1, cons)
     first = dtw(lambda r, c: first_pass_cost(inp, r, c), band1, shape=(n, m))

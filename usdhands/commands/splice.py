@@ -96,6 +96,16 @@ def _sides(args, body_map, hand_map) -> list[str]:
     return common
 
 
+def _handmap(resolve, skeleton, override, path, role: str):
+    """Hand map of one input; errors name the input."""
+    try:
+        return resolve(skeleton, override)
+    except UsdHandsError as e:
+        if e.path is None:
+            raise type(e)(f"{role}: {e.message}", path=path, location=e.location) from None
+        raise
+
+
 def _check_side(side, path, role: str) -> None:
     if side.forearm is None:
         raise UsdHandsError(f"{role}: the {side.side} hand (wrist {side.wrist!r}) has no forearm joint; "
@@ -129,8 +139,8 @@ def run(args) -> int:
     except ValueError as e:
         raise UsdHandsError(f"--match: {e} (BODY has {n} frames, HANDS {m0})") from None
 
-    body_map = resolve_handmap(body.skeleton, args.body_handmap)
-    hand_map = resolve_handmap(hands.skeleton, args.hands_handmap)
+    body_map = _handmap(resolve_handmap, body.skeleton, args.body_handmap, args.body, "BODY")
+    hand_map = _handmap(resolve_handmap, hands.skeleton, args.hands_handmap, args.hands, "HANDS")
     sides = _sides(args, body_map, hand_map)
     for s in sides:
         _check_side(body_map[s], args.body, "BODY")
