@@ -254,12 +254,6 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
         start = float(times[0]) / tcps
     T = len(codes)
     J = sk.num_joints
-    rot = np.empty((T, J, 4))
-    rot[:] = sk.rest_rotations
-    tr = np.empty((T, J, 3))
-    tr[:] = sk.rest_translations
-    sc = np.empty((T, J, 3))
-    sc[:] = sk.rest_scales
     # gather in the animation's joint order, then scatter into the skeleton's
     r_k = np.empty((T, K, 4), dtype=np.float32)
     t_k = np.empty((T, K, 3), dtype=np.float32)
@@ -285,14 +279,22 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
             has[label] = True
             dst[f] = np.asarray(arr)
     if len(times) == 0 and not any(has.values()):
-        # no value at all: an animation of zero frames (read_asset reports it)
-        rot, tr, sc = rot[:0], tr[:0], sc[:0]
-    if has["rotations"]:
-        rot[:, cols] = r_k
-    if has["translations"]:
-        tr[:, cols] = t_k
-    if has["scales"]:
-        sc[:, cols] = s_k
+        T = 0  # no value at all: an animation of zero frames (read_asset reports it)
+    everyone = K == J and bool((cols == np.arange(J)).all())
+
+    def full(label: str, values: np.ndarray, rest: np.ndarray) -> np.ndarray:
+        """Skeleton-order (T, J, n): the animation's values, rest for joints it lacks."""
+        if has[label] and everyone:
+            return values[:T]  # Clip converts to float64 in its one copy
+        out = np.empty((T, J, rest.shape[-1]))
+        out[:] = rest
+        if has[label]:
+            out[:, cols] = values[:T]
+        return out
+
+    rot = full("rotations", r_k, sk.rest_rotations)
+    tr = full("translations", t_k, sk.rest_translations)
+    sc = full("scales", s_k, sk.rest_scales)
     return Clip(sk, rate if len(times) else float(fps or tcps), rot, tr, sc, name=where, start_time=start)
 
 
