@@ -52,7 +52,7 @@ def labeller(regex: str | None, labels_file: Path | None):
         def by_regex(path: Path) -> str:
             m = rx.search(path.name)
             if not m:
-                raise UsdHandsError(f"--labels {regex!r} does not match the file name {path.name!r}", path=path)
+                raise UsdHandsError(f"--labels '{regex}' does not match the file name '{path.name}'", path=path)
             return m.group(1) if rx.groups else m.group(0)
 
         return by_regex
@@ -82,17 +82,28 @@ def labeller(regex: str | None, labels_file: Path | None):
 def read_labelled(paths: list[Path], label_of, fps, handmap_path, animation=None, progress=None):
     """Read clips with their hand maps and labels: list of ``(path, label, clip, handmap)``."""
     from usdhands.formats.io import read_clip
-    from usdhands.model.hand_detection import resolve_handmap
 
     out = []
     for i, p in enumerate(paths):
         label = label_of(p)
         clip = read_clip(p, animation=animation, fps=fps)
-        handmap = resolve_handmap(clip.skeleton, handmap_path)
+        handmap = handmap_for(clip, p, handmap_path)
         out.append((p, label, clip, handmap))
         if progress:
             progress(i + 1, len(paths), p.name)
     return out
+
+
+def handmap_for(clip, path, handmap_path):
+    """The clip's hand map; detection errors name the file they came from."""
+    from usdhands.model.hand_detection import resolve_handmap
+
+    try:
+        return resolve_handmap(clip.skeleton, handmap_path)
+    except UsdHandsError as e:
+        if e.path is None:
+            raise type(e)(e.message, path=path, location=e.location) from None
+        raise
 
 
 def load_config(path):

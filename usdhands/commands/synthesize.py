@@ -39,9 +39,8 @@ def run(args) -> int:
     from usdhands.algorithms.finger_database import load_database
     from usdhands.algorithms.synthesis import synthesize_clip
     from usdhands.commands._common import parse_list
-    from usdhands.commands._synthesis_common import bundled_database_path, load_config
+    from usdhands.commands._synthesis_common import bundled_database_path, handmap_for, load_config
     from usdhands.formats.io import read_clip, write_clip
-    from usdhands.model.hand_detection import resolve_handmap
     from usdhands.model.handmap import SIDES
 
     cfg = load_config(args.config)
@@ -53,7 +52,7 @@ def run(args) -> int:
     progress(0, 4, "reading")
     db = load_database(args.db or bundled_database_path())
     clip = read_clip(args.file, animation=args.animation)
-    handmap = resolve_handmap(clip.skeleton, args.handmap)
+    handmap = handmap_for(clip, args.file, args.handmap)
     wanted = parse_list(args.hands, SIDES) or list(SIDES)
     with_fingers = [s for s in wanted if handmap[s] is not None and handmap[s].finger_joints]
     if not with_fingers:

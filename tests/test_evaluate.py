@@ -1,0 +1,151 @@
+"""``usdhands evaluate``, ``db build`` and ``synthesize`` on files."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from synthesis_data import gesture_set, tiny_handmap
+
+from usdhands.algorithms.finger_database import load_database
+from usdhands.algorithms.gesture_evaluation import (
+    DEFAULT_PREDICTORS, evaluate_predictors, parse_predictor, prepare_eval_set,
+)
+from usdhands.cli import main
+from usdhands.formats.io import read_clip, write_asset
+from usdhands.model.asset import Asset
+
+
+@pytest.fixture(scope="module")
+def gesture_files(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("gestures")
+    paths = []
+    for label, clip in gesture_set(3, seed=1):
+        p = folder / f"{clip.name}.bvh"
+        write_asset(Asset("memory", [clip.skeleton], [clip], []), p)
+        paths.append(p)
+    return folder, paths
+
+
+def _run(capsys, *argv):
+    status = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
+def test_predictor_names_parse():
+    assert parse_predictor("wrist_pos+0.5rot") == [("wrist_pos", 1.0), ("wrist_rot", 0.5)]
+    assert parse_predictor("0.25*elbow_rot + wrist_pos") == [("elbow_rot", 0.25), ("wrist_pos", 1.0)]
+    with pytest.raises(ValueError, match=r"Cannot read predictor 'hand_pos': term 'hand_pos' is not"):
+        parse_predictor("hand_pos")
+    with pytest.raises(ValueError, match=r"term '0.5rot' names no joint"):
+        parse_predictor("0.5rot")
+
+
+def test_evaluate_json_matches_the_library_on_the_same_files(gesture_files, capsys, tmp_path):
+    folder, paths = gesture_files
+    status, out, err = _run(capsys, "evaluate", *paths, "--labels", r"^([a-z]+)_\d+", "--json",
+                            "--plot", tmp_path / "plots")
+    assert status == 0, err
+    r = json.loads(out)
+    assert r["k"] == 5 and list(r["predictors"]) == list(DEFAULT_PREDICTORS)
+    assert r["best"] == max(r["predictors"], key=r["predictors"].get)
+    assert r["confusion"]["labels"] == sorted({p.name.split("_")[0] for p in paths})
+    hm = tiny_handmap()
+    items = [(p.name.split("_")[0], read_clip(p), hm) for p in paths]
+    lib = evaluate_predictors(prepare_eval_set(items), DEFAULT_PREDICTORS, 5)
+    assert r["segments"] == lib["segments"]
+    for name, share in lib["predictors"].items():
+        assert r["predictors"][name] == pytest.approx(share)
+    assert r["predictors"]["wrist_pos+0.5rot"] > r["chance"]
+    for png in ("predictors.png", "confusion.png"):
+        f = tmp_path / "plots" / png
+        assert f.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f.stat().st_size < 150_000
+
+
+def test_evaluate_table_and_label_errors(gesture_files, capsys):
+    folder, paths = gesture_files
+    status, out, _ = _run(capsys, "evaluate", folder, "--labels", r"^([a-z]+)_", "--predictors",
+                          "wrist_rot,wrist_pos+0.5rot", "--k", "3")
+    assert status == 0
+    assert "wrist_pos+0.5rot" in out and "(chance)" in out and "confusion (wrist_pos+0.5rot)" in out
+    status, _, err = _run(capsys, "evaluate", *paths[:2], "--labels", r"^(\d+)_")
+    assert status == 2
+    assert err.strip() == f"usdhands: error: {paths[0]}: --labels '^(\\d+)_' does not match the file name '{paths[0].name}'"
+    status, _, err = _run(capsys, "evaluate", *paths[:2])
+    assert status == 2 and "evaluate needs --labels REGEX or --labels-file CSV" in err
+
+
+def test_evaluate_labels_file(gesture_files, capsys, tmp_path):
+    folder, paths = gesture_files
+    csv = tmp_path / "labels.csv"
+    csv.write_text("".join(f"{p.name},{p.name.split('_')[0]}\n" for p in paths))
+    status, out, _ = _run(capsys, "evaluate", *paths, "--labels-file", csv, "--json", "--predictors", "wrist_pos+0.5rot")
+    status2, out2, _ = _run(capsys, "evaluate", *paths, "--labels", r"^([a-z]+)_", "--json", "--predictors",
+                            "wrist_pos+0.5rot")
+    assert status == status2 == 0
+    assert json.loads(out) == json.loads(out2)
+
+
+def test_holdout_beats_the_baselines(gesture_files, capsys):
+    folder, paths = gesture_files
+    status, out, err = _run(capsys, "evaluate", "--holdout", *paths, "--json")
+    assert status == 0, err
+    r = json.loads(out)
+    m = r["methods"]
+    assert set(m) == {"synthesis", "mean_pose", "random_segments", "nearest_wrist"}
+    assert m["synthesis"]["error_deg"] < m["mean_pose"]["error_deg"]
+    assert m["synthesis"]["error_deg"] < m["random_segments"]["error_deg"]
+    assert m["mean_pose"]["speed_deg_s"] == pytest.approx(0.0, abs=1e-6)
+    assert r["clips"] == len(paths)
+
+
+def test_db_build_and_synthesize_files(gesture_files, capsys, tmp_path):
+    folder, paths = gesture_files
+    db_path = tmp_path / "db"
+    status, out, err = _run(capsys, "db", "build", *paths[1:], "-o", db_path, "--labels", r"^([a-z]+)_",
+                            "--mirror", "--json")
+    assert status == 0, err
+    info = json.loads(out)
+    db = load_database(db_path)
+    assert info["tracks"] == 2 * 2 * (len(paths) - 1) == len(db.tracks)
+    assert {c["source"] for c in db.clips} == {str(p) for p in paths[1:]}
+    # synthesize the held-out first file: the body stays, fingers come from the database
+    src = paths[0]
+    out_file = tmp_path / "out.bvh"
+    status, out, err = _run(capsys, "synthesize", src, "-o", out_file, "--db", db_path, "--k", "3",
+                            "--plot", tmp_path / "plots")
+    assert status == 0, err
+    a, b = read_clip(src), read_clip(out_file)
+    hm = tiny_handmap()
+    fingers = sorted(a.skeleton.index(j) for s in hm.sides for j in s.finger_joints)
+    body = [j for j in range(a.num_joints) if j not in fingers]
+    from usdhands.model.rotations import quat_angle_deg
+
+    assert quat_angle_deg(a.rotations[:, body], b.rotations[:, body]).max() < 1e-3
+    assert np.allclose(a.translations[:, 0], b.translations[:, 0], atol=1e-4)
+    # the held-out clip is an 'attention' gesture: its fingers come back close to the truth
+    err_deg = quat_angle_deg(a.rotations[:, fingers], b.rotations[:, fingers]).mean()
+    assert err_deg < 10.0
+    pngs = sorted(p.name for p in (tmp_path / "plots").iterdir())
+    assert pngs == ["left_fingers.png", "left_graph.png", "left_segments.png",
+                    "right_fingers.png", "right_graph.png", "right_segments.png"]
+
+
+def test_synthesize_needs_finger_joints(capsys, tmp_path):
+    from synthesis_data import tiny_skeleton
+
+    sk = tiny_skeleton()
+    keep = [j for j, n in enumerate(sk.short_names) if "Hand" not in n or n.endswith("Hand")]
+    sub = sk.subset(keep)
+    from usdhands.model import Clip
+
+    clip = Clip(sub, 30, np.broadcast_to(sub.rest_rotations, (20, sub.num_joints, 4)))
+    src = tmp_path / "nofingers.bvh"
+    write_asset(Asset("memory", [sub], [clip], []), src)
+    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "o.bvh")
+    assert status == 2
+    assert err.startswith(f"usdhands: error: {src}: no hand found in skeleton 'nofingers'; looked for finger joints")
+    assert err.rstrip().endswith("saw 8 joints: Hips, Spine, LeftArm, LeftForeArm, LeftHand, RightArm, RightForeArm, RightHand")
+    assert not (tmp_path / "o.bvh").exists()
