@@ -514,3 +514,38 @@ def test_sample_humanoid_matches_its_authored_handmap():
 
     sk = humanoid_skeleton()
     assert detect_hands(sk) == humanoid_handmap(sk)
+
+
+def test_hands_for_prefers_override_then_recorded_usd_map_then_detection(tmp_path):
+    from usdhands.formats.hands import hands_for
+    from usdhands.formats.io import read_asset, write_asset, write_clip
+    from usdhands.model import Clip
+    from usdhands.model.asset import Asset
+    from usdhands.model.handmap import HandMap, HandSide
+    from usdhands.samples.humanoid import humanoid_skeleton
+
+    sk = humanoid_skeleton()
+    write_asset(Asset("mem", (sk,), (Clip(sk, 30, np.tile(sk.rest_rotations, (3, 1, 1))),)), tmp_path / "h.usda")
+    plain = read_asset(tmp_path / "h.usda")
+    detected, src = hands_for(tmp_path / "h.usda", plain.skeletons[0])
+    assert src == "detected" and detected.right is not None
+    custom = HandMap(left=HandSide("left", detected.left.wrist, fingers={"index": detected.left.fingers["index"][:2]}))
+    write_clip(tmp_path / "h.usda", plain.clip(), tmp_path / "marked.usda", hand_map=custom)
+    marked = read_asset(tmp_path / "marked.usda").skeletons[0]
+    assert hands_for(tmp_path / "marked.usda", marked) == (custom, "file")
+    js = tmp_path / "map.json"
+    js.write_text(json.dumps(detected.to_dict()))
+    assert hands_for(tmp_path / "marked.usda", marked, js) == (detected, "override")
+
+
+def test_hands_for_side_from_file_name_and_error_path(shared_assets):
+    from usdhands.formats.hands import hands_for
+    from usdhands.formats.io import read_asset
+
+    src = shared_assets / "webxr_hand" / "right.glb"
+    hm, how = hands_for(src, read_asset(src).skeletons[0])
+    assert how == "detected" and hm.left is None and hm.right is not None
+    cesium = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    with pytest.raises(NoHandsError) as e:
+        hands_for(cesium, read_asset(cesium).skeletons[0])
+    assert str(e.value).startswith(f"{cesium}: no hand found in skeleton ")

@@ -7,10 +7,10 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import print_table
-from usdhands.errors import AssetReadError, NoHandsError, NoSkeletonError
+from usdhands.errors import AssetReadError, NoSkeletonError
+from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset
 from usdhands.formats.registry import atomic_output, check_output_path
-from usdhands.model.hand_detection import resolve_handmap, side_from_name
 from usdhands.model.handmap import FINGERS, SIDES, HandMap
 from usdhands.model.skeleton import short_joint_name
 
@@ -28,7 +28,8 @@ def register(sub) -> None:
     p.add_argument("--side", choices=SIDES, default=None,
                    help="side of a single hand whose joint names give none (WebXR); default: from the file name")
     p.add_argument("--handmap", type=Path, default=None,
-                   help="check this hand map JSON against the skeleton instead of detecting")
+                   help="check this hand map JSON against the skeleton instead of detecting "
+                        "(default: the map a USD file records with UsdHandsHandMapAPI, else detection)")
     p.set_defaults(func=run)
 
 
@@ -70,12 +71,10 @@ def run(args) -> int:
         check_output_path(args.output, args.file)
     asset = read_asset(args.file)
     sk = _pick_skeleton(asset, args.file, args.animation, args.skeleton)
-    side_hint = args.side or side_from_name(args.file.name)
-    try:
-        hm = resolve_handmap(sk, args.handmap, side_hint=side_hint)
-    except NoHandsError as e:
-        raise NoHandsError(e.message, path=args.file) from None
-    print(f"{args.file}: skeleton {sk.name!r}, {sk.num_joints} joints")
+    hm, source = hands_for(args.file, sk, args.handmap, side_hint=args.side)
+    origin = {"override": f"from {args.handmap}", "file": "recorded in the file (UsdHandsHandMapAPI)",
+              "detected": "detected"}[source]
+    print(f"{args.file}: skeleton {sk.name!r}, {sk.num_joints} joints; hands {origin}")
     print_table(handmap_rows(hm), ["side", "part", "joints (proximal to distal)"])
     if args.output is not None:
         data = {"skeleton": sk.name, **hm.to_dict()}
