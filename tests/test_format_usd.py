@@ -632,3 +632,18 @@ def test_written_files_get_the_usual_permissions(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert out.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+def test_write_clip_animation_chosen_by_name_or_path(tmp_path):
+    src = build_stage(tmp_path / "char.usda")
+    clip = read_clip(src).replace(name="renamed in memory")
+    new = clip.replace(rotations=random_quats(clip.rotations.shape[:2]))
+    for i, which in enumerate(("Anim", "/Char/Skel/Anim")):
+        out = write_clip(src, new, tmp_path / f"by{i}.usda", animation=which)
+        assert_rotations_close(read_clip(out).rotations, new.rotations)
+    with pytest.raises(AssetReadError) as e:
+        write_clip(src, new, tmp_path / "x.usda", animation="Walk")
+    assert str(e.value) == f"{src}: no SkelAnimation named 'Walk'; give its prim path"
+    with pytest.raises(AssetReadError) as e:
+        write_clip(src, new, tmp_path / "x.usda", animation="/Char/Body")
+    assert str(e.value) == f"{src}: no SkelAnimation at /Char/Body"

@@ -310,7 +310,7 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
         Where ``path`` will be renamed to; relative sublayer paths are computed from its
         folder. Defaults to ``path``.
     animation : str, optional
-        Prim path of the SkelAnimation to replace.
+        Prim path (or unique prim name) of the SkelAnimation to replace.
     as_layer : bool
         False: a copy of the source with the animation replaced (meshes, materials
         and every other prim kept): the root layer as it is when it composes nothing
@@ -448,7 +448,12 @@ def _put_clip(stage: Usd.Stage, clip: Clip, animation: str | None, source: Path,
         elif animation is not None:
             raise AssetReadError(f"no SkelAnimation at {animation}", path=source)
     elif animation is not None:
-        raise AssetReadError(f"animation must be a SkelAnimation prim path, got {animation!r}", path=source)
+        named = [p for p in stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate))
+                 if p.IsA(UsdSkel.Animation) and p.GetName() == str(animation)]
+        if len(named) != 1:
+            what = "no" if not named else f"{len(named)}"
+            raise AssetReadError(f"{what} SkelAnimation named {animation!r}; give its prim path", path=source)
+        anim_prim = named[0]
     try:
         skel_prim = _find_skeleton(stage, clip, anim_prim.GetPath() if anim_prim else None)
     except AssetReadError as e:
