@@ -224,10 +224,13 @@ def test_fps_option_and_detected_rates(tmp_path):
     clip = read_clip(build_test_gltf(tmp_path, "glb"), fps=4)
     assert clip.fps == 4 and clip.num_frames == 9
     assert np.allclose(clip.translations[2, 0], [0.5, 1, 0])
-    for rate in (24, 30, 60):
+    for rate in (24, 30, 60, 40, 120):
         assert detect_fps((np.arange(50) / rate).astype(np.float32)) == rate
-    assert detect_fps(np.arange(20) / 7.0) == 7.0            # regular spacing outside the list
-    assert detect_fps([0.0, 0.013, 0.5, 0.77]) == 30.0     # irregular: the default
+    assert detect_fps(np.arange(20) / 29.97) == 29.97            # regular spacing outside the list
+    assert detect_fps(np.array([0, 1, 3, 10, 11]) / 24) == 24.0  # keyframes on a 24 fps grid
+    assert detect_fps(np.array([0, 4, 12]) / 24) == 30.0         # sparse keys (every 1/6 s) fit 30 fps
+    assert detect_fps([0.0, 1.0, 2.0]) == 30.0
+    assert detect_fps([0.0, 0.013, 0.5, 0.77]) == 30.0           # irregular: the default
     assert detect_fps([1.25]) == 30.0
 
 
