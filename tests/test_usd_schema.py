@@ -160,3 +160,15 @@ def test_authored_hand_map_is_the_registered_schema():
     assert out.returncode == 0, out.stderr
     lines = out.stdout.strip().splitlines()
     assert lines == ["True False True", "True True", "('Hips/Hand_R/Thumb1',)"]
+
+
+def test_command_prints_the_plugin_folder():
+    out = run_python("""
+        from usdhands.cli import main
+        raise SystemExit(main(["usd-plugin", "--check"]))
+    """)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout == f"{plugin_path()}\n"
+    assert out.stderr.splitlines() == ["usdHands plugin registered now",
+                                       "  UsdHandsHandMapAPI: multiple-apply API schema",
+                                       "  UsdHandsFingerMotionAPI: single-apply API schema"]
