@@ -261,6 +261,53 @@ def test_sparse_accessor_without_buffer_view_and_malformed_json(tmp_path):
         read_asset(bad)
 
 
+def test_ancestors_kept_only_where_needed_and_skins_sharing_joints_merged(tmp_path):
+    """RootNode (identity) > Armature (scale 0.01, 90° about x) > hips > Mid (not a joint) > hand > tip;
+    skin0 = [hips, hand], skin1 = [hand, tip] share 'hand'; skin2 = [other] is a second character.
+    One animation drives hips and other."""
+    g = pygltflib.GLTF2(asset=pygltflib.Asset(version="2.0"))
+    g.buffers = [pygltflib.Buffer()]
+    b = _Blob(g)
+    rx = Rotation.from_euler("x", 90, degrees=True).as_quat().tolist()
+    g.nodes = [pygltflib.Node(name="RootNode", children=[1, 6]),
+               pygltflib.Node(name="Armature", rotation=rx, scale=[0.01] * 3, children=[2]),
+               pygltflib.Node(name="hips", translation=[0, 100, 0], children=[3]),
+               pygltflib.Node(name="Mid", translation=[0, 10, 0], children=[4]),
+               pygltflib.Node(name="hand", translation=[0, 5, 0], children=[5]),
+               pygltflib.Node(name="hand", translation=[0, 2, 0]),          # repeated name
+               pygltflib.Node(name="other", translation=[3, 0, 0])]
+    eye = np.tile(np.eye(4, dtype=np.float32).reshape(1, 16), (2, 1))
+    g.skins = [pygltflib.Skin(joints=[2, 4], inverseBindMatrices=b.accessor(eye, "MAT4")),
+               pygltflib.Skin(joints=[4, 5], inverseBindMatrices=b.accessor(eye, "MAT4")),
+               pygltflib.Skin(name="second", joints=[6])]
+    t = b.accessor(np.array([[0], [1]], np.float32), "SCALAR", min_max=True)
+    out = b.accessor(np.array([[0, 100, 0], [0, 110, 0]], np.float32), "VEC3")
+    out2 = b.accessor(np.array([[3, 0, 0], [4, 0, 0]], np.float32), "VEC3")
+    tgt = pygltflib.AnimationChannelTarget
+    g.animations = [pygltflib.Animation(
+        samplers=[pygltflib.AnimationSampler(input=t, output=out), pygltflib.AnimationSampler(input=t, output=out2)],
+        channels=[pygltflib.AnimationChannel(sampler=0, target=tgt(node=2, path="translation")),
+                  pygltflib.AnimationChannel(sampler=1, target=tgt(node=6, path="translation"))])]
+    g.scenes = [pygltflib.Scene(nodes=[0])]
+    g.buffers[0].byteLength = len(b.data)
+    g.set_binary_blob(bytes(b.data))
+    path = tmp_path / "tree.glb"
+    g.save_binary(str(path))
+
+    asset = read_asset(path)
+    first, second = asset.skeletons
+    assert first.joint_names == ("Armature", "hips", "Mid", "hand", "hand.001")   # RootNode dropped
+    assert list(first.parents) == [-1, 0, 1, 2, 3]
+    assert second.name == "second" and second.joint_names == ("other",)
+    # world positions as the node tree gives them: scale 0.01 and +y turned to +z
+    assert np.allclose(first.rest_world_positions(), [[0, 0, 0], [0, 0, 1], [0, 0, 1.1], [0, 0, 1.15],
+                                                      [0, 0, 1.17]], atol=1e-9)
+    assert [(c.name, c.skeleton.name) for c in asset.clips] == [("animation0", "skin0"),
+                                                               ("animation0:second", "second")]
+    assert np.allclose(asset.clips[0].world_positions()[-1, 1], [0, 0, 1.1])
+    assert np.allclose(asset.clips[1].translations[-1, 0], [4, 0, 0])
+
+
 def test_nan_in_animation_is_reported(tmp_path):
     path = build_test_gltf(tmp_path, "glb", nan=True)
     with pytest.raises(InvalidAnimationError, match=r"animation 'Anim' has NaN or infinite translations "
