@@ -14,7 +14,7 @@ import pygltflib
 import pytest
 from scipy.spatial.transform import Rotation
 
-from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatchError
+from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatchError, OutputPathError
 from usdhands.formats.gltf import HANDLER
 from usdhands.formats.gltf_read import detect_fps, sample_channel
 from usdhands.formats.io import read_asset, read_clip, write_asset, write_clip
@@ -448,6 +448,9 @@ def test_write_clip_rejects_foreign_joints(tmp_path):
                                                  r"'skin0': 'Hips', 'Spine', 'LeftHand', 'LeftHandIndex1', 'RightHand' \.\.\."):
         write_clip(src, random_clip(), tmp_path / "x.glb")
     assert not (tmp_path / "x.glb").exists()
+    with pytest.raises(OutputPathError, match=r"x.glb: an override layer \(--layer, as_layer\) needs a USD output"):
+        write_clip(src, read_clip(src), tmp_path / "x.glb", as_layer=True)
+    assert not (tmp_path / "x.glb").exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 
 
 # --------------------------------------------------------------------------- real files

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pygltflib
 
-from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.errors import AssetReadError, JointMismatchError, OutputPathError
 from usdhands.formats.gltf_container import BinaryAppender, GltfFile, load_gltf, save_gltf
 from usdhands.formats.gltf_read import (
     GltfScene, SkeletonBinding, animation_channels, channel_keys, malformed_as_read_error, sample_channel, scan_scene,
@@ -377,12 +377,19 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
         The file's final location, used to re-express relative URIs of external
         buffers and images when it is in another folder than ``source``.
     animation : str or int, optional
+    as_layer : bool, optional
+        Only False is accepted (override layers are a USD feature).
 
     Raises
     ------
     JointMismatchError
         The clip names joints the file's skeletons do not have.
+    OutputPathError
+        ``as_layer=True``.
     """
+    if options.pop("as_layer", False):
+        raise OutputPathError("an override layer (--layer, as_layer) needs a USD output (.usd, .usda, .usdc); "
+                              "glTF files are written whole", path=final_path or path)
     if options:
         raise TypeError(f"unexpected options for glTF write_clip: {sorted(options)}")
     source = Path(source)
