@@ -238,6 +238,31 @@ def leap_like(full: Clip, style: str) -> Clip:
     return Clip(sk, full.fps, rot, tr)
 
 
+def reaxis(clip: Clip, seed: int = 0) -> Clip:
+    """The same motion on a rig whose every joint frame is turned by a random constant rotation.
+
+    World positions stay the same; local rotations, rest rotations and rest translations
+    all change (``q'_j = C_parent⁻¹ q_j C_j``, ``t'_j = C_parent⁻¹ t_j``), like two DCCs'
+    exports of one character with other joint axis conventions.
+    """
+    from scipy.spatial.transform import Rotation
+
+    sk = clip.skeleton
+    J = sk.num_joints
+    C = Rotation.random(J, random_state=seed)
+    Cp = [Rotation.identity() if p < 0 else C[int(p)] for p in sk.parents]
+    rest_q = np.array([(Cp[j].inv() * Rotation.from_quat(np.array(sk.rest_rotations[j])) * C[j]).as_quat() for j in range(J)])
+    rest_t = np.array([Cp[j].inv().apply(np.array(sk.rest_translations[j])) for j in range(J)])
+    new_sk = Skeleton(sk.joint_names, sk.parents, rest_t, rest_q, meters_per_unit=sk.meters_per_unit,
+                      up_axis=sk.up_axis, name=sk.name + "_reaxis")
+    rot = np.empty_like(clip.rotations)
+    tr = np.empty_like(clip.translations)
+    for j in range(J):
+        rot[:, j] = (Cp[j].inv() * Rotation.from_quat(np.array(clip.rotations[:, j])) * C[j]).as_quat()
+        tr[:, j] = Cp[j].inv().apply(np.array(clip.translations[:, j]))
+    return Clip(new_sk, clip.fps, rot, tr)
+
+
 def leap_handside(side: str) -> HandSide:
     """HandSide of :func:`leap_like` (no shoulder, forearm on the wrist)."""
     s = side[0]

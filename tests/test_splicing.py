@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from splice_synth import body_handside, leap_handside, make_case
+from splice_synth import body_handside, leap_handside, make_case, reaxis
 
 from usdhands.algorithms.dtw import Constraint
 from usdhands.algorithms.splicing import (
@@ -179,6 +179,23 @@ def test_splice_onto_partial_hand_skeleton_with_other_joint_names(leap_case):
     assert fe.mean() < 2.0
 
 
+def test_rig_with_other_joint_axes_needs_the_hand_frame_transfer(leap_case):
+    hands = reaxis(leap_case.hands, seed=3)
+    np.testing.assert_allclose(hands.world_positions(), leap_case.hands.world_positions(), atol=1e-9)
+    body_sides, hand_sides = _sides(leap_case, partial=True)
+    local = splice_clips(leap_case.body, hands, body_sides, hand_sides, options=SpliceOptions(transfer="local"))
+    hand = splice_clips(leap_case.body, hands, body_sides, hand_sides, options=SpliceOptions(transfer="hand"))
+    auto = splice_clips(leap_case.body, hands, body_sides, hand_sides)
+    same = splice_clips(leap_case.body, leap_case.hands, body_sides, hand_sides)
+    assert auto.transfer_modes == {"left": "hand", "right": "hand"}
+    assert same.transfer_modes == {"left": "local", "right": "local"}
+    np.testing.assert_allclose(auto.clip.rotations, hand.clip.rotations)
+    for s in SIDES:  # the alignment does not depend on joint axes
+        assert np.abs(hand.sides[s].alignment - leap_case.truth).mean() <= 1.5
+    assert _finger_error_deg(hand, leap_case).mean() < 2.0
+    assert _finger_error_deg(local, leap_case).mean() > 30.0
+
+
 def test_paper_forearm_vector_alignment_and_trunk_yaw_options(case):
     body_sides, hand_sides = _sides(case)
     one = lambda d: {"left": d["left"]}
@@ -326,6 +343,12 @@ def test_cli_real_leap_recording_onto_a_body_resamples_and_transfers_relative_to
     leap = shared_assets / "leap_hands" / "gesture-typing.bvh"
     out = d / "leap_out.bvh"
     status, stdout, err = _run(["splice", str(body), str(leap), "-o", str(out), "--json"], capsys)
+    assert status == 0, err
+    # the Leap rig's joint axes differ from the body's: auto carries rotations through the hands' axes
+    assert json.loads(stdout)["transfer"] == {"right": "hand"}
+    assert "right hand: the finger joints of BODY and HANDS have other axis conventions" in err
+    status, stdout, err = _run(["splice", str(body), str(leap), "-o", str(out), "--json", "--transfer", "local"],
+                               capsys)
     assert status == 0, err
     assert "HANDS is at 37.04 fps and BODY at 30 fps: HANDS resampled to 30 fps (317 -> 256 frames)" in err
     assert "HANDS finger joints without a counterpart" not in err

@@ -44,7 +44,7 @@ from scipy.signal import savgol_filter
 from usdhands.algorithms.dtw import Band, Constraint, WarpResult, check_constraints, dtw
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
-from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_slerp, trs_to_xform
+from usdhands.model.rotations import matrix_to_quat, quat_conjugate, quat_multiply, quat_slerp, trs_to_xform
 
 __all__ = [
     "MarkerOffsets", "SpliceOptions", "SideAlignment", "FingerTransfer",
@@ -52,7 +52,7 @@ __all__ = [
     "sign_features", "first_pass_cost", "first_pass_cost_naive", "hand_angle_cost",
     "hand_angle_cost_naive", "window_yaw_naive", "align_hands", "median_alignment",
     "phase_boundaries", "pair_finger_joints", "transfer_fingers", "forearm_hand_vectors",
-    "SpliceResult", "splice_clips", "partial_world_xforms", "hand_directions", "direction_angle_cost",
+    "SpliceResult", "splice_clips", "partial_world_xforms", "hand_rest_basis", "transfer_axes", "hand_directions", "direction_angle_cost",
 ]
 
 
@@ -91,6 +91,64 @@ def _first_base(skeleton, chain: Sequence[str]) -> int | None:
     return names[0]
 
 
+def _hand_rest_axes(skeleton, side: HandSide, rest: np.ndarray):
+    """Wrist and knuckle rest positions, unit vectors along and across the hand, hand length."""
+    pos = rest[:, :3, 3]
+    knuckles = {f: _first_base(skeleton, side.fingers[f]) for f in FINGERS}
+    hand_j = next((knuckles[f] for f in ("middle", "index", "ring", "pinky") if knuckles[f] is not None), None)
+    if hand_j is None:
+        raise ValueError(f"hand {side.side!r} has no finger joints to place the hand marker on")
+    W = pos[skeleton.index(side.wrist)]
+    H = pos[hand_j]
+    length = float(np.linalg.norm(H - W))
+    if length < 1e-9:
+        raise ValueError(f"hand {side.side!r}: the knuckle {skeleton.joint_names[hand_j]!r} sits on the wrist")
+    along = (H - W) / length
+    a = next((knuckles[f] for f in ("index", "thumb", "middle") if knuckles[f] is not None and knuckles[f] != hand_j),
+             None)
+    b = next((knuckles[f] for f in ("pinky", "ring") if knuckles[f] is not None and knuckles[f] != hand_j), None)
+    across = None
+    if a is not None and b is not None:
+        across = pos[a] - pos[b]
+    elif a is not None:
+        across = pos[a] - H
+    elif b is not None:
+        across = H - pos[b]
+    if across is not None:
+        across = across - along * np.dot(across, along)
+    if across is None or np.linalg.norm(across) < 1e-9 * length:
+        helper = np.array([0.0, 1.0, 0.0]) if abs(along[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        across = np.cross(along, helper)
+    across = across / np.linalg.norm(across)
+    return W, H, along, across, length
+
+
+def hand_rest_basis(skeleton, side: HandSide) -> np.ndarray:
+    """Rotation ``(3, 3)`` whose columns are the hand's rest axes in the rig's world frame.
+
+    Columns: along the hand (wrist → middle knuckle), across it (pinky → index
+    knuckle, made perpendicular), and their cross product.
+    """
+    _, _, along, across, _ = _hand_rest_axes(skeleton, side, skeleton.rest_world_xforms())
+    return np.stack([along, across, np.cross(along, across)], axis=1)
+
+
+def transfer_axes(body_skeleton, body_side: HandSide, hand_skeleton, hand_side: HandSide,
+                  pairs: Sequence[tuple[str, str]]) -> np.ndarray:
+    """Per pair the quaternion ``c`` (xyzw, ``(k, 4)``) with ``r_body = c · r_hand · c⁻¹``.
+
+    ``r`` is a joint's rotation relative to its rest in its own rest frame. ``c`` maps the
+    hand rig's joint frame at rest into the body rig's through the two hands' rest axes
+    (:func:`hand_rest_basis`), so rigs with other joint axis conventions, or other rest
+    orientations of the hand, exchange the same finger motion.
+    """
+    M = hand_rest_basis(body_skeleton, body_side) @ hand_rest_basis(hand_skeleton, hand_side).T
+    gb = body_skeleton.rest_world_xforms()[[body_skeleton.index(b) for b, _ in pairs], :3, :3]
+    gh = hand_skeleton.rest_world_xforms()[[hand_skeleton.index(h) for _, h in pairs], :3, :3]
+    c = np.swapaxes(_rot_only(gb), -1, -2) @ M @ _rot_only(gh)
+    return matrix_to_quat(c)
+
+
 def default_marker_offsets(skeleton, side: HandSide, *, wrist_width: float = 0.25,
                            forearm_distance: float = 1.0) -> MarkerOffsets:
     """Marker offsets derived from the rest pose.
@@ -113,32 +171,7 @@ def default_marker_offsets(skeleton, side: HandSide, *, wrist_width: float = 0.2
     w = skeleton.index(side.wrist)
     fa = skeleton.index(side.forearm)
     pos = rest[:, :3, 3]
-    knuckles = {f: _first_base(skeleton, side.fingers[f]) for f in FINGERS}
-    hand_j = next((knuckles[f] for f in ("middle", "index", "ring", "pinky") if knuckles[f] is not None), None)
-    if hand_j is None:
-        raise ValueError(f"hand {side.side!r} has no finger joints to place the hand marker on")
-    W = pos[w]
-    H = pos[hand_j]
-    length = float(np.linalg.norm(H - W))
-    if length < 1e-9:
-        raise ValueError(f"hand {side.side!r}: the knuckle {skeleton.joint_names[hand_j]!r} sits on the wrist")
-    along = (H - W) / length
-    a = next((knuckles[f] for f in ("index", "thumb", "middle") if knuckles[f] is not None and knuckles[f] != hand_j),
-             None)
-    b = next((knuckles[f] for f in ("pinky", "ring") if knuckles[f] is not None and knuckles[f] != hand_j), None)
-    across = None
-    if a is not None and b is not None:
-        across = pos[a] - pos[b]
-    elif a is not None:
-        across = pos[a] - H
-    elif b is not None:
-        across = H - pos[b]
-    if across is not None:
-        across = across - along * np.dot(across, along)
-    if across is None or np.linalg.norm(across) < 1e-9 * length:
-        helper = np.array([0.0, 1.0, 0.0]) if abs(along[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        across = np.cross(along, helper)
-    across = across / np.linalg.norm(across)
+    W, H, along, across, length = _hand_rest_axes(skeleton, side, rest)
     to_elbow = pos[fa] - W
     if np.linalg.norm(to_elbow) > 0.1 * length:
         to_elbow = to_elbow / np.linalg.norm(to_elbow)
@@ -632,6 +665,14 @@ class SpliceOptions:
         Second pass: align the forearms as joint frames (:func:`hand_directions`,
         needs joints) or, as in the paper, by the minimal rotation between the
         forearm vectors of the markers (eq. 9).
+    transfer : {"auto", "local", "hand"}
+        Finger rotations relative to rest copied joint frame to joint frame
+        (``"local"``: ``q_body = rest_body · rest_hand⁻¹ · q_hand``), or carried through
+        the hands' rest axes (``"hand"``, :func:`transfer_axes`) for rigs with other
+        joint axis conventions; ``"auto"`` takes ``"local"`` when every pair's joint
+        frames agree within ``auto_transfer_deg`` degrees and ``"hand"`` otherwise.
+    auto_transfer_deg : float
+        The threshold of ``"auto"``.
     """
 
     band1: float = 0.3
@@ -645,8 +686,12 @@ class SpliceOptions:
     jump_frames: float = 2.0
     min_phase: int = 4
     forearm_align: str = "frame"
+    transfer: str = "auto"
+    auto_transfer_deg: float = 10.0
 
     def __post_init__(self) -> None:
+        if self.transfer not in ("local", "hand", "auto"):
+            raise ValueError(f"Expected transfer 'local', 'hand' or 'auto', got {self.transfer!r}")
         if self.forearm_align not in ("frame", "vector"):
             raise ValueError(f"Expected forearm_align 'frame' or 'vector', got {self.forearm_align!r}")
         if self.yaw not in ("window", "trunk", "none"):
@@ -855,7 +900,8 @@ def _sample(rel: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], alignment: np.ndarray, *,
-                     blend_window: int = 4, jump_frames: float = 2.0) -> FingerTransfer:
+                     blend_window: int = 4, jump_frames: float = 2.0,
+                     axes: np.ndarray | None = None) -> FingerTransfer:
     """Finger rotations of ``hands`` at the aligned frames, relative to rest, on ``body``'s joints.
 
     Parameters
@@ -869,6 +915,10 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
         Half-width (frames) of the cross-fade at a jump.
     jump_frames : float
         Extra hand frames per body frame beyond the mean rate that make a jump.
+    axes : (len(pairs), 4) float, optional
+        :func:`transfer_axes`; omitted, rotations relative to rest are copied as they
+        are (``q_body = rest_body · rest_hand⁻¹ · q_hand``), which assumes both rigs'
+        finger joints share their axis conventions.
     """
     a = np.asarray(alignment, dtype=np.float64)
     n = body.num_frames
@@ -899,6 +949,11 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
             ql = _sample(rel, left_t)
             qr = _sample(rel, right_t)
             out[t] = quat_slerp(ql, qr, alpha[:, None] * np.ones(len(pairs)))
+    if axes is not None:
+        c = np.asarray(axes, dtype=np.float64)
+        if c.shape != (len(pairs), 4):
+            raise ValueError(f"Expected axes of shape ({len(pairs)}, 4), got {c.shape}")
+        out = quat_multiply(quat_multiply(c[None], out), quat_conjugate(c)[None])
     rots = quat_multiply(body.skeleton.rest_rotations[bj][None], out)
     return FingerTransfer(bj, rots, seams.astype(np.int64))
 
@@ -917,6 +972,8 @@ class SpliceResult:
     pairs : dict of str to list of (body joint, hand joint)
     body_unmatched, hand_unmatched : dict of str to list of str
         Finger joints without a counterpart, per hand.
+    transfer_modes : dict of str to str
+        ``"local"`` or ``"hand"`` per hand (what ``"auto"`` chose).
     """
 
     clip: Clip
@@ -925,6 +982,7 @@ class SpliceResult:
     pairs: dict
     body_unmatched: dict
     hand_unmatched: dict
+    transfer_modes: dict
 
 
 def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
@@ -961,7 +1019,7 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
     wb = partial_world_xforms(body, [j for s in body_sides.values() for j in _side_joints(body.skeleton, s)])
     wh = partial_world_xforms(hands, [j for s in hand_sides.values() for j in _side_joints(hands.skeleton, s)])
     out = body
-    sides, transfers, pairs_all, bun, hun = {}, {}, {}, {}, {}
+    sides, transfers, pairs_all, bun, hun, modes = {}, {}, {}, {}, {}, {}
     order = [s for s in ("left", "right") if s in body_sides]
     for k, s in enumerate(order):
         bs, hs = body_sides[s], hand_sides[s]
@@ -982,14 +1040,23 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
                          body_hand_dirs=hand_directions(body, bs, bo, wb),
                          hand_hand_dirs=hand_directions(hands, hs, ho, wh), side=s)
         pairs, bu, hu = pair_finger_joints(bs, hs)
+        mode, axes = options.transfer, None
+        if pairs and mode != "local":
+            axes = transfer_axes(body.skeleton, bs, hands.skeleton, hs, pairs)
+            misfit = float(np.degrees(2 * np.arccos(np.clip(np.abs(axes[:, 3]), 0.0, 1.0))).max())
+            if mode == "auto":
+                mode = "hand" if misfit > options.auto_transfer_deg else "local"
+            if mode == "local":
+                axes = None
+        modes[s] = mode
         tr = transfer_fingers(body, hands, pairs, al.alignment, blend_window=options.blend_window,
-                              jump_frames=options.jump_frames)
+                              jump_frames=options.jump_frames, axes=axes)
         if tr.joints:
             out = out.with_joint_rotations(tr.joints, tr.rotations)
         sides[s], transfers[s], pairs_all[s], bun[s], hun[s] = al, tr, pairs, bu, hu
         if progress is not None:
             progress(k + 1, len(order), s)
-    return SpliceResult(out, sides, transfers, pairs_all, bun, hun)
+    return SpliceResult(out, sides, transfers, pairs_all, bun, hun, modes)
 
 
 def partial_world_xforms(clip: Clip, joints: Sequence[int]) -> np.ndarray:

@@ -42,6 +42,9 @@ def register(sub) -> None:
                    help="with --yaw trunk: heading of the hand capture when HANDS has no trunk (default 0)")
     p.add_argument("--forearm-align", choices=("frame", "vector"), default="frame",
                    help="second pass: align forearm joint frames (default) or forearm marker vectors as in the paper")
+    p.add_argument("--transfer", choices=("auto", "local", "hand"), default="auto",
+                   help="finger rotations relative to rest copied joint frame to joint frame (local), or through "
+                        "the hands' rest axes for rigs with other joint axes (hand); auto picks (default)")
     p.add_argument("--blend", type=int, default=4, metavar="N",
                    help="frames on each side of a jump in hand timing to cross-fade (default 4)")
     p.add_argument("--json", action="store_true", help="print the alignment, phases and costs as JSON")
@@ -170,7 +173,7 @@ def run(args) -> int:
         constraints = conv
 
     options = SpliceOptions(band1=band1, band2=band2, yaw=args.yaw, hand_trunk_yaw_deg=args.hand_yaw,
-                            forearm_align=args.forearm_align, blend_window=args.blend)
+                            forearm_align=args.forearm_align, blend_window=args.blend, transfer=args.transfer)
     progress = Progress("splice")
     try:
         result = splice_clips(body, hands, {s: body_map[s] for s in sides}, {s: hand_map[s] for s in sides},
@@ -183,6 +186,9 @@ def run(args) -> int:
     write_clip(args.body, result.clip, args.output, **opts)
 
     for s in sides:
+        if args.transfer == "auto" and result.transfer_modes.get(s) == "hand":
+            print(f"usdhands: note: {s} hand: the finger joints of BODY and HANDS have other axis conventions; "
+                  "rotations carried through the hands' rest axes (--transfer hand)", file=sys.stderr)
         if result.body_unmatched[s]:
             print(f"usdhands: note: {s} hand: BODY finger joints without a counterpart in HANDS keep their "
                   f"own motion: {', '.join(result.body_unmatched[s])}", file=sys.stderr)
@@ -208,6 +214,7 @@ def run(args) -> int:
             "seams": {s: [int(v) for v in result.transfers[s].seams] for s in sides},
             "pairs": {s: [list(p) for p in result.pairs[s]] for s in sides},
             "body_unmatched": result.body_unmatched, "hands_unmatched": result.hand_unmatched,
+            "transfer": result.transfer_modes,
             "constraints": [str(c) for c in (parse_match(t) for t in args.match)],
         }
         print_json(out)
