@@ -332,3 +332,9 @@ def test_write_clip_converts_a_clip_in_metres_back_to_the_source_units(shared_as
     m_clip = HANDLER.read(src, units="m").clip()
     HANDLER.write_clip(src, m_clip, tmp_path / "m2.bvh", units="m")
     assert_same_motion(clip, read_asset(tmp_path / "m2.bvh").clip())
+
+
+def test_byte_order_mark_is_skipped(tmp_path):
+    p = tmp_path / "bom.bvh"
+    p.write_text("\ufeff" + synthetic_bvh("ZXY", np.zeros((2, 15))), encoding="utf-8")
+    assert read_asset(p).clip().num_frames == 2

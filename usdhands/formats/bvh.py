@@ -44,7 +44,7 @@ Writing
   Skeletons in other units or Z-up are converted to the ``units`` (default
   centimetres) and +Y.
 - :meth:`BvhHandler.write_clip` writes the source file's hierarchy text unchanged
-  with the clip's motion, in the source's channel layout (orders kept).
+  (line endings become ``\n``) with the clip's motion, in the source's channel layout (orders kept).
 - Numbers are written with 6 decimals (1e-6 degree, 1e-6 unit); Euler angles are
   unwrapped over time so curves have no 360° jumps.
 """
@@ -184,7 +184,7 @@ def parse_bvh(path: str | os.PathLike) -> BvhFile:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError as e:
         raise AssetReadError(f"cannot read: {e.strerror}", path=path) from None
-    lines = text.splitlines()
+    lines = text.removeprefix("\ufeff").splitlines()
     motion_line = None
     for i, line in enumerate(lines):
         if line.strip().upper() == "MOTION" or line.strip().upper().startswith("MOTION "):
