@@ -606,3 +606,63 @@ def test_robot_expressive_two_bone_fingers_without_pinky(shared_assets, tmp_path
     # one hand only
     code, out, _ = run_cli(capsys, "reduce", src, "--animation", "Wave", "--hands", "right", "--json")
     assert code == 0 and json.loads(out)["curves"] == 33
+
+
+def test_other_euler_order_round_trips_and_bad_order_is_refused(shared_assets, tmp_path, capsys):
+    from usdhands.formats.io import read_clip
+    from usdhands.model.rotations import quat_angle_deg
+
+    src = shared_assets.joinpath(*LEAP)
+    reduced, model = tmp_path / "r.bvh", tmp_path / "m.json"
+    code, _, err = run_cli(capsys, "reduce", src, "--order", "zyx", "-o", reduced, "--model", model)
+    assert code == 0, err
+    assert ReductionModel.load(model).order == "ZYX"
+    out = tmp_path / "e.bvh"
+    assert run_cli(capsys, "expand", src, "--model", model, "-o", out)[0] == 0
+    assert quat_angle_deg(read_clip(reduced).rotations, read_clip(out).rotations).max() < 1e-9
+    code, _, err = run_cli(capsys, "reduce", src, "--order", "XXY")
+    assert code == 2 and err == "usdhands: error: bad --order 'XXY': expected a permutation of XYZ such as XYZ or ZYX\n"
+
+
+def test_across_hands_relates_curves_of_both_hands():
+    u = 20 * basis(0)
+    v = np.stack([u, 0.5 * u + 0.01 * basis(1), 0.7 * u, 15 * basis(2)], axis=1)
+    names = ["L1.x", "L2.x", "R1.x", "R2.x"]
+    sides = ["left", "left", "right", "right"]
+    apart = reduce_curves(v, names, "rmsd<0.3", groups=sides).final
+    pooled = reduce_curves(v, names, "rmsd<0.3", groups=sides, across_groups=True).final
+    assert {r.dependent: r.controlling for r in apart.model.relations} == {"L2.x": "L1.x"}
+    assert {r.dependent: r.controlling for r in pooled.model.relations} == {"L2.x": "L1.x", "R1.x": "L1.x"}
+    assert apart.dofs_left_by_group == {"left": 1, "right": 2}
+    assert pooled.dofs_left_by_group == {"left": 1, "right": 1}
+
+
+def test_cli_across_hands_on_a_two_handed_clip(tmp_path, capsys):
+    """Both hands of the sample conversation given the same finger curves: pooled, the left controls all."""
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+    from usdhands.model.hand_detection import detect_hands
+    from usdhands.samples.gestures import conversation_clip
+
+    clip = conversation_clip().slice(0, 300)
+    sk = clip.skeleton
+    hands = detect_hands(sk)
+    left = [sk.index(j) for j in hands.left.finger_joints]
+    right = [sk.index(j) for j in hands.right.finger_joints]
+    # BVH has no rest rotations (the reader's rest is the identity), so equal local rotations
+    # read back as equal finger curves
+    twin = clip.with_joint_rotations(left, clip.rotations[:, right])
+    path = tmp_path / "twins.bvh"
+    write_asset(Asset(path=None, skeletons=(sk,), clips=(twin,)), path)
+
+    code, out, err = run_cli(capsys, "reduce", path, "--json")
+    assert code == 0, err
+    apart = json.loads(out)
+    assert apart["steps"][-1]["dofs_left_by_hand"]["left"] == apart["steps"][-1]["dofs_left_by_hand"]["right"] > 0
+    code, out, err = run_cli(capsys, "reduce", path, "--json", "--across-hands")
+    assert code == 0, err
+    pooled = json.loads(out)
+    assert pooled["steps"][-1]["dofs_left_by_hand"] == {"left": apart["steps"][-1]["dofs_left_by_hand"]["left"],
+                                                         "right": 0}
+    assert any(r["dependent"].startswith("Right") and r["controlling"].startswith("Left") and r["rmsd"] < 1e-4
+               for r in pooled["relations"])

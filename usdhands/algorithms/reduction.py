@@ -370,7 +370,7 @@ class ReductionResult:
 
 
 # ---------------------------------------------------------------------------- the method
-def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None,
+def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None, across_groups: bool = False,
                   order: str = "XYZ", source: str = "") -> ReductionResult:
     """Run the simplification steps on a set of curves.
 
@@ -385,6 +385,9 @@ def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None
     groups : (D,) sequence, optional
         A label per curve (``"left"``/``"right"``): relations only within a label
         (hands are independent). Default: one group.
+    across_groups : bool
+        Relate curves of different groups too (the paper pooled both hands); the groups
+        then only label the DOF counts.
     order : str
         Euler order of the curves, recorded in the models.
     source : str
@@ -417,7 +420,7 @@ def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None
     cov = _covariance(v, mean)
     rng = vmax - vmin
     std = np.sqrt(np.diag(cov))
-    rmsd1, rmsd2 = _rmsd_from_cov(cov, rng, codes)
+    rmsd1, rmsd2 = _rmsd_from_cov(cov, rng, np.zeros(D, dtype=np.int64) if across_groups else codes)
     valid = _valid(std, rng)
     # total order: larger std ranks higher; equal std -> the earlier column ranks higher
     rank = np.empty(D, dtype=np.int64)

@@ -93,7 +93,7 @@ def run(args) -> int:
     clip, handmap, curves, sides = load_finger_curves(args.file, args.animation, args.handmap, args.hands, args.order)
     progress(1, 3, "reducing")
     result = reduce_curves(curves.values, curves.names, steps,
-                           groups=None if args.across_hands else sides, order=curves.order,
+                           groups=sides, across_groups=args.across_hands, order=curves.order,
                            source=args.file.name)
     k = len(result.steps) if args.step is None else args.step
     if not 1 <= k <= len(result.steps):
