@@ -334,6 +334,11 @@ def test_robot_without_hand_joint_synthetic():
     check_robot(detect_hands(make_skeleton(robot_pairs())))
 
 
+def test_wristless_rig_ignores_finger_words_in_the_head():
+    pairs = robot_pairs() + [("Neck", "Torso"), ("Head", "Neck"), ("EarRing.L", "Head"), ("Pinky.L", "EarRing.L")]
+    check_robot(detect_hands(make_skeleton(pairs)))
+
+
 def test_no_hands_lists_joints_and_what_was_looked_for():
     names = [("Hips", None)] + [(f"Bone{k:02d}", "Hips" if k == 0 else f"Bone{k - 1:02d}") for k in range(44)]
     with pytest.raises(NoHandsError) as e:

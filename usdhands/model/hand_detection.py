@@ -15,7 +15,9 @@ classifies each joint:
   ``ring``; ``pinky``/``pinkie``/``little``; a number after ``finger``: Rokoko's
   ``Finger1Proximal`` and MakeHuman's ``finger1-2.L`` count from 1 (thumb … pinky),
   3ds Max Biped's ``Finger0``, ``Finger01``, ``Finger1`` … from 0 (the skeleton is read
-  as Biped when it has a ``Finger0``). Names with ``foot``/``toe`` (HumanIK's foot fingers) are no fingers.
+  as Biped when it has a ``Finger0``). Names with ``foot``/``toe`` (HumanIK's foot
+  fingers), and joints in a head, leg or tail branch (``EarRing.L`` under ``Head``),
+  are no fingers.
 - **end joints**, which carry no DOF and are left out of the chains: names with a
   token ``end``, ``nub``, ``tip``, ``leaf``, ``site`` (``*_end``, ``*Nub``,
   ``*-tip``, BVH End Sites read as ``<parent>_end``), and leaf joints numbered 4 or
@@ -79,6 +81,8 @@ _END_WORDS = {"end", "nub", "tip", "leaf", "site", "effector"}
 _NOT_FINGER_WORDS = {"foot", "toe", "toes", "leg", "twist", "roll", "ik", "pole", "target"}
 _SEGMENT_RANK = {"metacarpal": 0, "meta": 0, "carpal": 0, "proximal": 1, "prox": 1,
                  "intermediate": 2, "inter": 2, "medial": 2, "distal": 3, "dist": 3}
+_OFF_ARM_WORDS = {"head", "jaw", "eye", "ear", "leg", "upleg", "thigh", "knee", "calf", "shin", "foot",
+                  "toe", "toes", "tail"}
 _HELPER_WORDS = {"twist", "roll", "share", "helper", "ik", "pole", "target"}
 
 _MAX_LISTED = 40
@@ -118,6 +122,12 @@ def _classify(skeleton: Skeleton) -> list[_Joint]:
             has_child[p] = True
     all_tokens = [joint_tokens(n) for n in skeleton.short_names]
     biped = any(a == "finger" and b == "0" for toks in all_tokens for a, b in zip(toks, toks[1:]))
+    # joints in a head, leg or tail branch are never fingers ("EarRing.L" under "Head"); not "neck":
+    # some rigs hang the shoulders from the neck
+    off_arm = [False] * J
+    for j, toks in enumerate(all_tokens):
+        p = int(skeleton.parents[j])
+        off_arm[j] = bool(set(toks) & _OFF_ARM_WORDS) or (p >= 0 and off_arm[p])
     out = []
     for j, toks in enumerate(all_tokens):
         tokset = set(toks)
@@ -146,7 +156,7 @@ def _classify(skeleton: Skeleton) -> list[_Joint]:
                     rest = toks[k + 2:]
                     digits = [int(rest[0])] if rest and rest[0].isdigit() else []
                 break
-        if tokset & _NOT_FINGER_WORDS:
+        if tokset & _NOT_FINGER_WORDS or off_arm[j]:
             finger = None
         if digits:
             number = digits[-1]
