@@ -1,0 +1,133 @@
+"""``usdhands convert``: glTF <-> USD <-> BVH through the command line, meshes included."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from usdhands.cli import main
+from usdhands.formats.io import read_asset
+from usdhands.formats.usd_validate import usd_compliance_errors
+from usdhands.model import Clip, Skeleton
+from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.model.rotations import quat_angle_deg
+from usdhands.formats.io import write_asset
+
+
+def convert(capsys, src, dst, *extra) -> str:
+    code = main(["convert", str(src), str(dst), *map(str, extra)])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    return err
+
+
+def assert_same_motion(a: Clip, b: Clip, rot_rad=1e-4, trans_rel=1e-5):
+    assert b.num_frames == a.num_frames and b.fps == pytest.approx(a.fps)
+    idx = [b.skeleton.index(n) for n in a.skeleton.joint_names]
+    angle = np.radians(quat_angle_deg(a.rotations, b.rotations[:, idx]))
+    assert angle.max() < rot_rad
+    scale = max(1.0, np.abs(a.skeleton.rest_translations).max())
+    assert np.abs(a.translations - b.translations[:, idx]).max() < trans_rel * scale
+
+
+def test_gltf_usd_gltf_round_trip_keeps_motion_and_meshes(shared_assets, tmp_path, capsys, gltf_validator):
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    usd = tmp_path / "robot.usdc"
+    back = tmp_path / "robot.glb"
+    convert(capsys, src, usd)
+    assert usd_compliance_errors(usd) == []
+    convert(capsys, usd, back)
+    assert gltf_validator(back)[0]["numErrors"] == 0
+    a, b = read_asset(src), read_asset(back)
+    assert [c.name for c in b.clips] == [c.name for c in a.clips]
+    for ca, cb in zip(a.clips, b.clips):
+        assert_same_motion(ca, cb)
+    assert len(b.meshes) == len(a.meshes) == 4
+    for ma, mb in zip(a.meshes, b.meshes):
+        np.testing.assert_allclose(mb.points, ma.points, atol=1e-5)
+        np.testing.assert_allclose(mb.normals, ma.normals, atol=1e-5)
+        assert (ma.uvs is None) == (mb.uvs is None)
+        if ma.uvs is not None:
+            np.testing.assert_allclose(mb.uvs, ma.uvs, atol=1e-6)
+        names_a = np.array(a.skeletons[0].joint_names)[ma.joint_indices]
+        names_b = np.array(b.skeletons[0].joint_names)[mb.joint_indices]
+        assert (names_a == names_b)[ma.joint_weights > 0].all()
+        np.testing.assert_allclose(mb.joint_weights, ma.joint_weights, atol=1e-6)
+
+
+def test_one_animation_by_name(shared_assets, tmp_path, capsys):
+    out = tmp_path / "wave.usda"
+    convert(capsys, shared_assets / "robot_expressive" / "RobotExpressive.glb", out, "--animation", "Wave")
+    clips = read_asset(out).clips
+    assert [c.name.rsplit("/", 1)[-1] for c in clips] == ["Wave"]
+
+
+def test_bvh_to_gltf_converts_centimetres_to_metres(shared_assets, tmp_path, capsys, gltf_validator):
+    src = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    out = tmp_path / "ok.glb"
+    convert(capsys, src, out)
+    assert gltf_validator(out)[0]["numErrors"] == 0
+    a, b = read_asset(src).clips[0], read_asset(out).clips[0]
+    assert a.skeleton.meters_per_unit == 0.01 and b.skeleton.meters_per_unit == 1.0
+    idx = [b.skeleton.index(n) for n in a.skeleton.joint_names]
+    np.testing.assert_allclose(b.world_positions()[:, idx], a.world_positions() * 0.01, atol=1e-6)
+    # and back to BVH, in centimetres again
+    bvh = tmp_path / "ok.bvh"
+    convert(capsys, out, bvh)
+    c = read_asset(bvh).clips[0]
+    idx = [c.skeleton.index(n) for n in a.skeleton.joint_names]
+    np.testing.assert_allclose(c.world_positions()[:, idx], a.world_positions(), atol=1e-3)
+
+
+def test_z_up_usd_to_gltf_is_y_up(tmp_path, capsys):
+    sk = Skeleton(["Hips", "Hips/Head"], [-1, 0], [[0, 0, 100], [0, 0, 60]], np.tile([0, 0, 0, 1.0], (2, 1)),
+                  meters_per_unit=0.01, up_axis="Z")
+    src = write_asset(Asset("mem", (sk,), (Clip(sk, 24, np.tile([0, 0, 0, 1.0], (3, 2, 1)), name="Anim"),)),
+                      tmp_path / "zup.usda")
+    out = tmp_path / "yup.glb"
+    convert(capsys, src, out)
+    head = read_asset(out).clips[0].world_positions()[0, 1]
+    np.testing.assert_allclose(head, [0, 1.6, 0], atol=1e-6)
+
+
+def test_mesh_with_six_influences_survives_usd_and_gltf(tmp_path, capsys, gltf_validator):
+    J = 7
+    names = ["root"] + [f"root/b{i}" for i in range(1, J)]
+    sk = Skeleton(names, [-1] + [0] * (J - 1), np.r_[[[0, 0, 0]], np.eye(3)[np.arange(J - 1) % 3]],
+                  np.tile([0, 0, 0, 1.0], (J, 1)), bind_xforms=None)
+    bind = np.tile(np.eye(4), (J, 1, 1))
+    bind[:, :3, 3] = sk.rest_world_positions()
+    sk = Skeleton(sk.joint_names, sk.parents, sk.rest_translations, sk.rest_rotations, bind_xforms=bind)
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(4, 3))
+    idx = np.array([rng.permutation(J)[:6] for _ in range(4)])
+    w = rng.uniform(0.1, 1, size=(4, 6))
+    w /= w.sum(axis=1, keepdims=True)
+    mesh = SkinnedMesh("blob", pts, np.array([3, 3]), np.array([0, 1, 2, 0, 2, 3]),
+                       normals=np.tile([0, 0, 1.0], (4, 1)), uvs=rng.uniform(size=(4, 2)),
+                       joint_indices=idx, joint_weights=w)
+    rot = np.tile([0, 0, 0, 1.0], (5, J, 1))
+    src = write_asset(Asset("mem", (sk,), (Clip(sk, 30, rot, name="A"),), (mesh,)), tmp_path / "six.usda")
+    glb = tmp_path / "six.glb"
+    convert(capsys, src, glb)
+    assert gltf_validator(glb)[0]["numErrors"] == 0
+    usd = tmp_path / "six_back.usda"
+    convert(capsys, glb, usd)
+    for path in (glb, usd):
+        m = read_asset(path).meshes[0]
+        dense = np.zeros((4, J))
+        np.add.at(dense, (np.arange(4)[:, None], m.joint_indices), m.joint_weights)  # padding adds 0
+        ref = np.zeros((4, J))
+        np.add.at(ref, (np.arange(4)[:, None], idx), w)
+        np.testing.assert_allclose(dense, ref, atol=1e-6)
+
+
+def test_written_file_has_ordinary_permissions(shared_assets, tmp_path, capsys):
+    import os
+    import stat
+
+    out = tmp_path / "ok.usda"
+    convert(capsys, shared_assets / "leap_hands" / "fingers-ok.bvh", out)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o666 & ~umask
