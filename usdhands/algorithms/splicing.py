@@ -14,16 +14,19 @@ animations* (sections 3 and 4). For each hand:
    eq. 6: how many signs of the first and second derivatives of the markers differ.
 3. **Second pass** (within phases): DTW in a narrower band (10 %) around the first
    path, still through the constraints, over the angle between the hand vectors once
-   the forearm vectors are aligned (eq. 8–9), in degrees.
+   the forearms are aligned (eq. 8–9), in degrees. By default the forearms are aligned
+   as joint frames (:func:`hand_directions`); ``forearm_align="vector"`` is the paper's
+   minimal rotation between the markers' forearm vectors.
 4. **Merge**: a body frame matched to several hand frames takes their median
    (a fractional frame, sampled by slerp); where the hand frame jumps ahead, the
    finger motion is cross-faded over a window (:func:`transfer_fingers`).
 
 Finger rotations are transferred relative to each skeleton's rest pose:
-``q_body = rest_body * (rest_hand⁻¹ * q_hand)``; this assumes the two rigs' finger
-joints have the same local axis conventions (true for two exports of one rig family;
-retarget otherwise). Finger joints are paired finger by finger from the distal end
-of each chain, so a chain with a metacarpal pairs with one without.
+``q_body = rest_body * (rest_hand⁻¹ * q_hand)`` when both rigs' finger joints share
+their axis conventions, otherwise through the hands' rest axes
+(:func:`transfer_axes`); ``SpliceOptions.transfer`` chooses. Finger joints are paired
+finger by finger from the distal end of each chain, so a chain with a metacarpal
+pairs with one without.
 
 A hand clip without a shoulder joint (a hand-only capture such as a Leap Motion
 BVH rooted at the forearm) is used without subtraction: the capture's trunk is
@@ -52,7 +55,8 @@ __all__ = [
     "sign_features", "first_pass_cost", "first_pass_cost_naive", "hand_angle_cost",
     "hand_angle_cost_naive", "window_yaw_naive", "align_hands", "median_alignment",
     "phase_boundaries", "pair_finger_joints", "transfer_fingers", "forearm_hand_vectors",
-    "SpliceResult", "splice_clips", "partial_world_xforms", "hand_rest_basis", "transfer_axes", "hand_directions", "direction_angle_cost",
+    "SpliceResult", "splice_clips", "partial_world_xforms", "hand_rest_basis", "transfer_axes",
+    "hand_directions", "direction_angle_cost",
 ]
 
 
