@@ -555,6 +555,8 @@ def test_cli_user_mistakes(shared_assets, tmp_path, capsys):
     src = shared_assets.joinpath(*LEAP)
     code, _, err = run_cli(capsys, "reduce", src, "--hands", "left")
     assert code == 2 and err == f"usdhands: error: {src}: no left hand with fingers (hands found: right)\n"
+    code, _, err = run_cli(capsys, "reduce", src, "--model", tmp_path / "x.bvh", "-o", tmp_path / "x.bvh")
+    assert code == 2 and err == f"usdhands: error: {tmp_path / 'x.bvh'}: the model JSON would overwrite this file\n"
     code, _, err = run_cli(capsys, "reduce", src, "--step", "5")
     assert code == 2 and err == "usdhands: error: --step 5 is out of range: 4 step(s) given\n"
     model = ReductionModel(("LeftHandIndex1.x", "LeftHandIndex1.y", "LeftHandIndex1.z"),
@@ -666,3 +668,22 @@ def test_cli_across_hands_on_a_two_handed_clip(tmp_path, capsys):
                                                          "right": 0}
     assert any(r["dependent"].startswith("Right") and r["controlling"].startswith("Left") and r["rmsd"] < 1e-4
                for r in pooled["relations"])
+
+
+def test_reduce_expand_through_usd(sample_assets, tmp_path, capsys):
+    from usdhands.formats.io import read_clip
+    from usdhands.model.rotations import quat_angle_deg
+
+    src = sample_assets / "humanoid.usda"
+    reduced, model = tmp_path / "reduced.usda", tmp_path / "m.json"
+    code, out, err = run_cli(capsys, "reduce", src, "-o", reduced, "--model", model)
+    assert code == 0, err
+    m = ReductionModel.load(model)
+    assert m.relations and m.constants and "LeftHandIndex2.y" in m.curves  # short names of USD joint paths
+    from_orig, again = tmp_path / "from_orig.usda", tmp_path / "again.usda"
+    assert run_cli(capsys, "expand", src, "--model", model, "-o", from_orig)[0] == 0
+    assert run_cli(capsys, "expand", reduced, "--model", model, "-o", again)[0] == 0
+    r_red, r_orig, r_again = (read_clip(p).rotations for p in (reduced, from_orig, again))
+    assert quat_angle_deg(r_red, r_orig).max() < 1e-9
+    assert quat_angle_deg(r_red, r_again).max() < 2e-5  # USD stores quatf (float32): about 6e-6 degrees
+    assert quat_angle_deg(r_red, read_clip(src).rotations).max() > 0.1

@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from usdhands.commands._common import parse_list, print_json, print_table
-from usdhands.errors import UsdHandsError
+from usdhands.errors import OutputPathError, UsdHandsError
 
 
 def register(sub) -> None:
@@ -88,6 +88,10 @@ def run(args) -> int:
     from usdhands.commands._common import Progress
 
     steps = parse_steps(args.steps)
+    if args.model is not None:
+        for other in (args.file, args.output):
+            if other is not None and args.model.resolve() == Path(other).resolve():
+                raise OutputPathError("the model JSON would overwrite this file", path=args.model)
     progress = Progress("reduce")
     progress(0, 3, "reading")
     clip, handmap, curves, sides = load_finger_curves(args.file, args.animation, args.handmap, args.hands, args.order)
