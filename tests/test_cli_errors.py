@@ -145,6 +145,13 @@ def test_usd_animation_joints_do_not_match(tmp_path, capsys):
     check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.glb"], "Hips/RightHand", [bad])
 
 
+def test_usd_zero_length_quaternion(tmp_path, capsys):
+    bad = tmp_path / "zeroquat.usda"
+    bad.write_text(usd_skel('["Hips", "Hips/LeftHand"]', "[(1, 0, 0, 0), (0, 0, 0, 0)]"))
+    check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.glb"],
+                "/Root/Skel/Anim: rotations hold a zero-length quaternion (joint 'Hips/LeftHand', frame 0 at time 0)", [bad])
+
+
 def test_unknown_output_extension(shared_assets, tmp_path, capsys):
     src = leap_copy(shared_assets, tmp_path)
     check_error(capsys, tmp_path, ["convert", src, tmp_path / "out.xyz"],

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Gf, Usd, UsdGeom, UsdSkel
 
-from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatchError
 from usdhands.formats.usd_common import (
     SOURCE_SKELETON_KEY,
     bound_animation_path,
@@ -228,6 +228,32 @@ def frame_times(samples: list[float], tcps: float, fps: float | None) -> tuple[n
     return first + np.arange(n) * step, float(fps)
 
 
+def _check_authored_rotations(prim: Usd.Prim, joints: list[str], path: Path, where: str) -> None:
+    """Raise InvalidAnimationError for a zero-length or NaN quaternion among the authored rotations.
+
+    UsdSkel's queries turn such values into matrices and back, which hides them, so the
+    authored samples are checked directly.
+    """
+    attr = UsdSkel.Animation(prim).GetRotationsAttr()
+    if not attr or not attr.HasAuthoredValue():
+        return
+    times = attr.GetTimeSamples() or [Usd.TimeCode.Default()]
+    for k, t in enumerate(times):
+        value = attr.Get(t)
+        if value is None or len(value) == 0:
+            continue
+        q = np.asarray(value, dtype=np.float64)
+        norms = np.linalg.norm(q, axis=-1)
+        bad = ~np.isfinite(norms) | (norms < 1e-6)
+        if bad.any():
+            j = int(np.argmax(bad))
+            name = joints[j] if j < len(joints) else str(j)
+            what = "a zero-length quaternion" if np.isfinite(norms[j]) else "a NaN quaternion"
+            at = "" if isinstance(t, Usd.TimeCode) else f" at time {t:g}"
+            raise InvalidAnimationError(f"rotations hold {what} (joint {name!r}, frame {k}{at})",
+                                        path=path, location=where)
+
+
 def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: float | None,
                path: Path) -> Clip:
     prim = anim_query.GetPrim()
@@ -278,6 +304,7 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
                                          location=where)
             has[label] = True
             dst[f] = np.asarray(arr)
+    _check_authored_rotations(prim, joints, path, where)
     if len(times) == 0 and not any(has.values()):
         T = 0  # no value at all: an animation of zero frames (read_asset reports it)
     everyone = K == J and bool((cols == np.arange(J)).all())
