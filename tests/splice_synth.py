@@ -295,3 +295,52 @@ if __name__ == "__main__":
     if len(sys.argv) != 2:
         sys.exit("usage: python tests/splice_synth.py OUTPUT_FOLDER")
     write_example(sys.argv[1])
+
+
+def hand_session(clip: Clip, sides, *, hand_ratio: float = 1.1, warp_amount: float = 0.35,
+                 noise_deg: float = 0.5, seed: int = 0) -> tuple[Clip, np.ndarray]:
+    """A hand session made from any clip with hands: the recipe of :func:`make_case`.
+
+    Known smooth non-linear monotone time warp; the rotations of each side's shoulder
+    and forearm joints scaled towards rest by 0.5-0.8 (slerp); the root held at its
+    first frame (a still trunk); noise on the arm joints.
+
+    Parameters
+    ----------
+    clip : Clip
+    sides : iterable of HandSide
+        Hands whose arms get the amplitude scaling.
+
+    Returns
+    -------
+    hands : Clip
+    truth : (n,) float
+        Hand frame belonging to each body frame.
+    """
+    from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_slerp
+
+    n = clip.num_frames
+    m = int(round(n * hand_ratio))
+    u = np.linspace(0.0, 1.0, m)
+    k = 2.0
+    warp = (n - 1) * (u + warp_amount * np.sin(2 * np.pi * k * u) / (2 * np.pi * k))
+    i0 = np.clip(np.floor(warp).astype(int), 0, n - 2)
+    w = warp - i0
+    J = clip.num_joints
+    rot = quat_slerp(clip.rotations[i0], clip.rotations[i0 + 1], np.repeat(w[:, None], J, 1))
+    tr = clip.translations[i0] * (1 - w)[:, None, None] + clip.translations[i0 + 1] * w[:, None, None]
+    rng = np.random.default_rng(seed)
+    scale = 0.65 + 0.15 * np.sin(2 * np.pi * 0.7 * u + 0.3)
+    sk = clip.skeleton
+    arm = [sk.index(n_) for s in sides for n_ in (s.shoulder, s.forearm) if n_ is not None]
+    rest = sk.rest_rotations[arm]
+    rel = quat_multiply(quat_conjugate(rest)[None], rot[:, arm])
+    ident = np.broadcast_to([0.0, 0.0, 0.0, 1.0], rel.shape)
+    rel = quat_slerp(ident, rel, np.repeat(scale[:, None], len(arm), 1))
+    noise = euler_deg_to_quat(rng.normal(0.0, noise_deg, rel.shape[:-1] + (3,)))
+    rot[:, arm] = quat_multiply(quat_multiply(rest[None], rel), noise)
+    roots = np.nonzero(sk.parents < 0)[0]
+    rot[:, roots] = clip.rotations[0, roots]
+    tr[:, roots] = clip.translations[0, roots]
+    truth = np.interp(np.arange(n), warp, np.arange(m))
+    return Clip(sk, clip.fps, rot, tr, name="hand_session"), truth
