@@ -55,6 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     except UsdHandsError as e:
         print(f"usdhands: error: {e}", file=sys.stderr)
         return EXIT_USER_ERROR
+    except BrokenPipeError:  # output piped into head and the like
+        sys.stderr.close()
+        return 0
     except KeyboardInterrupt:
         print("usdhands: interrupted", file=sys.stderr)
         return 130

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from usdhands.commands._common import print_json, print_table
 from usdhands.errors import NoHandsError
+from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset
 from usdhands.model.handmap import FINGERS, SIDES, HandMap
 
@@ -20,11 +21,9 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _hands(skeleton, override) -> HandMap:
-    from usdhands.model.hand_detection import resolve_handmap
-
+def _hands(path: Path, skeleton, override) -> HandMap:
     try:
-        return resolve_handmap(skeleton, override)
+        return hands_for(path, skeleton, override)[0]
     except NoHandsError:
         return HandMap()
 
@@ -35,7 +34,7 @@ def inspect_asset(path: Path, handmap_path: Path | None = None) -> dict:
     skeletons = []
     hands = HandMap()
     for sk in asset.skeletons:
-        hm = _hands(sk, handmap_path)
+        hm = _hands(path, sk, handmap_path)
         if hands.left is None and hands.right is None:
             hands = hm
         skeletons.append({
