@@ -557,6 +557,9 @@ def test_cli_user_mistakes(shared_assets, tmp_path, capsys):
     assert code == 2 and err == f"usdhands: error: {src}: no left hand with fingers (hands found: right)\n"
     code, _, err = run_cli(capsys, "reduce", src, "--model", tmp_path / "x.bvh", "-o", tmp_path / "x.bvh")
     assert code == 2 and err == f"usdhands: error: {tmp_path / 'x.bvh'}: the model JSON would overwrite this file\n"
+    cesium = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    code, _, err = run_cli(capsys, "reduce", cesium)
+    assert code == 2 and err.startswith("usdhands: error: no hand found in skeleton") and err.count("\n") == 1
     code, _, err = run_cli(capsys, "reduce", src, "--step", "5")
     assert code == 2 and err == "usdhands: error: --step 5 is out of range: 4 step(s) given\n"
     model = ReductionModel(("LeftHandIndex1.x", "LeftHandIndex1.y", "LeftHandIndex1.z"),

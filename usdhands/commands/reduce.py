@@ -60,7 +60,9 @@ def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | Non
     _check_order(order)
     clip = read_clip(path, animation=animation)
     handmap = resolve_handmap(clip.skeleton, handmap_path)
-    wanted = parse_list(hands_arg, SIDES) or [h.side for h in handmap.sides]
+    wanted = parse_list(hands_arg, SIDES) or [h.side for h in handmap.sides if h.finger_joints]
+    if not wanted:
+        raise UsdHandsError("no hand with finger joints", path=path)
     joints, sides = [], []
     for side in SIDES:
         if side not in wanted:
