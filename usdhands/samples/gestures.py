@@ -56,6 +56,7 @@ __all__ = [
 ]
 
 TAKES_PER_TYPE = 8
+MIN_TAKE_S = 2.0  # a slow retraction rather than a take under 2 s
 
 # Spread of the takes of a type: height, distance, lateral placement (multipliers of
 # each type's own ranges, in cm per unit), and hand-orientation tilt (degrees, s.d.).
@@ -166,15 +167,15 @@ def _gesture_keys(gesture: str, p: _TakeParams, t0: float, start: HandKey, end: 
                          False, 2, tilt))
         t_s = t + prep + stroke * 1.2
         end_pos = _v(-44 * A - 3 * L, 28 + 7 * H, 24 + 4 * D)
-        keys.append(_key(t_s, end_pos, (-0.25, 0.85, 0.4), (0.8, 0, 0.6), pose, True, 5, tilt))
-        keys.append(_key(t_s + hold, end_pos + drift(), (-0.25, 0.85, 0.4), (0.8, 0, 0.6), hold_pose(), True, 5,
+        keys.append(_key(t_s, end_pos, (-0.35, 0.55, 0.8), (0.8, 0, 0.6), pose, True, 5, tilt))
+        keys.append(_key(t_s + hold, end_pos + drift(), (-0.35, 0.55, 0.8), (0.8, 0, 0.6), hold_pose(), True, 5,
                          small_tilt()))
         t_h = t_s + hold
     elif gesture == "doubt_shrug":
         keys.append(_key(t + prep * 0.9, _v(-24, -2 + 2 * H, 10 + 2 * D), (-0.3, -0.5, 0.8), (0.5, 0.5, 0), mid, False,
                          5 * A, tilt))
         t_s = t + prep + stroke * 0.7
-        end_pos = _v(-33 - 3 * A - 2 * L, 3 + 4 * H, 18 + 4 * D)
+        end_pos = _v(-33 - 3 * A - 2 * L, 3 + 5 * H, 18 + 4 * D)
         keys.append(_key(t_s, end_pos, (-0.75, 0.05, 0.6), (-0.2, 1, 0.05), pose, True, 12 * A, tilt))
         keys.append(_key(t_s + hold, end_pos + drift(), (-0.75, 0.05, 0.6), (-0.2, 1, 0.05), hold_pose(), True,
                          11 * A, small_tilt()))
@@ -210,7 +211,7 @@ def _gesture_keys(gesture: str, p: _TakeParams, t0: float, start: HandKey, end: 
     elif gesture == "turn":
         c = _v(-20 + 2 * L, 24 + 5 * H, 34 + 4 * D)
         r = 6.5 * A
-        turns = 1.5 if rng.uniform() < 0.5 else 2.0
+        turns = 1.5 if (rng.uniform() < 0.5 or pace > 1.15) else 2.0
         t_prep = t + prep
         keys.append(_key(t + prep * 0.6, _v(-19, 6 + 3 * H, 18 + 3 * D), (0.1, 0.1, 1), (0.9, 0.3, 0), mid, False, 0,
                          tilt))
@@ -252,10 +253,31 @@ def _gesture_keys(gesture: str, p: _TakeParams, t0: float, start: HandKey, end: 
         t_h = t_s + hold
     else:
         raise ValueError(f"Unknown gesture type {gesture!r}; expected one of {GESTURE_TYPES}")
-    t_end = t_h + retract
+    t_end = max(t_h + retract, t0 + MIN_TAKE_S)
+    keys.append(_retraction_via(keys[-1], end, t_h + 0.45 * (t_end - t_h)))
     keys.append(HandKey(t_end, end.pos, end.fingers_dir, end.palm, end.pose, True, end.shoulder_lift))
     del start
     return keys, extras, t_end
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def _retraction_via(hold: HandKey, end: HandKey, t: float) -> HandKey:
+    """Halfway down from the hold: the hand passes in front, fingers forward, palm turning in.
+
+    Fixes the way the hand turns between orientations up to 180° apart (fingers up,
+    palm forward, to fingers down, palm in), as a person's hand does, not the other
+    way round through the arm.
+    """
+    g = _unit(_unit(hold.fingers_dir) + _unit(end.fingers_dir) + _v(0, 0, 0.8))
+    n = _unit(hold.palm) + _unit(end.palm)
+    if np.linalg.norm(n) < 0.3:
+        n = end.palm
+    pos = 0.5 * (hold.pos + end.pos) + _v(0, 0, 3.0)
+    return HandKey(t, pos, g, _unit(n), 0.5 * (hold.pose + end.pose), False,
+                   0.5 * (hold.shoulder_lift + end.shoulder_lift))
 
 
 def _micro_motion(rng: np.random.Generator, amp: float = 0.8):
@@ -269,6 +291,12 @@ def _micro_motion(rng: np.random.Generator, amp: float = 0.8):
             out[:, :, 0] += amp / 3 * np.sin(2 * np.pi * freqs[k] * times[:, None] + phases[k])
         return out
     return f
+
+
+def _arm_style(rng: np.random.Generator) -> dict:
+    """How this take holds its elbow and splits the forearm twist (varies from take to take)."""
+    return {"elbow_out": float(rng.uniform(-0.35, 0.45)), "elbow_back": float(rng.uniform(-0.3, 0.4)),
+            "twist_share": float(rng.uniform(0.6, 0.95))}
 
 
 def _mirror_track_keys(keys: list[HandKey], rng: np.random.Generator, delay: float) -> list[HandKey]:
@@ -319,10 +347,10 @@ def gesture_take(gesture: str, take: int, seed: int = 0) -> Clip:
     start = rest_key(0.0, "right", relaxed, rng.normal(0, 0.6, 3))
     end = rest_key(0.0, "right", relaxed, rng.normal(0, 0.6, 3))
     keys, extras, t_end = _gesture_keys(gesture, p, 0.0, start, end, relaxed)
-    right = HandTrack("right", [start] + keys, extras + [_micro_motion(rng)])
+    right = HandTrack("right", [start] + keys, extras + [_micro_motion(rng)], **_arm_style(rng))
     if "left" in gesture_hands(gesture, take):
         lkeys = _mirror_track_keys([start] + keys, rng, delay=float(rng.integers(0, 3)) / FPS)
-        left = HandTrack("left", lkeys, [_micro_motion(rng)])
+        left = HandTrack("left", lkeys, [_micro_motion(rng)], **_arm_style(rng))
     else:
         lpose = relaxed_pose() + rng.normal(0, 2.0, (15, 3)) * [1, 0, 0.5]
         left = HandTrack("left", [rest_key(0.0, "left", lpose), rest_key(t_end, "left", lpose)],
@@ -425,7 +453,9 @@ def wave_clip(seed: int = 0) -> Clip:
         t += 0.3
         side = -1 if i % 2 == 0 else 1
         keys.append(_key(t, up + _v(4 * side, -1, 0), (0.45 * side - 0.15, 1, 0), (0, 0, 1), open_hand, True, 6))
-    keys.append(rest_key(t + 0.8, "right", relaxed))
+    end = rest_key(t + 0.8, "right", relaxed)
+    keys.append(_retraction_via(keys[-1], end, t + 0.35))
+    keys.append(end)
     tracks = [HandTrack("right", keys, [_micro_motion(rng)]),
               HandTrack("left", [rest_key(0.0, "left", relaxed), rest_key(t + 0.8, "left", relaxed)],
                         [_micro_motion(rng)])]

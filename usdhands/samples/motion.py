@@ -22,7 +22,7 @@ from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from usdhands.model.clip import Clip
 from usdhands.model.rotations import (
-    euler_deg_to_quat, matrix_to_quat, quat_multiply, quat_to_matrix, trs_to_xform,
+    euler_deg_to_quat, matrix_to_quat, quat_multiply, quat_slerp, quat_to_matrix, trs_to_xform,
 )
 from usdhands.model.skeleton import Skeleton, forward_kinematics
 from usdhands.samples.hand_poses import mirror_pose, relaxed_pose
@@ -70,13 +70,19 @@ class HandKey:
 class HandTrack:
     """The keys of one hand (sorted by time) plus additive finger motion.
 
-    ``finger_wave`` is an optional function ``times (T,) -> (T, 15, 3)`` degrees added
-    to the interpolated pose (the rolling fingers of "turn", micro-motion in holds).
+    ``finger_extra`` holds functions ``times (T,) -> (T, 15, 3)`` degrees added to the
+    interpolated pose (the rolling fingers of "turn", micro-motion in holds).
+    ``elbow_out`` and ``elbow_back`` move the IK pole (how far the elbow swings out
+    or back, about -0.4..0.4); ``twist_share`` is the part of the hand's twist the
+    forearm takes (the rest stays in the wrist joint), people differ in both.
     """
 
     side: str
     keys: list[HandKey] = field(default_factory=list)
     finger_extra: list = field(default_factory=list)
+    elbow_out: float = 0.0
+    elbow_back: float = 0.0
+    twist_share: float = 1.0
 
 
 @dataclass
@@ -115,14 +121,54 @@ def mirror_key(key: HandKey) -> HandKey:
 
 # ----------------------------------------------------------------- interpolation
 
+def _key_frame(k: HandKey) -> np.ndarray:
+    y = k.fingers_dir / np.linalg.norm(k.fingers_dir)
+    z = k.palm - np.dot(k.palm, y) * y
+    z /= np.linalg.norm(z)
+    return np.stack([np.cross(y, z), y, z], axis=-1)
+
+
+def _refine(keys: list[HandKey], max_deg: float = 50.0) -> list[HandKey]:
+    """Insert keys where the hand turns more than ``max_deg`` between two keys.
+
+    Direction vectors are interpolated component-wise, which fails between nearly
+    opposite directions; the inserted key carries the slerp halfway orientation, the
+    mean position and pose and the mean time, which leaves the position curve of a
+    clamped spline between two stop keys unchanged (a single cubic passes through
+    the midpoint at the middle time).
+    """
+    out = [keys[0]]
+    for k in keys[1:]:
+        a = out[-1]
+        ra, rb = _key_frame(a), _key_frame(k)
+        qa, qb = matrix_to_quat(ra), matrix_to_quat(rb)
+        ang = float(np.degrees(2 * np.arccos(np.clip(abs(np.dot(qa, qb)), 0.0, 1.0))))
+        if ang > max_deg and k.t - a.t > 2e-3:
+            qm = quat_slerp(qa, qb, 0.5)
+            m = quat_to_matrix(qm)
+            mid = HandKey(0.5 * (a.t + k.t), 0.5 * (a.pos + k.pos), m[:, 1], m[:, 2], 0.5 * (a.pose + k.pose),
+                          False, 0.5 * (a.shoulder_lift + k.shoulder_lift))
+            out.extend(_refine([a, mid, k], max_deg)[1:])
+        else:
+            out.append(k)
+    return out
+
+
 def _interp_track(keys: list[HandKey], times: np.ndarray) -> dict[str, np.ndarray]:
-    keys = sorted(keys, key=lambda k: k.t)
+    keys = _refine(sorted(keys, key=lambda k: k.t))
     kt = np.array([k.t for k in keys])
     if np.any(np.diff(kt) <= 1e-6):
         raise ValueError(f"Key times must increase, got {kt.tolist()}")
     if not keys[0].stop or not keys[-1].stop:
         raise ValueError("The first and last keys of a track must be stop keys")
-    vec = np.stack([np.concatenate([k.pos, k.fingers_dir, k.palm, [k.shoulder_lift]]) for k in keys])
+    # orientations as quaternion components, signs made consistent from key to key;
+    # consecutive keys are less than 50° apart (_refine), so the normalised spline of
+    # the components turns smoothly and never passes near zero
+    quats = np.stack([matrix_to_quat(_key_frame(k)) for k in keys])
+    for i in range(1, len(quats)):
+        if np.dot(quats[i], quats[i - 1]) < 0:
+            quats[i] = -quats[i]
+    vec = np.stack([np.concatenate([k.pos, q, [k.shoulder_lift]]) for k, q in zip(keys, quats)])
     out = np.empty((len(times), vec.shape[1]))
     stops = [i for i, k in enumerate(keys) if k.stop]
     tt = np.clip(times, kt[0], kt[-1])
@@ -132,10 +178,8 @@ def _interp_track(keys: list[HandKey], times: np.ndarray) -> dict[str, np.ndarra
         out[sel] = spline(tt[sel])
     poses = np.stack([k.pose.reshape(-1) for k in keys])
     fingers = PchipInterpolator(kt, poses, axis=0)(tt).reshape(len(times), 15, 3)
-    y = out[:, 3:6] / np.linalg.norm(out[:, 3:6], axis=1, keepdims=True)
-    z = out[:, 6:9] - np.sum(out[:, 6:9] * y, axis=1, keepdims=True) * y
-    z /= np.linalg.norm(z, axis=1, keepdims=True)
-    return {"pos": out[:, :3], "y": y, "z": z, "lift": out[:, 9], "fingers": fingers}
+    m = quat_to_matrix(out[:, 3:7] / np.linalg.norm(out[:, 3:7], axis=1, keepdims=True))
+    return {"pos": out[:, :3], "y": m[:, :, 1], "z": m[:, :, 2], "lift": out[:, 7], "fingers": fingers}
 
 
 # ----------------------------------------------------------------- kinematics
@@ -264,8 +308,15 @@ def build_clip(skeleton: Skeleton, tracks: list[HandTrack], duration: float, idl
         hand_w = _frames_from_yz(y, z)
         # the elbow points down and back, a little outward; it rises with the hand
         out = 1.0 if s == "left" else -1.0
+        # The pole must stay away from the shoulder-wrist line: down for an arm reaching
+        # forward or sideways, back for an arm hanging down, outward in both cases.
+        tr = by_side[s]
+        reach = _normalize(target - shoulder)
+        dy = np.einsum("ti,ti->t", reach, hips_r[:, :, 1])
+        w = np.clip(1.0 - dy ** 2, 0.0, 1.0)
         raise_ = np.clip((smp["pos"][:, 1] - 10.0) / 40.0, 0.0, 1.0)
-        pole_h = np.stack([(0.35 + 0.3 * raise_) * out, -np.ones(T), -0.45 + 0.75 * raise_], axis=1)
+        pole_h = np.stack([(0.35 + tr.elbow_out + 0.3 * raise_) * out, -w,
+                           -(1.0 - w) - (0.3 + tr.elbow_back) * w + 0.5 * raise_ * w], axis=1)
         pole = np.einsum("tij,tj->ti", hips_r, pole_h)
         elbow, wrist, dhat, p = _two_bone_ik(shoulder, target, pole, l1, l2)
         u = _normalize(elbow - shoulder)
@@ -275,7 +326,8 @@ def build_clip(skeleton: Skeleton, tracks: list[HandTrack], duration: float, idl
         fz = np.cross(hinge, f)
         fore0 = np.stack([hinge, f, fz], axis=-1)
         q_rel = matrix_to_quat(np.einsum("tji,tjk->tik", fore0, hand_w))
-        tw = np.unwrap(_twist_about_y(q_rel))
+        q_rel = np.where(q_rel[:, 3:4] < 0, -q_rel, q_rel)  # twist in (-180, 180] before unwrapping
+        tw = np.unwrap(_twist_about_y(q_rel)) * tr.twist_share
         fore_w = fore0 @ quat_to_matrix(_axis_angle_quat([0.0, 1.0, 0.0], tw))
         rot[:, j_up] = matrix_to_quat(np.einsum("tji,tjk->tik", cl_w[:, :3, :3], up_w))
         rot[:, j_lo] = matrix_to_quat(np.einsum("tji,tjk->tik", up_w, fore_w))
