@@ -13,7 +13,7 @@ from usdhands.model.clip import Clip
 __all__ = ["read_asset", "read_clip", "write_asset", "write_clip"]
 
 
-def read_asset(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
+def read_asset(path: str | os.PathLike, *, fps: float | None = None, **options) -> Asset:
     """Read every skeleton, clip and skinned mesh of a file.
 
     Parameters
@@ -22,6 +22,10 @@ def read_asset(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
     fps : float, optional
         Resample animations to this rate (formats with free key times pick a rate
         of their own when omitted).
+    **options
+        Passed to the format's reader: BVH takes ``units`` (``"cm"`` by default,
+        ``"m"``, ``"mm"``, ``"in"``, ... or metres per unit); USD and glTF take none
+        (a TypeError names an unexpected one).
 
     Raises
     ------
@@ -33,15 +37,17 @@ def read_asset(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
         raise AssetReadError("no such file", path=path)
     if path.is_dir():
         raise AssetReadError("is a folder, not a file", path=path)
-    asset = handler_for(path, "read").read(path, fps=fps)
+    asset = handler_for(path, "read").read(path, fps=fps, **options)
     for clip in asset.clips:
         clip.validate(str(path))
     return asset
 
 
 def read_clip(path: str | os.PathLike, *, animation: str | int | None = None,
-              fps: float | None = None) -> Clip:
+              fps: float | None = None, **options) -> Clip:
     """Read one animation (by name or index, default the first) of a file.
+
+    ``options`` go to the format's reader as in :func:`read_asset` (BVH: ``units``).
 
     Raises
     ------
@@ -50,7 +56,7 @@ def read_clip(path: str | os.PathLike, *, animation: str | int | None = None,
     AssetReadError
         No animation of that name, or the file cannot be read.
     """
-    asset = read_asset(path, fps=fps)
+    asset = read_asset(path, fps=fps, **options)
     if not asset.skeletons:
         raise NoSkeletonError("no skeleton in file", path=path)
     try:
