@@ -15,7 +15,9 @@ from usdhands.algorithms.finger_transfer import (
     NUM_DOFS, apply_canonical_curves, canonical_curves, hand_rig, mirror_curves,
 )
 from usdhands.algorithms.motion_graph import least_cost_path, transition_costs
-from usdhands.algorithms.segment_cost import band_window, dtw_align, knn_segments, lb_keogh, weight_features
+from usdhands.algorithms.segment_cost import (
+    band_window, dtw_align, dtw_align_fast, knn_segments, lb_keogh, weight_features,
+)
 from usdhands.algorithms.segmentation import segment_by_speed, wrist_speed
 from usdhands.algorithms.stitching import stitch_fragments
 from usdhands.algorithms.synthesis_config import SynthesisConfig, load_synthesis_config
@@ -123,6 +125,18 @@ def test_dtw_recovers_a_known_warp():
     assert np.allclose(d[path], q)
 
 
+def test_compiled_alignment_equals_numpy_twin():
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        n, m = int(rng.integers(1, 30)), int(rng.integers(1, 45))
+        q, d = rng.normal(size=(n, 6)), rng.normal(size=(m, 6))
+        band = float(rng.choice([0.1, 0.3, 1.0]))
+        c1, p1 = dtw_align(q, d, band)
+        c2, p2 = dtw_align_fast(q, d, band)
+        assert (c1 == c2 == float("inf")) or c1 == pytest.approx(c2)
+        assert np.array_equal(p1, p2)
+
+
 def test_weighted_cost_is_eq1():
     rng = np.random.default_rng(1)
     q, d = rng.normal(size=(12, 6)), rng.normal(size=(12, 6))
@@ -153,9 +167,12 @@ def test_knn_kernel_equals_brute_force_numpy(band, k):
     groups = rng.integers(0, 4, size=len(ds))
     qgroups = rng.integers(0, 4, size=len(qb))
     res = knn_segments(q, qb, d, ds, k=k, band=band, query_groups=qgroups, db_groups=groups)
-    full = knn_segments(q, qb, d, ds, k=k, band=band, query_groups=qgroups, db_groups=groups, prune=False)
-    assert (res.index == full.index).all() and np.allclose(res.cost, full.cost)
-    assert res.aligned.sum() < full.aligned.sum()  # the bound did prune
+    full = knn_segments(q, qb, d, ds, k=k, band=band, query_groups=qgroups, db_groups=groups, bound="none")
+    keogh = knn_segments(q, qb, d, ds, k=k, band=band, query_groups=qgroups, db_groups=groups, bound="keogh")
+    for r in (res, keogh):
+        assert (r.index == full.index).all() and np.allclose(r.cost, full.cost)
+    assert full.pruned.sum() == 0 and full.aligned.sum() == full.candidates.sum()
+    assert res.pruned.sum() <= keogh.pruned.sum() and keogh.pruned.sum() > 0  # Keogh is the tighter bound
     for i, (a, b) in enumerate(qb):
         found = []
         for c, (x, y) in enumerate(ds):
@@ -172,9 +189,22 @@ def test_knn_kernel_equals_brute_force_numpy(band, k):
         assert np.allclose(res.cost[i][: len(found[:k])], [v for v, _ in found[:k]])
 
 
+def test_knn_ties_go_to_the_lower_index_whatever_the_bound():
+    rng = np.random.default_rng(9)
+    seg = np.cumsum(rng.normal(size=(20, 6)), axis=0)
+    d = np.concatenate([seg, seg + 5.0, seg, seg])  # segments 0, 2, 3 are identical
+    ds = np.array([[0, 20], [20, 40], [40, 60], [60, 80]])
+    q = seg + rng.normal(0, 0.1, size=seg.shape)
+    for bound in ("none", "kim", "keogh"):
+        r = knn_segments(q, [[0, 20]], d, ds, k=2, bound=bound)
+        assert r.index[0].tolist() == [0, 2] and r.cost[0, 0] == r.cost[0, 1]
+
+
 def test_knn_rejects_bad_input():
     with pytest.raises(ValueError, match=r"Expected k >= 1, got 0"):
         knn_segments(np.zeros((10, 6)), [[0, 10]], np.zeros((10, 6)), [[0, 10]], k=0)
+    with pytest.raises(ValueError, match=r"Expected bound in \('none', 'kim', 'keogh'\), got 'lb'"):
+        knn_segments(np.zeros((10, 6)), [[0, 10]], np.zeros((10, 6)), [[0, 10]], bound="lb")
     with pytest.raises(ValueError, match=r"db_segments must hold non-empty ranges inside 0..10"):
         knn_segments(np.zeros((10, 6)), [[0, 10]], np.zeros((10, 6)), [[0, 11]])
 

@@ -86,6 +86,8 @@ def test_output_changes_only_fingers_is_deterministic_and_smooth_at_seams(gestur
     for side in ("left", "right"):
         h = a.hands[side]
         assert len(h.seams.frame) == len(h.bounds) - 2 > 10
+        # most candidates are never aligned in full; the end-point bound alone skips many
+        assert h.search.skipped_share > 0.5 and h.search.pruned_share > 0.2
         curves = canonical_curves(a.clip, hand_rig(clip.skeleton, hm[side]))[:, gesture_db.dof_index]
         for f in h.seams.frame:
             jump = np.abs(curves[f] - curves[f - 1])

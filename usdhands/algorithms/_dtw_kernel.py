@@ -149,15 +149,40 @@ def _insert(idx_row, cost_row, c, v):
     cost_row[pos] = v
 
 
+@njit(cache=True)
+def _sqdist(q, qi, d, di):
+    s = 0.0
+    for k in range(q.shape[1]):
+        t = q[qi, k] - d[di, k]
+        s += t * t
+    return s
+
+
 @njit(parallel=True, cache=True)
-def search(qf, qb, qg, df, ds, dg, k, length_factor, band, prune, out_idx, out_cost, stats):
-    """Top-k eq. 1 costs per query segment; see knn_segments."""
+def search(qf, qb, qg, df, ds, dg, k, length_factor, band, bound, out_idx, out_cost, stats):
+    """Top-k eq. 1 costs per query segment; see knn_segments.
+
+    Candidates are visited in order of the distance between segment means (a cheap
+    guess that finds good neighbours first, so the k-th best cost drops fast); each is
+    then checked against lower bounds before it is aligned (``bound``: 0 none, 1 the
+    fixed end points j(0) = 0, j(n-1) = m-1 in O(D), 2 those and LB_Keogh in
+    O((n + m) D), whose rows also tighten early abandoning).
+    """
     Q = qb.shape[0]
     N = ds.shape[0]
+    D = qf.shape[1]
     max_m = 0
     for c in range(N):
         if ds[c, 1] - ds[c, 0] > max_m:
             max_m = ds[c, 1] - ds[c, 0]
+    dmean = np.zeros((N, D))
+    for c in range(N):
+        m = ds[c, 1] - ds[c, 0]
+        for j in range(ds[c, 0], ds[c, 1]):
+            for kk in range(D):
+                dmean[c, kk] += df[j, kk]
+        for kk in range(D):
+            dmean[c, kk] /= m
     for qi in prange(Q):
         qs = qb[qi, 0]
         n = qb[qi, 1] - qb[qi, 0]
@@ -170,7 +195,13 @@ def search(qf, qb, qg, df, ds, dg, k, length_factor, band, prune, out_idx, out_c
         prev = np.empty(max_m + 1)
         cur = np.empty(max_m + 1)
         cand = np.empty(N, dtype=np.int64)
-        lbs = np.empty(N)
+        guess = np.empty(N)
+        qmean = np.zeros(D)
+        for i in range(n):
+            for kk in range(D):
+                qmean[kk] += qf[qs + i, kk]
+        for kk in range(D):
+            qmean[kk] /= n
         nc = 0
         for c in range(N):
             m = ds[c, 1] - ds[c, 0]
@@ -180,33 +211,40 @@ def search(qf, qb, qg, df, ds, dg, k, length_factor, band, prune, out_idx, out_c
                 continue
             if m > 2 * n - 1 and not (n == 1 and m == 1):
                 continue
-            window(n, m, band, lo, hi)
-            feasible = True
-            for i in range(n):
-                if lo[i] > hi[i]:
-                    feasible = False
-            if not feasible:
+            if n == 1 and m != 1:
                 continue
             cand[nc] = c
-            if prune:
-                lbs[nc] = _envelope_lb(qf, qs, n, df, ds[c, 0], m, lo, hi, rows, upq, dnq)
-            else:
-                lbs[nc] = 0.0
+            g = 0.0
+            for kk in range(D):
+                t = qmean[kk] - dmean[c, kk]
+                g += t * t
+            guess[nc] = g
             nc += 1
-        order = np.argsort(lbs[:nc], kind="mergesort")
+        order = np.argsort(guess[:nc], kind="mergesort")
         idx_row = out_idx[qi]
         cost_row = out_cost[qi]
         aligned = 0
         abandoned = 0
+        pruned = 0
         for oi in range(nc):
             c = cand[order[oi]]
-            limit = cost_row[k - 1] * n  # INF until k found
-            if prune and lbs[order[oi]] > limit:
-                break
             m = ds[c, 1] - ds[c, 0]
+            # totals are compared, not costs / n, so ties stay exact; the slack keeps
+            # rounding in the bounds from dropping a candidate that ties the k-th
+            limit = cost_row[k - 1] * (1.0 + 1e-12) + 1e-12  # INF until k found
+            if bound >= 1:
+                kim = _sqdist(qf, qs, df, ds[c, 0])
+                if n > 1:
+                    kim += _sqdist(qf, qs + n - 1, df, ds[c, 0] + m - 1)
+                if kim > limit:
+                    pruned += 1
+                    continue
             window(n, m, band, lo, hi)
-            if prune:
-                _envelope_lb(qf, qs, n, df, ds[c, 0], m, lo, hi, rows, upq, dnq)
+            if bound >= 2:
+                lb = _envelope_lb(qf, qs, n, df, ds[c, 0], m, lo, hi, rows, upq, dnq)
+                if lb > limit:
+                    pruned += 1
+                    continue
                 acc = 0.0
                 for i in range(n - 1, -1, -1):
                     tail[i] = acc
@@ -219,7 +257,53 @@ def search(qf, qb, qg, df, ds, dg, k, length_factor, band, prune, out_idx, out_c
             if v == INF:
                 abandoned += 1
                 continue
-            _insert(idx_row, cost_row, c, v / n)
+            _insert(idx_row, cost_row, c, v)
+        for p in range(k):
+            if idx_row[p] >= 0:
+                cost_row[p] = cost_row[p] / n
         stats[qi, 0] = nc
         stats[qi, 1] = aligned
         stats[qi, 2] = abandoned
+        stats[qi, 3] = pruned
+
+
+@njit(cache=True)
+def align_path(q, d, band, path):
+    """Asymmetric DTW of one pair with its warp path (the numba twin of dtw_align).
+
+    Fills ``path (n,)`` and returns the total cost (not divided by n), INF if no warp fits.
+    Ties prefer the smaller step, as ``dtw_align`` does.
+    """
+    n = q.shape[0]
+    m = d.shape[0]
+    lo = np.empty(n, dtype=np.int64)
+    hi = np.empty(n, dtype=np.int64)
+    window(n, m, band, lo, hi)
+    for i in range(n):
+        if lo[i] > hi[i]:
+            return INF
+    acc = np.full((n, m), INF)
+    step = np.zeros((n, m), dtype=np.int8)
+    acc[0, 0] = _sqdist(q, 0, d, 0)
+    for i in range(1, n):
+        for j in range(lo[i], hi[i] + 1):
+            best = acc[i - 1, j]
+            st = 0
+            if j >= 1 and acc[i - 1, j - 1] < best:
+                best = acc[i - 1, j - 1]
+                st = 1
+            if j >= 2 and acc[i - 1, j - 2] < best:
+                best = acc[i - 1, j - 2]
+                st = 2
+            if best == INF:
+                continue
+            acc[i, j] = best + _sqdist(q, i, d, j)
+            step[i, j] = st
+    if acc[n - 1, m - 1] == INF:
+        return INF
+    j = m - 1
+    for i in range(n - 1, -1, -1):
+        path[i] = j
+        if i > 0:
+            j -= step[i, j]
+    return acc[n - 1, m - 1]

@@ -37,7 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
-from usdhands.model.rotations import euler_deg_to_quat, quat_conjugate, quat_multiply, quat_to_euler_deg, unwrap_deg
+from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_euler_deg, unwrap_deg
 from usdhands.model.skeleton import Skeleton
 
 __all__ = [
@@ -177,11 +177,28 @@ def apply_canonical_curves(clip: Clip, rig: HandRig, curves: np.ndarray) -> Clip
     if not len(slots):
         return clip
     joints = rig.slot_joint[slots]
-    can = euler_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots], ORDER)
+    can = euler_xyz_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots])
     C = rig.frame[slots]
     rel = quat_multiply(quat_multiply(quat_conjugate(C)[None], can), C[None])
     local = quat_multiply(clip.skeleton.rest_rotations[joints][None], rel)
     return clip.with_joint_rotations([int(j) for j in joints], local)
+
+
+def euler_xyz_deg_to_quat(e: np.ndarray) -> np.ndarray:
+    """Intrinsic XYZ Euler angles in degrees ``(..., 3)`` to quaternions ``(..., 4)`` xyzw.
+
+    The same as ``euler_deg_to_quat(e, "XYZ")`` (``q = qx ⊗ qy ⊗ qz``), in plain NumPy
+    (several times faster than going through scipy for large batches).
+    """
+    h = np.radians(np.asarray(e, dtype=np.float64)) / 2
+    cx, cy, cz = np.cos(h[..., 0]), np.cos(h[..., 1]), np.cos(h[..., 2])
+    sx, sy, sz = np.sin(h[..., 0]), np.sin(h[..., 1]), np.sin(h[..., 2])
+    return np.stack([
+        sx * cy * cz + cx * sy * sz,
+        cx * sy * cz - sx * cy * sz,
+        cx * cy * sz + sx * sy * cz,
+        cx * cy * cz - sx * sy * sz,
+    ], axis=-1)
 
 
 def mirror_curves(curves: np.ndarray) -> np.ndarray:

@@ -16,15 +16,26 @@ the local cost is a plain squared Euclidean distance.
 Search. :func:`knn_segments` compares every input segment with every database
 segment whose length is within ``length_factor`` of it and keeps the ``k`` cheapest.
 It runs in one numba-compiled kernel, parallel over input segments. For each input
-segment it first computes an **LB_Keogh** lower bound for every candidate (the
-squared distance of each input frame to the min/max envelope of the database frames
-its band allows, built with a monotone deque in O(n + m)), visits candidates in order
-of that bound, stops as soon as the bound exceeds the ``k``-th best cost found so far
-(every remaining candidate is **pruned**), and abandons a full alignment early once
-its partial cost plus the bound of the remaining rows exceeds that ``k``-th cost.
+segment it visits the candidates in order of the distance between segment means (a
+cheap guess that finds good neighbours early, so the ``k``-th best cost drops fast).
+Each candidate is first checked against a lower bound of its cost and **pruned**
+(never aligned) when the bound exceeds the ``k``-th best cost so far; an alignment
+that is started is **abandoned** as soon as its cheapest partial path (plus, with
+LB_Keogh, the bound of the remaining rows) exceeds that cost. Bounds (``bound``):
+
+- ``"kim"`` (default): the end points, ``|q₀ − d₀|² + |q_{n−1} − d_{m−1}|²``, which
+  every warp contains (``j(0) = 0``, ``j(n−1) = m−1``); O(D) per candidate;
+- ``"keogh"``: the end points, then **LB_Keogh**, the squared distance of each input
+  frame to the min/max envelope of the database frames its band allows (built with a
+  monotone deque, O(n + m) per dimension); tighter, but on wrist motion it costs
+  more than the alignments it saves (see benchmarks/bench_synthesis.py);
+- ``"none"``: early abandoning only.
+
+The result is the same for every bound (ties in cost go to the lower index).
 
 :func:`dtw_align` is the plain NumPy twin for one pair (cost and warp path); tests
-check the kernel against it and the benchmark measures the kernel's speed-up over it.
+check the kernel and :func:`dtw_align_fast` (its compiled twin) against it and the
+benchmark measures the kernel's speed-up over it.
 """
 
 from __future__ import annotations
@@ -34,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
-    "weight_features", "band_window", "dtw_align", "lb_keogh", "knn_segments", "SearchResult",
+    "weight_features", "band_window", "dtw_align", "dtw_align_fast", "lb_keogh", "knn_segments", "SearchResult",
 ]
 
 
@@ -113,8 +124,10 @@ def dtw_align(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> tuple[f
     acc[0, 0] = local[0, 0]
     for i in range(1, n):
         prev = acc[i - 1]
-        opts = np.stack([prev, np.concatenate([[np.inf], prev[:-1]]),
-                         np.concatenate([[np.inf, np.inf], prev[:-2]])])
+        opts = np.full((3, m), np.inf)  # predecessors at j, j-1, j-2
+        opts[0] = prev
+        opts[1, 1:] = prev[:-1]
+        opts[2, 2:] = prev[:-2]
         best = np.argmin(opts, axis=0)
         row = opts[best, np.arange(m)] + local[i]
         inside = np.zeros(m, dtype=bool)
@@ -130,6 +143,22 @@ def dtw_align(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> tuple[f
         if i:
             j -= int(step[i, j])
     return float(acc[n - 1, m - 1] / n), path
+
+
+def dtw_align_fast(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> tuple[float, np.ndarray]:
+    """:func:`dtw_align` compiled with numba: same arguments, same result."""
+    from usdhands.algorithms import _dtw_kernel as kern
+
+    q = np.ascontiguousarray(query, dtype=np.float64)
+    c = np.ascontiguousarray(cand, dtype=np.float64)
+    n, m = len(q), len(c)
+    if n == 0 or m == 0 or q.ndim != 2 or c.ndim != 2 or q.shape[1] != c.shape[1]:
+        raise ValueError(f"Expected non-empty (n, D) and (m, D) segments, got {q.shape} and {c.shape}")
+    path = np.zeros(n, dtype=np.int64)
+    total = kern.align_path(q, c, float(band), path)
+    if not np.isfinite(total):
+        return float("inf"), np.zeros(0, dtype=np.int64)
+    return float(total / n), path
 
 
 def lb_keogh(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> float:
@@ -148,6 +177,10 @@ def lb_keogh(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> float:
     return total / n
 
 
+#: Lower bounds of :func:`knn_segments` and their kernel codes.
+BOUNDS = {"none": 0, "kim": 1, "keogh": 2}
+
+
 @dataclass(frozen=True)
 class SearchResult:
     """The k cheapest database segments of every input segment.
@@ -160,8 +193,10 @@ class SearchResult:
         Their segment costs (eq. 1); inf where index is -1.
     candidates : (Q,) int
         Database segments within the length factor (and not excluded) per input segment.
+    pruned : (Q,) int
+        Candidates the lower bound ruled out without aligning them.
     aligned : (Q,) int
-        Candidates whose full alignment was started (the rest were pruned by the bound).
+        Candidates whose alignment was started.
     abandoned : (Q,) int
         Alignments stopped early by the bound on the remaining rows.
     """
@@ -169,23 +204,28 @@ class SearchResult:
     index: np.ndarray
     cost: np.ndarray
     candidates: np.ndarray
+    pruned: np.ndarray
     aligned: np.ndarray
     abandoned: np.ndarray
 
     @property
     def pruned_share(self) -> float:
-        """Share of candidate pairs never aligned in full (pruned or abandoned)."""
+        """Share of candidate pairs the lower bound skipped (never aligned)."""
         total = int(self.candidates.sum())
-        if total == 0:
-            return 0.0
-        return 1.0 - float((self.aligned - self.abandoned).sum()) / total
+        return float(self.pruned.sum()) / total if total else 0.0
+
+    @property
+    def skipped_share(self) -> float:
+        """Share of candidate pairs never aligned in full (pruned or abandoned early)."""
+        total = int(self.candidates.sum())
+        return 1.0 - float((self.aligned - self.abandoned).sum()) / total if total else 0.0
 
 
 def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
                  db_features: np.ndarray, db_segments: np.ndarray, k: int = 5,
                  length_factor: float = 1.5, band: float = 1.0,
                  query_groups: np.ndarray | None = None, db_groups: np.ndarray | None = None,
-                 prune: bool = True) -> SearchResult:
+                 bound: str = "kim") -> SearchResult:
     """The ``k`` database segments of least eq. 1 cost for every input segment.
 
     Parameters
@@ -208,14 +248,14 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
     db_groups : (N,) int, optional
         A database segment whose group equals the input segment's is skipped
         (leave-one-out); -1 matches nothing.
-    prune : bool
-        Use the lower bound (True) or align every candidate in full (False).
+    bound : {"kim", "keogh", "none"}
+        Lower bound used to prune candidates (see the module notes).
 
     Returns
     -------
     SearchResult
         Ties in cost go to the lower database index; the result does not depend on
-        ``prune`` or on the number of threads.
+        ``bound`` or on the number of threads.
     """
     from usdhands.algorithms import _dtw_kernel as kern
 
@@ -231,6 +271,8 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
         raise ValueError(f"Expected length_factor >= 1, got {length_factor}")
     if not 0 < band <= 1:
         raise ValueError(f"Expected 0 < band <= 1, got {band}")
+    if bound not in BOUNDS:
+        raise ValueError(f"Expected bound in {tuple(BOUNDS)}, got {bound!r}")
     for name, b, total in (("query_bounds", qb, len(qf)), ("db_segments", ds, len(df))):
         if len(b) and ((b[:, 0] < 0).any() or (b[:, 1] > total).any() or (b[:, 1] <= b[:, 0]).any()):
             raise ValueError(f"{name} must hold non-empty ranges inside 0..{total}")
@@ -241,8 +283,8 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
         raise ValueError(f"Expected query_groups ({Q},) and db_groups ({N},), got {qg.shape} and {dg.shape}")
     out_idx = np.full((Q, int(k)), -1, dtype=np.int64)
     out_cost = np.full((Q, int(k)), np.inf)
-    stats = np.zeros((Q, 3), dtype=np.int64)
+    stats = np.zeros((Q, 4), dtype=np.int64)
     if Q and N:
-        kern.search(qf, qb, qg, df, ds, dg, int(k), float(length_factor), float(band), bool(prune),
+        kern.search(qf, qb, qg, df, ds, dg, int(k), float(length_factor), float(band), BOUNDS[bound],
                     out_idx, out_cost, stats)
-    return SearchResult(out_idx, out_cost, stats[:, 0], stats[:, 1], stats[:, 2])
+    return SearchResult(out_idx, out_cost, stats[:, 0], stats[:, 3], stats[:, 1], stats[:, 2])

@@ -26,10 +26,10 @@ import numpy as np
 from usdhands.algorithms.finger_database import FingerDatabase, segment_track
 from usdhands.algorithms.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
 from usdhands.algorithms.motion_graph import least_cost_path, transition_costs
-from usdhands.algorithms.segment_cost import SearchResult, dtw_align, knn_segments, weight_features
+from usdhands.algorithms.segment_cost import SearchResult, dtw_align_fast, knn_segments, weight_features
 from usdhands.algorithms.stitching import SeamReport, stitch_fragments
 from usdhands.algorithms.synthesis_config import SynthesisConfig
-from usdhands.algorithms.wrist_features import reach_cm, wrist_features
+from usdhands.algorithms.wrist_features import reach_cm, world_xforms_for, wrist_features
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
 
@@ -96,15 +96,32 @@ def db_side_segments(db: FingerDatabase, side: str, exclude_clips=()) -> np.ndar
     return np.nonzero(keep)[0]
 
 
-def _finger_velocity(db: FingerDatabase, frame: int, track_start: int, track_stop: int, forward: bool) -> np.ndarray:
-    if forward:
-        a, b = (frame, frame + 1) if frame + 1 < track_stop else (frame - 1, frame)
-    else:
-        a, b = (frame - 1, frame) if frame - 1 >= track_start else (frame, frame + 1)
-    a, b = max(a, track_start), min(b, track_stop - 1)
-    if a == b:
-        return np.zeros(len(db.dof_index))
-    return (np.asarray(db.fingers[b], dtype=np.float64) - np.asarray(db.fingers[a], dtype=np.float64)) * db.fps
+def _candidate_ends(db: FingerDatabase, cand: np.ndarray):
+    """Finger DOFs and velocities (deg/s) at the first and last frame of candidate segments.
+
+    ``cand (N, k)`` database segment indices (-1: none, given zeros). Velocities are
+    one-sided differences inside the segment's track.
+    """
+    valid = cand >= 0
+    seg = db.segments[np.maximum(cand, 0)]  # (N, k, 3)
+    a, b, t = seg[..., 0], seg[..., 1], seg[..., 2]
+    ta, tb = db.tracks[t, 0], db.tracks[t, 1]
+    fingers = db.fingers
+    rows = lambda r: np.asarray(fingers[r.ravel()], dtype=np.float64).reshape(r.shape + (fingers.shape[1],))  # noqa: E731
+
+    def velocity(first, second):
+        first = np.clip(first, ta, tb - 1)
+        second = np.clip(second, ta, tb - 1)
+        v = (rows(second) - rows(first)) * db.fps
+        return np.where((second > first)[..., None], v, 0.0)
+
+    starts, ends = rows(a), rows(b - 1)
+    fwd = a + 1 < tb
+    vstart = velocity(np.where(fwd, a, a - 1), np.where(fwd, a + 1, a))
+    back = b - 2 >= ta
+    vend = velocity(np.where(back, b - 2, b - 1), np.where(back, b - 1, b))
+    z = ~valid[..., None]
+    return (np.where(z, 0.0, starts), np.where(z, 0.0, ends), np.where(z, 0.0, vstart), np.where(z, 0.0, vend))
 
 
 def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config: SynthesisConfig | None = None,
@@ -160,22 +177,7 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         raise ValueError(f"No database segment can be aligned to input segments {np.nonzero(cand_local[:, 0] < 0)[0].tolist()}")
     cand = np.where(cand_local >= 0, seg_idx[np.maximum(cand_local, 0)], -1)
     N, k = cand.shape
-    C = len(db.dof_index)
-    starts = np.zeros((N, k, C))
-    ends = np.zeros((N, k, C))
-    vstart = np.zeros((N, k, C))
-    vend = np.zeros((N, k, C))
-    for i in range(N):
-        for j in range(k):
-            s = cand[i, j]
-            if s < 0:
-                continue
-            a, b, t = (int(x) for x in db.segments[s])
-            ta, tb = int(db.tracks[t, 0]), int(db.tracks[t, 1])
-            starts[i, j] = db.fingers[a]
-            ends[i, j] = db.fingers[b - 1]
-            vstart[i, j] = _finger_velocity(db, a, ta, tb, True)
-            vend[i, j] = _finger_velocity(db, b - 1, ta, tb, False)
+    starts, ends, vstart, vend = _candidate_ends(db, cand)
     tc = cfg.transition
     transitions = [transition_costs(ends[i], vend[i], starts[i + 1], vstart[i + 1], tc.w_joint, tc.w_velocity)
                    for i in range(N - 1)]
@@ -186,7 +188,7 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         a, b = int(db.segments[chosen[i], 0]), int(db.segments[chosen[i], 1])
         q0, q1 = int(bounds[i]), int(bounds[i + 1])
         band = sc.dtw_band if sc.length_factor * (b - a) >= (q1 - q0) and (b - a) <= sc.length_factor * (q1 - q0) else 1.0
-        _, warp = dtw_align(qw[q0:q1], dw[a:b], band)
+        _, warp = dtw_align_fast(qw[q0:q1], dw[a:b], band)
         if len(warp) == 0:  # only for widened candidates that cannot be warped: stretch linearly
             warp = np.round(np.linspace(0, b - a - 1, q1 - q0)).astype(np.int64)
         fragments.append(np.asarray(db.fingers[a + warp], dtype=np.float64))
@@ -252,7 +254,7 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
     for h in hands:
         if h not in SIDES:
             raise ValueError(f"Expected hands among {SIDES}, got {h!r}")
-    world = clip.world_xforms()
+    world = world_xforms_for(clip, [handmap[s] for s in hands if handmap[s] is not None])
     out = clip
     results, mapping, scales = {}, {}, {}
     sc = cfg.segment_cost

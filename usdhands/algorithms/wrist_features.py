@@ -48,7 +48,7 @@ from usdhands.model.skeleton import Skeleton
 
 __all__ = [
     "FEATURE_JOINTS", "hand_point", "hand_frame", "REFERENCE_HAND", "reach_cm", "arm_features", "wrist_features",
-    "mirror_features", "Z_UP_TO_Y_UP", "world_rotations",
+    "mirror_features", "Z_UP_TO_Y_UP", "world_rotations", "world_xforms_for",
 ]
 
 #: Joint roles whose features :func:`arm_features` computes.
@@ -160,6 +160,33 @@ def reach_cm(skeleton: Skeleton, hand: HandSide) -> float:
     if total <= 0:
         raise ValueError(f"Hand {hand.side!r} of skeleton {skeleton.name!r} has zero reach")
     return total
+
+
+def world_xforms_for(clip: Clip, hands: list[HandSide]) -> np.ndarray:
+    """World transforms ``(T, J, 4, 4)`` of only the joints arm features need.
+
+    Forward kinematics runs on the chains from the root to the wrist, elbow and
+    shoulder of the given hands; other joints' entries are left zero. Much cheaper
+    than :meth:`Clip.world_xforms` on rigs with many finger, face or leg joints.
+    """
+    sk = clip.skeleton
+    need = set()
+    for hand in hands:
+        for name in (hand.wrist, hand.forearm, hand.shoulder, hand.root):
+            if name:
+                need.update(sk.chain_to_root(sk.index(name)))
+        if not hand.root:
+            need.add(_root_index(sk, hand))
+    joints = sorted(need)
+    T = clip.num_frames
+    out = np.zeros((T, sk.num_joints, 4, 4))
+    from usdhands.model.rotations import trs_to_xform
+
+    local = trs_to_xform(clip.translations[:, joints], clip.rotations[:, joints], clip.scales[:, joints])
+    for i, j in enumerate(joints):
+        p = int(sk.parents[j])
+        out[:, j] = local[:, i] if p < 0 else out[:, p] @ local[:, i]
+    return out
 
 
 def world_rotations(xforms: np.ndarray) -> np.ndarray:
