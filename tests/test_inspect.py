@@ -52,3 +52,44 @@ def test_table_output(shared_assets, capsys):
     out = capsys.readouterr().out
     assert "fingers-ok  245     40" in out
     assert "right  rHand  index   rIndex1 rIndex2 rIndex3" in out
+
+
+def test_commands_use_the_hand_map_a_usd_file_records_and_the_override(tmp_path, capsys):
+    """inspect and handmap take --handmap first, then the USD-recorded map, then detection."""
+    import numpy as np
+
+    from usdhands.formats.hands import hands_for
+    from usdhands.formats.io import read_asset, write_asset, write_clip
+    from usdhands.model import Clip
+    from usdhands.model.asset import Asset
+    from usdhands.model.handmap import HandMap, HandSide
+    from usdhands.samples.humanoid import humanoid_skeleton
+
+    sk = humanoid_skeleton()
+    plain_path = write_asset(Asset("mem", (sk,), (Clip(sk, 30, np.tile(sk.rest_rotations, (3, 1, 1))),)),
+                             tmp_path / "h.usda")
+    plain = read_asset(plain_path)
+    detected, _ = hands_for(plain_path, plain.skeletons[0])
+    two = detected.left.fingers["index"][:2]
+    custom = HandMap(left=HandSide("left", detected.left.wrist, fingers={"index": two}))
+    marked = write_clip(plain_path, plain.clip(), tmp_path / "marked.usda", hand_map=custom)
+
+    d = inspect_json(capsys, marked)
+    assert d["hands"]["right"] is None
+    assert d["hands"]["left"]["fingers"]["index"] == list(two)
+    assert d["hands"]["left"]["fingers"]["thumb"] == []
+
+    assert main(["handmap", str(marked)]) == 0
+    out = capsys.readouterr().out
+    assert "hands recorded in the file (UsdHandsHandMapAPI)" in out.splitlines()[0]
+    assert "right  -         (no hand found)" in out
+
+    override = tmp_path / "full.json"
+    override.write_text(json.dumps(detected.to_dict()))
+    assert main(["handmap", str(marked), "--handmap", str(override)]) == 0
+    out = capsys.readouterr().out
+    assert f"hands from {override}" in out.splitlines()[0]
+    assert "right  wrist" in out
+    d = json.loads(json.dumps(detected.to_dict()))
+    assert main(["inspect", "--json", str(marked), "--handmap", str(override)]) == 0
+    assert json.loads(capsys.readouterr().out)["hands"] == d
