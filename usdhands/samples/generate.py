@@ -18,7 +18,7 @@ Files (``<ext>`` is ``.usda``/``.usdc`` for USD, ``.glb`` for glTF, ``.bvh``):
   ``gestures/labels.csv`` with the hands each take uses;
 - ``gestures_bodyonly/<type>_<take>_bodyonly.<ext>``: a few takes with the fingers
   frozen at rest (synthesis inputs);
-- ``conversation.<ext>``: about 27 s of chained gestures with ground-truth fingers, and
+- ``conversation.<ext>``: about 29 s of chained gestures with ground-truth fingers, and
   ``conversation.labels.csv`` (type, hands, start and end in seconds);
   ``conversation_bodyonly.<ext>``: the same with the fingers frozen at rest;
 - ``props/cup.obj`` and ``props/cup.usda``: the cup prop.

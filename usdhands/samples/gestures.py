@@ -29,7 +29,7 @@ Public API, used by tests and by the synthesis code:
 
 - :func:`gesture_database` ``(seed=0) -> list[(label, Clip)]``, 64 takes
 - :func:`gesture_take` ``(gesture, take, seed=0) -> Clip``
-- :func:`conversation_clip` ``(seed=0) -> Clip`` (about 25 s of chained gestures)
+- :func:`conversation_clip` ``(seed=0) -> Clip`` (about 29 s of chained gestures)
 - :func:`conversation_annotations` ``(seed=0) -> list[GestureSpan]``
 - :func:`body_only` ``(clip) -> Clip`` (fingers frozen at rest)
 - :func:`humanoid_skeleton` ``() -> Skeleton``
@@ -421,7 +421,7 @@ def _conversation_plan(seed: int):
 
 
 def conversation_clip(seed: int = 0) -> Clip:
-    """About 27 seconds of conversational gesturing: ten gestures chained, ground-truth fingers.
+    """About 29 seconds of conversational gesturing: ten gestures chained, ground-truth fingers.
 
     Gestures follow one another with short pauses, returning to rest or only to a low
     position in front of the body; :func:`conversation_annotations` gives each
