@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from splice_synth import body_handside, leap_handside, make_case, reaxis
+from splice_synth import body_handside, hand_session, leap_handside, make_case, reaxis
 
 from usdhands.algorithms.dtw import Constraint
 from usdhands.algorithms.splicing import (
     MarkerOffsets, SpliceOptions, FirstPassInput, align_hands, default_marker_offsets, direction_angle_cost,
     first_pass_cost, first_pass_cost_naive, hand_angle_cost, hand_angle_cost_naive, hand_directions,
-    markers_from_joints, median_alignment, pair_finger_joints, phase_boundaries, sign_features, splice_clips,
+    fit_rotation, markers_from_joints, median_alignment, pair_finger_joints, phase_boundaries, sign_features, splice_clips,
     transfer_fingers, window_yaw_naive,
 )
 from usdhands.model import Clip, HandSide
@@ -127,17 +127,30 @@ def test_markers_follow_given_offsets(case):
     np.testing.assert_allclose(m[:, 3], (w @ [8.0, 0, 0, 1])[:, :3], atol=1e-9)
 
 
-def test_hand_directions_read_the_same_on_different_rigs(leap_case):
+def test_hand_directions_agree_across_rigs_up_to_one_fitted_rotation(leap_case):
     body_sides, hand_sides = _sides(leap_case, partial=True)
+    j = np.round(leap_case.truth).astype(int)
+    angle = lambda a, b: np.degrees(np.arccos(np.clip(np.sum(a * b, axis=1), -1, 1)))
+    turned = reaxis(leap_case.hands, seed=5)
     for s in SIDES:
         ub = hand_directions(leap_case.body, body_sides[s])
         uh = hand_directions(leap_case.hands, hand_sides[s])
         # at the true correspondence both rigs give the same wrist bend, noise aside
-        j = np.round(leap_case.truth).astype(int)
-        ang = np.degrees(np.arccos(np.clip(np.sum(ub * uh[j], axis=1), -1, 1)))
-        assert np.median(ang) < 3.0
-    rest = Clip(leap_case.hands.skeleton, 30.0, np.tile([0.0, 0, 0, 1], (1, leap_case.hands.num_joints, 1)))
-    np.testing.assert_allclose(hand_directions(rest, hand_sides["right"]), [[1.0, 0, 0]], atol=1e-9)
+        assert np.median(angle(ub, uh[j])) < 3.0
+        # a rig with other joint axes reads differently, until the constant rotation is fitted
+        ut = hand_directions(turned, hand_sides[s])
+        assert np.median(angle(ub, ut[j])) > 20.0
+        R = fit_rotation(ub, ut[j])
+        assert np.median(angle(ub, ut[j] @ R.T)) < 3.0
+
+
+def test_fit_rotation_recovers_a_rotation():
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(9)
+    b = rng.normal(size=(50, 3))
+    R = Rotation.random(random_state=2).as_matrix()
+    np.testing.assert_allclose(fit_rotation(b @ R.T, b), R, atol=1e-9)
 
 
 # -- the splice against ground truth ----------------------------------------------------------
@@ -437,3 +450,28 @@ def test_cli_usd_body_gets_an_override_layer_with_the_spliced_fingers(bvh_case, 
     oj = [c.body.skeleton.index(n.rsplit("/", 1)[-1]) for n in names]
     assert len(names) == 15
     assert quat_angle_deg(spliced.rotations[:, bj], c.body.rotations[:, oj]).mean() < 2.0
+
+
+def test_cli_sample_conversation_glb_with_a_bvh_hand_take(sample_assets, tmp_path, capsys):
+    """A body clip with fingers from the samples, its hand take made with the known warp."""
+    import json
+
+    from usdhands.formats.io import read_clip
+    from usdhands.model.hand_detection import detect_hands
+
+    src = sample_assets / "conversation.glb"
+    if not src.exists():
+        pytest.skip(f"{src} not found")
+    body = read_clip(src)
+    hm = detect_hands(body.skeleton)
+    hands, truth = hand_session(body, hm.sides, seed=1)
+    hands_path = _write_bvh(hands.with_meters_per_unit(0.01), tmp_path / "hands.bvh")
+    out = tmp_path / "spliced.glb"
+    status, stdout, err = _run(["splice", str(src), str(hands_path), "-o", str(out), "--json"], capsys)
+    assert status == 0, err
+    rep = json.loads(stdout)
+    for s in SIDES:
+        assert np.abs(np.array(rep["alignment"][s]) - truth).mean() <= 1.5
+    spliced = read_clip(out)
+    fingers = [body.skeleton.index(j) for h in hm.sides for j in h.finger_joints]
+    assert quat_angle_deg(spliced.rotations[:, fingers], body.rotations[:, fingers]).mean() < 2.0

@@ -23,8 +23,10 @@ animations* (sections 3 and 4). For each hand:
 
 Finger rotations are transferred relative to each skeleton's rest pose:
 ``q_body = rest_body * (rest_hand⁻¹ * q_hand)`` when both rigs' finger joints share
-their axis conventions, otherwise through the hands' rest axes
-(:func:`transfer_axes`); ``SpliceOptions.transfer`` chooses. Finger joints are paired
+their axis conventions and rest rotations, as they are when only the declared rest
+rotations differ (a glTF character and its BVH export), otherwise through the hands'
+rest axes (:func:`transfer_axes`); ``SpliceOptions.transfer`` chooses
+(:func:`choose_transfer`). Finger joints are paired
 finger by finger from the distal end of each chain, so a chain with a metacarpal
 pairs with one without.
 
@@ -55,8 +57,8 @@ __all__ = [
     "sign_features", "first_pass_cost", "first_pass_cost_naive", "hand_angle_cost",
     "hand_angle_cost_naive", "window_yaw_naive", "align_hands", "median_alignment",
     "phase_boundaries", "pair_finger_joints", "transfer_fingers", "forearm_hand_vectors",
-    "SpliceResult", "splice_clips", "partial_world_xforms", "hand_rest_basis", "transfer_axes",
-    "hand_directions", "direction_angle_cost",
+    "SpliceResult", "splice_clips", "partial_world_xforms", "hand_rest_basis", "transfer_axes", "choose_transfer",
+    "hand_directions", "direction_angle_cost", "fit_rotation", "forearm_rest_basis",
 ]
 
 
@@ -151,6 +153,40 @@ def transfer_axes(body_skeleton, body_side: HandSide, hand_skeleton, hand_side: 
     gh = hand_skeleton.rest_world_xforms()[[hand_skeleton.index(h) for _, h in pairs], :3, :3]
     c = np.swapaxes(_rot_only(gb), -1, -2) @ M @ _rot_only(gh)
     return matrix_to_quat(c)
+
+
+def _angle_between(a: np.ndarray, b: np.ndarray) -> float:
+    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    if na < 1e-12 or nb < 1e-12:
+        return 0.0
+    return float(np.degrees(np.arccos(np.clip(np.dot(a, b) / (na * nb), -1.0, 1.0))))
+
+
+def choose_transfer(body_skeleton, hand_skeleton, pairs: Sequence[tuple[str, str]], tolerance_deg: float = 10.0) -> str:
+    """How to carry finger rotations between two rigs: ``"local"``, ``"copy"`` or ``"hand"``.
+
+    The joint frames of a pair coincide when the joint's rest offset (in its parent's
+    frame) and its first child's rest offset (in its own frame) point the same way in
+    both rigs, within ``tolerance_deg``. When every pair's frames coincide, the same
+    local rotation is the same pose in both rigs: ``"local"`` when the rest rotations
+    agree too (then it equals ``"copy"``), ``"copy"`` otherwise. Otherwise the rigs
+    use other joint axes: ``"hand"``.
+    """
+    same_frames = same_rest = True
+    for b, h in pairs:
+        jb, jh = body_skeleton.index(b), hand_skeleton.index(h)
+        if _angle_between(body_skeleton.rest_translations[jb], hand_skeleton.rest_translations[jh]) > tolerance_deg:
+            same_frames = False
+        cb, ch = body_skeleton.children(jb), hand_skeleton.children(jh)
+        if cb and ch and _angle_between(body_skeleton.rest_translations[cb[0]],
+                                        hand_skeleton.rest_translations[ch[0]]) > tolerance_deg:
+            same_frames = False
+        rb, rh = body_skeleton.rest_rotations[jb], hand_skeleton.rest_rotations[jh]
+        if np.degrees(2 * np.arccos(min(abs(float(np.dot(rb, rh))), 1.0))) > tolerance_deg:
+            same_rest = False
+    if not same_frames:
+        return "hand"
+    return "local" if same_rest else "copy"
 
 
 def default_marker_offsets(skeleton, side: HandSide, *, wrist_width: float = 0.25,
@@ -504,14 +540,13 @@ def _rot_only(m: np.ndarray) -> np.ndarray:
 
 def hand_directions(clip: Clip, side: HandSide, offsets: MarkerOffsets | None = None,
                     world: np.ndarray | None = None) -> np.ndarray:
-    """The hand vector of eq. 8 in the forearm joint's frame, normalised across rigs, ``(T, 3)``.
+    """The hand vector of eq. 8 in the forearm joint's frame, ``(T, 3)`` unit vectors.
 
-    The forearm is aligned as a whole frame (the joint's rotation) rather than by the
-    minimal rotation between forearm vectors: ``u(t) = Bᵀ R_f(t)ᵀ h(t)``, where ``R_f``
-    is the forearm joint's world rotation and ``B`` the rest-pose basis (hand vector,
-    across the wrist, their cross product) in the forearm's frame, so that every rig
-    reads ``(1, 0, 0)`` at rest whatever its joint axis conventions. The angle between
-    two such vectors is eq. 9 without the twist ambiguity of aligning two vectors.
+    ``u(t) = R_f(t)ᵀ h(t)``, with ``R_f`` the forearm joint's world rotation: the forearm
+    is aligned as a whole frame rather than by the minimal rotation between forearm
+    vectors, so the twist about the forearm stays fixed. Two rigs' forearm frames may
+    differ by a constant rotation (other joint axes); :func:`align_hands` removes it
+    with a least-squares fit over the first pass's matches.
     """
     sk = clip.skeleton
     offsets = default_marker_offsets(sk, side) if offsets is None else offsets
@@ -520,23 +555,42 @@ def hand_directions(clip: Clip, side: HandSide, offsets: MarkerOffsets | None = 
     fa = sk.index(side.forearm)
     o = offsets.as_array()
     hv = o[3] - 0.5 * (o[0] + o[1])  # in the wrist frame
-    across = o[0] - o[1]
     Rw = _rot_only(world[:, w, :3, :3])
     Rf = _rot_only(world[:, fa, :3, :3])
     u = np.einsum("tji,tjk,k->ti", Rf, Rw, hv)
-    rest = sk.rest_world_xforms()
-    rw, rf = _rot_only(rest[w, :3, :3]), _rot_only(rest[fa, :3, :3])
-    e1 = rf.T @ rw @ hv
+    return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
+
+
+def forearm_rest_basis(skeleton, side: HandSide, offsets: MarkerOffsets | None = None) -> np.ndarray:
+    """Rest-pose axes of the hand in the forearm joint's frame, ``(3, 3)`` (columns).
+
+    Columns: the hand vector of eq. 8, the wrist markers' across direction (made
+    perpendicular), their cross product, all at rest and in forearm-local coordinates.
+    ``B_body · B_handᵀ`` maps :func:`hand_directions` of the hand rig onto the body rig's
+    when both rest poses hold the hand alike.
+    """
+    offsets = default_marker_offsets(skeleton, side) if offsets is None else offsets
+    rest = skeleton.rest_world_xforms()
+    rw = _rot_only(rest[skeleton.index(side.wrist), :3, :3])
+    rf = _rot_only(rest[skeleton.index(side.forearm), :3, :3])
+    o = offsets.as_array()
+    e1 = rf.T @ rw @ (o[3] - 0.5 * (o[0] + o[1]))
     e1 = e1 / np.linalg.norm(e1)
-    e2 = rf.T @ rw @ across
+    e2 = rf.T @ rw @ (o[0] - o[1])
     e2 = e2 - e1 * np.dot(e1, e2)
     if np.linalg.norm(e2) < 1e-9:
         helper = np.array([0.0, 1.0, 0.0]) if abs(e1[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
         e2 = np.cross(e1, helper)
     e2 = e2 / np.linalg.norm(e2)
-    B = np.stack([e1, e2, np.cross(e1, e2)], axis=1)
-    u = u @ B
-    return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
+    return np.stack([e1, e2, np.cross(e1, e2)], axis=1)
+
+
+def fit_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation ``(3, 3)`` minimising ``Σ |a_k − R b_k|²`` over rows of ``(N, 3)`` arrays (Kabsch)."""
+    H = np.asarray(b, dtype=np.float64).T @ np.asarray(a, dtype=np.float64)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
 
 
 @njit(cache=True)
@@ -669,12 +723,13 @@ class SpliceOptions:
         Second pass: align the forearms as joint frames (:func:`hand_directions`,
         needs joints) or, as in the paper, by the minimal rotation between the
         forearm vectors of the markers (eq. 9).
-    transfer : {"auto", "local", "hand"}
-        Finger rotations relative to rest copied joint frame to joint frame
-        (``"local"``: ``q_body = rest_body · rest_hand⁻¹ · q_hand``), or carried through
-        the hands' rest axes (``"hand"``, :func:`transfer_axes`) for rigs with other
-        joint axis conventions; ``"auto"`` takes ``"local"`` when every pair's joint
-        frames agree within ``auto_transfer_deg`` degrees and ``"hand"`` otherwise.
+    refit : int
+        With ``forearm_align="frame"``: how many times the rest-pose guess of the
+        rotation between the two rigs' forearm frames is refitted on the second pass's
+        matches.
+    transfer : {"auto", "local", "copy", "hand"}
+        How finger rotations go from one rig to the other (:func:`transfer_fingers`);
+        ``"auto"`` asks :func:`choose_transfer`.
     auto_transfer_deg : float
         The threshold of ``"auto"``.
     """
@@ -690,12 +745,13 @@ class SpliceOptions:
     jump_frames: float = 2.0
     min_phase: int = 4
     forearm_align: str = "frame"
+    refit: int = 1
     transfer: str = "auto"
     auto_transfer_deg: float = 10.0
 
     def __post_init__(self) -> None:
-        if self.transfer not in ("local", "hand", "auto"):
-            raise ValueError(f"Expected transfer 'local', 'hand' or 'auto', got {self.transfer!r}")
+        if self.transfer not in ("local", "copy", "hand", "auto"):
+            raise ValueError(f"Expected transfer 'auto', 'local', 'copy' or 'hand', got {self.transfer!r}")
         if self.forearm_align not in ("frame", "vector"):
             raise ValueError(f"Expected forearm_align 'frame' or 'vector', got {self.forearm_align!r}")
         if self.yaw not in ("window", "trunk", "none"):
@@ -779,7 +835,7 @@ def align_hands(body_markers: np.ndarray, hand_markers: np.ndarray, fps: float, 
                 constraints: Sequence[Constraint] = (), options: SpliceOptions = SpliceOptions(),
                 body_yaw_deg: np.ndarray | None = None, hand_yaw_deg: np.ndarray | None = None,
                 body_hand_dirs: np.ndarray | None = None, hand_hand_dirs: np.ndarray | None = None,
-                side: str = "right") -> SideAlignment:
+                frame_rotation: np.ndarray | None = None, side: str = "right") -> SideAlignment:
     """Two-pass DTW of one hand's markers (section 3 and 4 of the paper).
 
     Parameters
@@ -802,6 +858,10 @@ def align_hands(body_markers: np.ndarray, hand_markers: np.ndarray, fps: float, 
         Forearm-aligned unit hand vectors (:func:`hand_directions`); with
         ``options.forearm_align == "frame"`` the second pass compares these, otherwise
         it aligns the markers' forearm vectors (eq. 8–9).
+    frame_rotation : (3, 3) float, optional
+        A guess of the rotation from the hand rig's forearm frame to the body rig's
+        (``forearm_rest_basis(body) @ forearm_rest_basis(hands).T``); tried, refitted,
+        against no rotation.
 
     Returns
     -------
@@ -838,7 +898,26 @@ def align_hands(body_markers: np.ndarray, hand_markers: np.ndarray, fps: float, 
         uh = np.asarray(hand_hand_dirs, dtype=np.float64)
         if ub.shape != (n, 3) or uh.shape != (m, 3):
             raise ValueError(f"Expected hand directions of shapes ({n}, 3) and ({m}, 3), got {ub.shape} and {uh.shape}")
-        second = dtw(lambda r, c: direction_angle_cost(ub, uh, r, c), band2, shape=(n, m))
+        # The two rigs' forearm frames may differ by a constant rotation. Candidates: none (same
+        # joint axes), and the rest-pose guess refitted on the second pass's matches; the one
+        # whose second pass costs less wins.
+        candidates = [(np.eye(3), 0)]
+        if frame_rotation is not None:
+            G = np.asarray(frame_rotation, dtype=np.float64)
+            if G.shape != (3, 3):
+                raise ValueError(f"Expected frame_rotation of shape (3, 3), got {G.shape}")
+            if np.degrees(np.arccos(np.clip((np.trace(G) - 1) / 2, -1, 1))) > 1.0:
+                candidates.append((G, options.refit))
+        second = None
+        for R, refits in candidates:
+            for k in range(refits + 1):
+                uh_r = uh @ R.T
+                res = dtw(lambda r, c: direction_angle_cost(ub, uh_r, r, c), band2, shape=(n, m))
+                if k < refits:
+                    match = np.clip(np.round(median_alignment(res.path, n)).astype(int), 0, m - 1)
+                    R = fit_rotation(ub, uh[match])
+            if second is None or res.cost < second.cost:
+                second = res
     else:
         fb, hb = forearm_hand_vectors(P)
         fh, hh = forearm_hand_vectors(Q)
@@ -904,9 +983,9 @@ def _sample(rel: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], alignment: np.ndarray, *,
-                     blend_window: int = 4, jump_frames: float = 2.0,
+                     blend_window: int = 4, jump_frames: float = 2.0, mode: str = "local",
                      axes: np.ndarray | None = None) -> FingerTransfer:
-    """Finger rotations of ``hands`` at the aligned frames, relative to rest, on ``body``'s joints.
+    """Finger rotations of ``hands`` at the aligned frames, put on ``body``'s joints.
 
     Parameters
     ----------
@@ -919,11 +998,20 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
         Half-width (frames) of the cross-fade at a jump.
     jump_frames : float
         Extra hand frames per body frame beyond the mean rate that make a jump.
+    mode : {"local", "copy", "hand"}
+        ``"local"``: rotations relative to rest, ``q_body = rest_body · rest_hand⁻¹ ·
+        q_hand``; ``"copy"``: local rotations as they are, ``q_body = q_hand`` (rigs
+        whose joint frames coincide but whose declared rest rotations differ, such as
+        a glTF character and its BVH export); ``"hand"``: rotations relative to rest
+        carried through the hands' rest axes, ``q_body = rest_body · c · rest_hand⁻¹ ·
+        q_hand · c⁻¹`` with ``c`` from ``axes``.
     axes : (len(pairs), 4) float, optional
-        :func:`transfer_axes`; omitted, rotations relative to rest are copied as they
-        are (``q_body = rest_body · rest_hand⁻¹ · q_hand``), which assumes both rigs'
-        finger joints share their axis conventions.
+        :func:`transfer_axes`, for ``mode="hand"``.
     """
+    if mode not in ("local", "copy", "hand"):
+        raise ValueError(f"Expected mode 'local', 'copy' or 'hand', got {mode!r}")
+    if mode == "hand" and axes is None:
+        raise ValueError("mode='hand' needs axes (transfer_axes)")
     a = np.asarray(alignment, dtype=np.float64)
     n = body.num_frames
     if a.shape != (n,):
@@ -932,7 +1020,9 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
     hj = [hands.skeleton.index(h) for _, h in pairs]
     if not pairs:
         return FingerTransfer([], np.zeros((n, 0, 4)), np.zeros(0, np.int64))
-    rel = quat_multiply(quat_conjugate(hands.skeleton.rest_rotations[hj])[None], hands.rotations[:, hj])
+    rel = np.array(hands.rotations[:, hj])
+    if mode != "copy":
+        rel = quat_multiply(quat_conjugate(hands.skeleton.rest_rotations[hj])[None], rel)
     # keep consecutive quaternions in one hemisphere so slerp and blends take short arcs
     if rel.shape[0] > 1:
         step = np.where(np.sum(rel[1:] * rel[:-1], axis=-1) < 0, -1.0, 1.0)
@@ -953,7 +1043,9 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
             ql = _sample(rel, left_t)
             qr = _sample(rel, right_t)
             out[t] = quat_slerp(ql, qr, alpha[:, None] * np.ones(len(pairs)))
-    if axes is not None:
+    if mode == "copy":
+        return FingerTransfer(bj, out, seams.astype(np.int64))
+    if mode == "hand":
         c = np.asarray(axes, dtype=np.float64)
         if c.shape != (len(pairs), 4):
             raise ValueError(f"Expected axes of shape ({len(pairs)}, 4), got {c.shape}")
@@ -977,7 +1069,7 @@ class SpliceResult:
     body_unmatched, hand_unmatched : dict of str to list of str
         Finger joints without a counterpart, per hand.
     transfer_modes : dict of str to str
-        ``"local"`` or ``"hand"`` per hand (what ``"auto"`` chose).
+        ``"local"``, ``"copy"`` or ``"hand"`` per hand (what ``"auto"`` chose).
     """
 
     clip: Clip
@@ -1042,19 +1134,17 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         al = align_hands(bm, hm, body.fps, body_ref=bref, hand_ref=href, constraints=constraints,
                          options=options, body_yaw_deg=yb, hand_yaw_deg=yh,
                          body_hand_dirs=hand_directions(body, bs, bo, wb),
-                         hand_hand_dirs=hand_directions(hands, hs, ho, wh), side=s)
+                         hand_hand_dirs=hand_directions(hands, hs, ho, wh),
+                         frame_rotation=forearm_rest_basis(body.skeleton, bs, bo)
+                         @ forearm_rest_basis(hands.skeleton, hs, ho).T, side=s)
         pairs, bu, hu = pair_finger_joints(bs, hs)
-        mode, axes = options.transfer, None
-        if pairs and mode != "local":
-            axes = transfer_axes(body.skeleton, bs, hands.skeleton, hs, pairs)
-            misfit = float(np.degrees(2 * np.arccos(np.clip(np.abs(axes[:, 3]), 0.0, 1.0))).max())
-            if mode == "auto":
-                mode = "hand" if misfit > options.auto_transfer_deg else "local"
-            if mode == "local":
-                axes = None
+        mode = options.transfer
+        if mode == "auto":
+            mode = choose_transfer(body.skeleton, hands.skeleton, pairs, options.auto_transfer_deg) if pairs else "local"
+        axes = transfer_axes(body.skeleton, bs, hands.skeleton, hs, pairs) if mode == "hand" and pairs else None
         modes[s] = mode
         tr = transfer_fingers(body, hands, pairs, al.alignment, blend_window=options.blend_window,
-                              jump_frames=options.jump_frames, axes=axes)
+                              jump_frames=options.jump_frames, mode=mode, axes=axes)
         if tr.joints:
             out = out.with_joint_rotations(tr.joints, tr.rotations)
         sides[s], transfers[s], pairs_all[s], bun[s], hun[s] = al, tr, pairs, bu, hu

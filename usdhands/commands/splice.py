@@ -42,9 +42,10 @@ def register(sub) -> None:
                    help="with --yaw trunk: heading of the hand capture when HANDS has no trunk (default 0)")
     p.add_argument("--forearm-align", choices=("frame", "vector"), default="frame",
                    help="second pass: align forearm joint frames (default) or forearm marker vectors as in the paper")
-    p.add_argument("--transfer", choices=("auto", "local", "hand"), default="auto",
-                   help="finger rotations relative to rest copied joint frame to joint frame (local), or through "
-                        "the hands' rest axes for rigs with other joint axes (hand); auto picks (default)")
+    p.add_argument("--transfer", choices=("auto", "local", "copy", "hand"), default="auto",
+                   help="finger rotations relative to rest copied joint to joint (local), local rotations as they "
+                        "are (copy: same joint frames, other rest rotations), or relative to rest through the "
+                        "hands' rest axes (hand: other joint axes); auto picks by comparing the rigs (default)")
     p.add_argument("--blend", type=int, default=4, metavar="N",
                    help="frames on each side of a jump in hand timing to cross-fade (default 4)")
     p.add_argument("--json", action="store_true", help="print the alignment, phases and costs as JSON")
@@ -189,6 +190,9 @@ def run(args) -> int:
         if args.transfer == "auto" and result.transfer_modes.get(s) == "hand":
             print(f"usdhands: note: {s} hand: the finger joints of BODY and HANDS have other axis conventions; "
                   "rotations carried through the hands' rest axes (--transfer hand)", file=sys.stderr)
+        if args.transfer == "auto" and result.transfer_modes.get(s) == "copy":
+            print(f"usdhands: note: {s} hand: the finger joints of BODY and HANDS have the same axes but other "
+                  "rest rotations; local rotations copied as they are (--transfer copy)", file=sys.stderr)
         if result.body_unmatched[s]:
             print(f"usdhands: note: {s} hand: BODY finger joints without a counterpart in HANDS keep their "
                   f"own motion: {', '.join(result.body_unmatched[s])}", file=sys.stderr)
