@@ -134,9 +134,9 @@ def _blend(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
     return (1 - w) * a + w * b
 
 
-def _gesture_keys(gesture: str, p: _TakeParams, t0: float, start: HandKey, end: HandKey,
+def _gesture_keys(gesture: str, p: _TakeParams, t0: float, end: HandKey,
                   relaxed: np.ndarray) -> tuple[list[HandKey], list, float]:
-    """Right-hand keys of one gesture after ``start`` (at ``t0``), ending at ``end``'s place.
+    """Right-hand keys of one gesture starting at ``t0`` (after the track's last key), ending at ``end``'s place.
 
     Returns the keys (``end`` moved to the gesture's end time), extra finger motion
     functions, and the end time.
@@ -256,7 +256,6 @@ def _gesture_keys(gesture: str, p: _TakeParams, t0: float, start: HandKey, end: 
     t_end = max(t_h + retract, t0 + MIN_TAKE_S)
     keys.append(_retraction_via(keys[-1], end, t_h + 0.45 * (t_end - t_h)))
     keys.append(HandKey(t_end, end.pos, end.fingers_dir, end.palm, end.pose, True, end.shoulder_lift))
-    del start
     return keys, extras, t_end
 
 
@@ -346,11 +345,11 @@ def gesture_take(gesture: str, take: int, seed: int = 0) -> Clip:
     relaxed = relaxed_pose() + rng.normal(0, 2.0, (15, 3)) * [1, 0, 0.5]
     start = rest_key(0.0, "right", relaxed, rng.normal(0, 0.6, 3))
     end = rest_key(0.0, "right", relaxed, rng.normal(0, 0.6, 3))
-    keys, extras, t_end = _gesture_keys(gesture, p, 0.0, start, end, relaxed)
+    keys, extras, t_end = _gesture_keys(gesture, p, 0.0, end, relaxed)
     right = HandTrack("right", [start] + keys, extras + [_micro_motion(rng)], **_arm_style(rng))
     if "left" in gesture_hands(gesture, take):
         lkeys = _mirror_track_keys([start] + keys, rng, delay=float(rng.integers(0, 3)) / FPS)
-        left = HandTrack("left", lkeys, [_micro_motion(rng)], **_arm_style(rng))
+        left = HandTrack("left", lkeys, extras + [_micro_motion(rng)], **_arm_style(rng))
     else:
         lpose = relaxed_pose() + rng.normal(0, 2.0, (15, 3)) * [1, 0, 0.5]
         left = HandTrack("left", [rest_key(0.0, "left", lpose), rest_key(t_end, "left", lpose)],
@@ -398,7 +397,7 @@ def _conversation_plan(seed: int):
                 tracks[side].append(HandKey(t, k.pos, k.fingers_dir, k.palm, k.pose, True, k.shoulder_lift))
         last = tracks["right"][-1] if "right" in hands else mirror_key(tracks["left"][-1])
         end = _low_rest_key(0.0, relaxed) if rng.uniform() < 0.6 else rest_key(0.0, "right", relaxed)
-        keys, ex, t_end = _gesture_keys(gesture, p, t, last, end, relaxed)
+        keys, ex, t_end = _gesture_keys(gesture, p, t, end, relaxed)
         if "right" in hands:
             tracks["right"] += keys
             extras["right"] += ex
@@ -406,8 +405,7 @@ def _conversation_plan(seed: int):
             lk = [mirror_key(k) for k in keys] if "right" not in hands else _mirror_track_keys(
                 [last] + keys, rng, 1.0 / FPS)[1:]
             tracks["left"] += lk
-            if "right" not in hands:
-                extras["left"] += ex
+            extras["left"] += ex
         for side in ("left", "right"):  # an idle hand stays where it is
             if side not in hands:
                 k = tracks[side][-1]
