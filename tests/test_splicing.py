@@ -475,3 +475,19 @@ def test_cli_sample_conversation_glb_with_a_bvh_hand_take(sample_assets, tmp_pat
     spliced = read_clip(out)
     fingers = [body.skeleton.index(j) for h in hm.sides for j in h.finger_joints]
     assert quat_angle_deg(spliced.rotations[:, fingers], body.rotations[:, fingers]).mean() < 2.0
+
+
+def test_cli_constraints_are_in_the_hands_file_frames_when_resampled(bvh_case, shared_assets, capsys):
+    import json
+
+    c, body, _, d = bvh_case
+    leap = shared_assets / "leap_hands" / "gesture-typing.bvh"
+    status, stdout, err = _run(["splice", str(body), str(leap), "-o", str(d / "leap_c.bvh"), "--json",
+                                "--match", "100:150", "--match", "200:260:4"], capsys)
+    assert status == 0, err
+    a = np.array(json.loads(stdout)["alignment"]["right"])
+    step = 37.037037 / 30  # one frame of the resampled recording, in the recording's frames
+    assert abs(a[100] - 150) <= step / 2 + 1e-6
+    assert abs(a[200] - 260) <= 4 + step
+    status, _, err = _run(["splice", str(body), str(leap), "-o", str(d / "leap_c.bvh"), "--match", "100:317"], capsys)
+    assert status == 2 and "hand frame 317 is out of range 0..316 (BODY has 240 frames, HANDS 317)" in err
