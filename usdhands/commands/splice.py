@@ -163,9 +163,9 @@ def run(args) -> int:
         hands = hands.resample(body.fps)
         print(f"usdhands: note: HANDS is at {hand_fps:.4g} fps and BODY at {body.fps:.4g} fps: HANDS resampled "
               f"to {body.fps:.4g} fps ({m0} -> {hands.num_frames} frames); --match and the reported alignment "
-              "use HANDS's own frame numbers", file=sys.stderr)
+              "use HANDS's own frame numbers (constraints hold to within one resampled frame)", file=sys.stderr)
         m = hands.num_frames
-        conv = [Constraint(c.body, min(int(round(c.hand * ratio)), m - 1), int(math.ceil(c.tolerance * ratio)))
+        conv = [Constraint(c.body, min(int(round(c.hand * ratio)), m - 1), int(math.floor(c.tolerance * ratio)))
                 for c in constraints]
         try:
             check_constraints(conv, n, m)
