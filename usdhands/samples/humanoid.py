@@ -20,6 +20,8 @@ element) are the Mixamo names without namespace (``"LeftHandIndex1"``).
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from usdhands.model.asset import SkinnedMesh
@@ -187,6 +189,7 @@ def _joint_paths(names: list[str], parents: list[str | None]) -> list[str]:
     return [paths[n] for n in names]
 
 
+@lru_cache(maxsize=1)
 def humanoid_skeleton() -> Skeleton:
     """The sample humanoid's skeleton: 65 joints, centimetres, Y up, T-pose rest.
 
@@ -194,7 +197,8 @@ def humanoid_skeleton() -> Skeleton:
     -------
     Skeleton
         Joint names are USD joint paths (``"Hips/Spine/Spine1/Spine2/LeftShoulder"``);
-        ``bind_xforms`` equal the rest pose's world transforms.
+        ``bind_xforms`` equal the rest pose's world transforms. The same (immutable)
+        object on every call, so every generated clip shares it.
     """
     names, parents, R, P = _rest_frames()
     idx = {n: i for i, n in enumerate(names)}
