@@ -414,3 +414,25 @@ def test_cli_samples(tmp_path, capsys):
     assert "unknown value(s) ['fbx']" in capsys.readouterr().err
     assert cli_main(["samples", str(tmp_path / "missing" / "x")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_usd_skinning_matches_linear_blend(tmp_path):
+    """UsdSkel's own skinning of humanoid.usda equals linear blend skinning of the in-memory rig."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    from usdhands.samples.generate import generate_samples
+
+    path = generate_samples(tmp_path, formats=("usd",), only=("humanoid.usda",))[0]
+    stage = Usd.Stage.Open(str(path))
+    assert UsdSkel.BakeSkinning(stage.Traverse())
+    prim = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
+    clip = wave_clip()
+    mesh = humanoid_mesh(clip.skeleton)
+    skin = clip.world_xforms() @ np.linalg.inv(clip.skeleton.bind_xforms)[None]
+    P = np.concatenate([mesh.points, np.ones((len(mesh.points), 1))], axis=1)
+    for f in (0, 45, 80):
+        baked = np.asarray(UsdGeom.Mesh(prim).GetPointsAttr().Get(Usd.TimeCode(f)))
+        lbs = sum(mesh.joint_weights[:, k, None] * np.einsum("vij,vj->vi", skin[f, mesh.joint_indices[:, k]], P)[:, :3]
+                  for k in range(mesh.joint_indices.shape[1]))
+        assert np.abs(baked - lbs).max() < 1e-3
+    assert np.abs(lbs - mesh.points).max() > 30  # the wave moves the arm
