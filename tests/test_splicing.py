@@ -492,3 +492,21 @@ def test_cli_constraints_are_in_the_hands_file_frames_when_resampled(bvh_case, s
     assert abs(a[200] - 260) <= 4 + step
     status, _, err = _run(["splice", str(body), str(leap), "-o", str(d / "leap_c.bvh"), "--match", "100:317"], capsys)
     assert status == 2 and "hand frame 317 is out of range 0..316 (BODY has 240 frames, HANDS 317)" in err
+
+
+def test_cli_reports_finger_joints_without_counterpart(bvh_case, capsys):
+    import json
+
+    c, body, hands, d = bvh_case
+    side = leap_handside("right").to_dict()
+    side["fingers"]["pinky"] = ["rPinky2", "rPinky3"]
+    side["fingers"]["thumb"] = []
+    hm = d / "short_pinky.json"
+    hm.write_text(json.dumps({"left": None, "right": side}))
+    status, stdout, err = _run(["splice", str(body), str(hands), "-o", str(d / "short.bvh"), "--json",
+                                "--hands-handmap", str(hm)], capsys)
+    assert status == 0, err
+    assert ("right hand: BODY finger joints without a counterpart in HANDS keep their own motion: "
+            "RightHandThumb1, RightHandThumb2, RightHandThumb3, RightHandPinky1") in err
+    rep = json.loads(stdout)
+    assert ["RightHandPinky2", "rPinky2"] in rep["pairs"]["right"] and len(rep["pairs"]["right"]) == 11
