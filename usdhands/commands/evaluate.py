@@ -128,6 +128,6 @@ def _run_holdout(args, items, cfg) -> int:
         return 0
     print(f"held-out synthesis over {result['clips']} clips ({result['frames']} hand-frames); "
           f"ground truth mean angular speed {result['ground_truth_speed_deg_s']:.1f} deg/s")
-    rows = [[m, v["error_deg"], v["speed_deg_s"]] for m, v in result["methods"].items()]
+    rows = [[m, f"{v['error_deg']:.2f}", f"{v['speed_deg_s']:.2f}"] for m, v in result["methods"].items()]
     print_table(rows, ["method", "finger error (deg)", "angular speed (deg/s)"])
     return 0
