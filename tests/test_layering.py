@@ -1,0 +1,69 @@
+"""The layering rules of DESIGN.md as checked facts, and the library's lint."""
+
+from __future__ import annotations
+
+import ast
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parent.parent / "usdhands"
+
+
+def imported_modules(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module)
+    return out
+
+
+@pytest.mark.parametrize("layer,forbidden", [
+    ("model", ("pxr", "pygltflib", "usdhands.algorithms", "usdhands.formats", "usdhands.commands",
+               "usdhands.pipeline", "matplotlib", "trimesh")),
+    ("algorithms", ("pxr", "pygltflib", "usdhands.formats", "usdhands.commands", "usdhands.pipeline")),
+    ("formats", ("usdhands.commands", "usdhands.algorithms")),
+])
+def test_layer_imports_only_layers_below(layer, forbidden):
+    bad = []
+    for path in sorted((PKG / layer).rglob("*.py")):
+        for mod in imported_modules(path):
+            if any(mod == f or mod.startswith(f + ".") for f in forbidden):
+                bad.append(f"{path.relative_to(PKG.parent)} imports {mod}")
+    assert bad == []
+
+
+def test_pxr_and_pygltflib_only_where_allowed():
+    allowed_pxr = ("formats/usd", "pipeline/", "commands/")
+    bad = []
+    for path in sorted(PKG.rglob("*.py")):
+        rel = path.relative_to(PKG).as_posix()
+        mods = imported_modules(path)
+        if any(m == "pxr" or m.startswith("pxr.") for m in mods) and not rel.startswith(allowed_pxr):
+            bad.append(f"{rel} imports pxr")
+        if "pygltflib" in mods and not rel.startswith("formats/gltf"):
+            bad.append(f"{rel} imports pygltflib")
+    assert bad == []
+
+
+def test_importing_usdhands_imports_neither_pxr_nor_pygltflib():
+    code = ("import sys, usdhands, usdhands.model, usdhands.algorithms, usdhands.formats, usdhands.cli; "
+            "print(sorted(m for m in ('pxr', 'pygltflib', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_ruff_clean():
+    ruff = shutil.which("ruff")
+    if ruff is None:
+        pytest.skip("ruff is not installed (pip install -e '.[test]')")
+    root = PKG.parent
+    out = subprocess.run([ruff, "check", "usdhands", "tests", "benchmarks"], cwd=root,
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout
