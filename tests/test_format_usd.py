@@ -206,12 +206,27 @@ def test_cesium_man(shared_assets):
     (m,) = asset.meshes
     assert m.points.shape == (3273, 3) and m.joint_indices.shape == (3273, 4)
     np.testing.assert_allclose(m.joint_weights.sum(axis=1), 1.0, atol=1e-5)
-    # the clip's rotations are UsdSkel's own answer at each time code
+    # below the roots, the clip's rotations are UsdSkel's own answer at each time code
     stage = Usd.Stage.Open(str(path))
     anim_query = UsdSkel.Cache().GetAnimQuery(UsdSkel.Animation(stage.GetPrimAtPath(clip.name)))
     order = [sk.joint_names.index(str(t)) for t in anim_query.GetJointOrder()]
     q = np.asarray(anim_query.ComputeJointLocalTransformComponents(Usd.TimeCode(20))[1])
-    np.testing.assert_allclose(clip.rotations[19][order], q, atol=1e-7)
+    below = sk.parents[order] >= 0
+    np.testing.assert_allclose(clip.rotations[19][order][below], q[below], atol=1e-7)
+    # the Skeleton sits under a Z_UP Xform: its world transform is folded into the root,
+    # so joint world transforms are UsdSkel's ComputeJointWorldTransforms at every frame
+    cache = UsdSkel.Cache()
+    root = UsdSkel.Root(stage.GetPrimAtPath("/CesiumMan/Geom/Z_UP/Armature/Skeleton_torso_joint_1_3"))
+    cache.Populate(root, Usd.PrimDefaultPredicate)
+    skel_query = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath(root.GetPath().AppendChild("Skeleton"))))
+    ours = clip.world_xforms()
+    for f in range(clip.num_frames):
+        code = clip.start_time * 24.0 + f
+        world = np.asarray(skel_query.ComputeJointWorldTransforms(UsdGeom.XformCache(code)), dtype=float)
+        np.testing.assert_allclose(ours[f], world.transpose(0, 2, 1), atol=1e-5)
+    head = sk.index("Skeleton_neck_joint_2")
+    feet = clip.world_positions()[0, :, 1].min()
+    assert clip.world_positions()[0, head, 1] - feet > 1.0  # +Y is up, as the stage says
 
 
 def test_teapot_has_no_skeleton(shared_assets):
@@ -647,3 +662,110 @@ def test_write_clip_animation_chosen_by_name_or_path(tmp_path):
     with pytest.raises(AssetReadError) as e:
         write_clip(src, new, tmp_path / "x.usda", animation="/Char/Body")
     assert str(e.value) == f"{src}: no SkelAnimation at /Char/Body"
+
+
+# --------------------------------------------------------------------------- transforms above the Skeleton
+def _stage_under_transforms(path):
+    """A skinned 3-joint arm under a static rotated, scaled, moved Xform and an animated one."""
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    stage.SetTimeCodesPerSecond(24)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    world.AddTranslateOp().Set(Gf.Vec3d(1, 2, 3))
+    world.AddRotateXOp().Set(-90.0)
+    world.AddScaleOp().Set(Gf.Vec3f(2, 2, 2))
+    mover = UsdGeom.Xform.Define(stage, "/World/Mover")
+    op = mover.AddTranslateOp()
+    for t in range(4):
+        op.Set(Gf.Vec3d(0.5 * t, 0, 0), t)
+    mover.AddRotateZOp().Set(30.0)
+    root = UsdSkel.Root.Define(stage, "/World/Mover/Char")
+    skel = UsdSkel.Skeleton.Define(stage, "/World/Mover/Char/Skel")
+    joints = ["A", "A/B", "A/B/C"]
+    skel.CreateJointsAttr().Set(joints)
+    rest = [Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(0, 0, 0.3)), Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(0, 1, 0)),
+            Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(0, 1, 0))]
+    skel.CreateRestTransformsAttr().Set(rest)
+    bind = [rest[0], rest[1] * rest[0], rest[2] * rest[1] * rest[0]]
+    skel.CreateBindTransformsAttr().Set(bind)
+    anim = UsdSkel.Animation.Define(stage, "/World/Mover/Char/Anim")
+    anim.CreateJointsAttr().Set(joints)
+    rng = np.random.default_rng(5)
+    for t in range(4):
+        q = rng.normal(size=(3, 4)).astype(np.float32)
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        anim.CreateRotationsAttr().Set(Vt.QuatfArray.FromNumpy(q), t)
+        anim.CreateTranslationsAttr().Set(Vt.Vec3fArray([(0.1 * t, 0, 0.3), (0, 1, 0), (0, 1, 0)]), t)
+    anim.CreateScalesAttr().Set(Vt.Vec3hArray([(1, 1, 1)] * 3))
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Mover/Char/Mesh")
+    mesh.CreatePointsAttr().Set([(0.2, 0, 0), (0.2, 1.5, 0), (-0.2, 2, 0.1)])
+    mesh.CreateFaceVertexCountsAttr().Set([3])
+    mesh.CreateFaceVertexIndicesAttr().Set([0, 1, 2])
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(False, 2).Set([0, 1, 1, 2, 2, 1])
+    binding.CreateJointWeightsPrimvar(False, 2).Set([0.7, 0.3, 0.5, 0.5, 0.9, 0.1])
+    binding.CreateGeomBindTransformAttr().Set(Gf.Matrix4d(1).SetTranslate(Gf.Vec3d(0, 0.1, 0)))
+    stage.Save()
+    return root, skel
+
+
+def _usd_world_joints(path, t):
+    stage = Usd.Stage.Open(str(path))
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root(stage.GetPrimAtPath("/World/Mover/Char")), Usd.PrimDefaultPredicate)
+    query = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/World/Mover/Char/Skel")))
+    return np.asarray(query.ComputeJointWorldTransforms(UsdGeom.XformCache(t)), dtype=float).transpose(0, 2, 1)
+
+
+def test_transforms_above_the_skeleton_are_folded_into_the_roots(tmp_path):
+    src = tmp_path / "moved.usda"
+    _stage_under_transforms(src)
+    asset = read_asset(src)
+    clip = asset.clips[0]
+    assert clip.num_frames == 4
+    ours = clip.world_xforms()
+    for t in range(4):  # the Mover's animated translate is folded frame by frame
+        np.testing.assert_allclose(ours[t], _usd_world_joints(src, t), atol=1e-5)
+    # the skinned mesh lands where UsdSkel's own skinning puts it
+    m = asset.meshes[0]
+    sk = clip.skeleton
+    stage = Usd.Stage.Open(str(src))
+    stage.SetEditTarget(stage.GetSessionLayer())
+    assert UsdSkel.BakeSkinning(UsdSkel.Root(stage.GetPrimAtPath("/World/Mover/Char")), Gf.Interval(2, 2))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Mover/Char/Mesh"))
+    baked = np.asarray(mesh.GetPointsAttr().Get(2), dtype=float)
+    to_world = np.asarray(mesh.ComputeLocalToWorldTransform(2), dtype=float).T
+    want = (np.c_[baked, np.ones(3)] @ to_world.T)[:, :3]
+    skin = ours[2] @ np.linalg.inv(sk.bind_xforms)
+    p = np.c_[m.points, np.ones(len(m.points))] @ m.geom_bind_xform.T
+    got = np.einsum("vk,vkij,vj->vi", m.joint_weights, skin[m.joint_indices], p)[:, :3]
+    np.testing.assert_allclose(got, want, atol=1e-5)
+
+
+def test_folded_roots_are_unfolded_when_written_back(tmp_path):
+    src = tmp_path / "moved.usda"
+    _stage_under_transforms(src)
+    clip = read_clip(src)
+    src_stage = Usd.Stage.Open(str(src))
+    src_anim = UsdSkel.Animation(src_stage.GetPrimAtPath("/World/Mover/Char/Anim"))
+    out = write_clip(src, clip, tmp_path / "copy.usda")
+    out_stage = Usd.Stage.Open(str(out))
+    anim = UsdSkel.Animation(out_stage.GetPrimAtPath("/World/Mover/Char/Anim"))
+    for t in range(4):
+        np.testing.assert_allclose(np.asarray(anim.GetRotationsAttr().Get(t)),
+                                   np.asarray(src_anim.GetRotationsAttr().Get(t)), atol=1e-6)
+        np.testing.assert_allclose(np.asarray(anim.GetTranslationsAttr().Get(t)),
+                                   np.asarray(src_anim.GetTranslationsAttr().Get(t)), atol=1e-6)
+        np.testing.assert_allclose(_usd_world_joints(out, t), clip.world_xforms()[t], atol=1e-5)
+    # an unchanged clip as a layer authors no root override
+    layer = write_clip(src, clip, tmp_path / "layer.usda", as_layer=True)
+    assert "rotations" not in layer.read_text() and "translations" not in layer.read_text()
+    # a changed root comes back as changed, in world space
+    moved = clip.replace(translations=clip.translations + np.array([0.0, 0.25, 0.0]))
+    layer = write_clip(src, moved, tmp_path / "layer2.usda", as_layer=True)
+    back = read_clip(layer)
+    np.testing.assert_allclose(back.world_positions(), moved.world_positions(), atol=1e-5)
+    np.testing.assert_allclose(back.world_positions()[:, 0] - clip.world_positions()[:, 0],
+                               np.tile([0, 0.25, 0], (4, 1)), atol=1e-5)

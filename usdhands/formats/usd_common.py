@@ -13,14 +13,16 @@ from pathlib import Path
 from typing import Iterator, Sequence
 
 import numpy as np
-from pxr import Sdf, Tf, Usd, UsdSkel, UsdUtils, Vt
+from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
 
 from usdhands.errors import AssetReadError
+from usdhands.model.rotations import quat_canonical, quat_multiply, trs_to_xform, xform_to_trs
 
 __all__ = [
     "SOURCE_JOINT_NAMES_KEY", "SOURCE_SKELETON_KEY", "quiet_diagnostics", "open_stage",
     "tf_error_reason", "matrices_to_numpy", "numpy_to_matrices", "valid_identifier",
     "unique_name", "joint_tokens_for", "skeleton_tokens_and_names", "bound_animation_path",
+    "skeleton_world_xforms", "fold_into_roots",
 ]
 
 #: customData key on a Skeleton prim: the original joint names when the tokens had to be sanitised
@@ -160,3 +162,89 @@ def bound_animation_path(skel_prim: Usd.Prim) -> Sdf.Path | None:
         if targets:
             return targets[0]
     return None
+
+
+def _world_might_vary(prim: Usd.Prim) -> bool:
+    """Whether the local-to-world transform of ``prim`` may change over time."""
+    p = prim
+    while p and not p.IsPseudoRoot():
+        x = UsdGeom.Xformable(p)
+        if x:
+            if x.TransformMightBeTimeVarying():
+                return True
+            if x.GetResetXformStack():
+                break
+        p = p.GetParent()
+    return False
+
+
+def skeleton_world_xforms(prim: Usd.Prim, time_codes: Sequence[float] | None = None) -> np.ndarray | None:
+    """The local-to-world transform of a Skeleton prim (its own xformOps and its ancestors').
+
+    Parameters
+    ----------
+    prim : Usd.Prim
+    time_codes : (T,) float, optional
+        Times to evaluate at; the earliest time when omitted.
+
+    Returns
+    -------
+    (T, 4, 4) float64 or None
+        Column-vector transforms, one per time code (``(1, 4, 4)`` without
+        ``time_codes``); None when the transform is the identity at every time.
+        A transform that does not vary over time is computed once and repeated.
+    """
+    if time_codes is None or not _world_might_vary(prim):
+        m = matrices_to_numpy([UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.EarliestTime())])
+        if np.allclose(m[0], np.eye(4), rtol=0, atol=1e-12):
+            return None
+        n = 1 if time_codes is None else len(time_codes)
+        return np.repeat(m, n, axis=0)
+    cache = UsdGeom.XformCache()
+    out = np.empty((len(time_codes), 4, 4))
+    for i, t in enumerate(time_codes):
+        cache.SetTime(Usd.TimeCode(float(t)))
+        out[i] = np.asarray(cache.GetLocalToWorldTransform(prim), dtype=np.float64).T
+    if np.allclose(out, np.eye(4), rtol=0, atol=1e-12):
+        return None
+    return out
+
+
+def fold_into_roots(parents: np.ndarray, world: np.ndarray, translations: np.ndarray, rotations: np.ndarray,
+                    scales: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pre-multiply the root joints' local transforms by ``world`` at each frame.
+
+    Parameters
+    ----------
+    parents : (J,) int
+        -1 marks a root.
+    world : (T, 4, 4) float
+        Column-vector transform per frame (the inverse of a prim's local-to-world
+        unfolds instead).
+    translations : (T, J, 3) float
+    rotations : (T, J, 4) float, xyzw
+    scales : (T, J, 3) float
+
+    Returns
+    -------
+    translations, rotations, scales
+        float64 copies with the roots changed; rotations keep the hemisphere of
+        ``q_world * q`` (``q_world`` with w >= 0), so curves stay continuous and folding
+        with a transform then unfolding with its inverse gives the same signs back. A world transform with shear
+        relative to a root (non-uniform scale under rotation) cannot be held by T, R, S
+        and is approximated by :func:`~usdhands.model.rotations.xform_to_trs`.
+    """
+    t = np.array(translations, dtype=np.float64)
+    q = np.array(rotations, dtype=np.float64)
+    s = np.array(scales, dtype=np.float64)
+    roots = np.flatnonzero(np.asarray(parents) < 0)
+    if not len(roots) or not len(t):
+        return t, q, s
+    world = np.asarray(world, dtype=np.float64)
+    m = world[:, None] @ trs_to_xform(t[:, roots], q[:, roots], s[:, roots])
+    nt, nq, ns = xform_to_trs(m)
+    qw = quat_canonical(xform_to_trs(world)[1])  # w >= 0: the inverse transform gives the conjugate
+    ref = quat_multiply(np.broadcast_to(qw[:, None], q[:, roots].shape), q[:, roots])
+    nq = np.where((np.sum(nq * ref, axis=-1) < 0)[..., None], -nq, nq)
+    t[:, roots], q[:, roots], s[:, roots] = nt, nq, ns
+    return t, q, s

@@ -20,10 +20,12 @@ from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatch
 from usdhands.formats.usd_common import (
     SOURCE_SKELETON_KEY,
     bound_animation_path,
+    fold_into_roots,
     matrices_to_numpy,
     open_stage,
     quiet_diagnostics,
     skeleton_tokens_and_names,
+    skeleton_world_xforms,
 )
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
@@ -89,6 +91,8 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
             anim_prims.append(prim)
 
     skeletons: list[Skeleton] = []
+    kept_prims: list[Usd.Prim] = []
+    worlds: list[np.ndarray | None] = []
     tokens_of: list[list[str]] = []
     clips: list[Clip] = []
     used_anims: set[str] = set()
@@ -96,11 +100,15 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
     for prim in skel_prims:
         skel = UsdSkel.Skeleton(prim)
         query = cache.GetSkelQuery(skel)
-        sk, tokens = read_skeleton(skel, query, path=path, meters_per_unit=mpu, up_axis=up)
+        world = skeleton_world_xforms(prim)
+        world = None if world is None else world[0]
+        sk, tokens = read_skeleton(skel, query, path=path, meters_per_unit=mpu, up_axis=up, world=world)
         if sk is None:
             continue
         index_of_skel[str(prim.GetPath())] = len(skeletons)
         skeletons.append(sk)
+        kept_prims.append(prim)
+        worlds.append(world)
         tokens_of.append(tokens)
         anim_query = query.GetAnimQuery() if query else None
         if not anim_query:
@@ -109,7 +117,7 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
             if anim_prim and anim_prim.IsA(UsdSkel.Animation):
                 anim_query = cache.GetAnimQuery(UsdSkel.Animation(anim_prim))
         if anim_query:
-            clips.append(_read_clip(anim_query, sk, tokens, tcps, fps, path))
+            clips.append(_read_clip(anim_query, sk, tokens, tcps, fps, path, prim if world is not None else None))
             used_anims.add(str(anim_query.GetPrim().GetPath()))
 
     # animations bound to no skeleton: attach each to the skeleton it names or fits
@@ -126,7 +134,8 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
             k = next((i for i, toks in enumerate(tokens_of) if joints and set(joints) <= set(toks)), None)
         if k is None:
             continue  # animates no skeleton of this file
-        clips.append(_read_clip(anim_query, skeletons[k], tokens_of[k], tcps, fps, path))
+        clips.append(_read_clip(anim_query, skeletons[k], tokens_of[k], tcps, fps, path,
+                                kept_prims[k] if worlds[k] is not None else None))
 
     meshes: list[SkinnedMesh] = []
     for root in roots:
@@ -136,16 +145,23 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
                 continue
             for sq in binding.GetSkinningTargets():
                 if sq.GetPrim().IsA(UsdGeom.Mesh):
-                    meshes.append(_read_mesh(sq, k, tokens_of[k], path))
+                    meshes.append(_read_mesh(sq, k, tokens_of[k], path, worlds[k]))
     return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes))
 
 
 def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_unit: float = 1.0,
-                  up_axis: str = "Y") -> tuple[Skeleton | None, list[str]]:
+                  up_axis: str = "Y", world: np.ndarray | None = None) -> tuple[Skeleton | None, list[str]]:
     """The model Skeleton of a Skeleton prim and its joint tokens (None for no joints).
 
     Rest transforms come from ``restTransforms``, or are derived from
     ``bindTransforms`` (``local = bind[parent]^-1 · bind[joint]``) where those are missing.
+
+    Parameters
+    ----------
+    world : (4, 4) float, optional
+        The Skeleton prim's local-to-world transform (column vectors), folded into the
+        root joints' rest transforms and into every bind transform, so that the model
+        skeleton is in stage (world) space. None leaves the joints in skeleton space.
 
     Raises
     ------
@@ -180,8 +196,12 @@ def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_u
     rest = None if rest is None or len(rest) == 0 else rest
     if rest is not None and len(rest) != J:
         raise JointMismatchError(f"restTransforms has {len(rest)} entries for {J} joints", path=path, location=where)
+    if world is not None and bind_np is not None:
+        bind_np = np.asarray(world, dtype=np.float64) @ bind_np
     if rest is not None:
         local = matrices_to_numpy(rest)
+        if world is not None:
+            local[parents < 0] = np.asarray(world, dtype=np.float64) @ local[parents < 0]
     elif bind_np is not None:
         local = np.empty_like(bind_np)
         for j, p in enumerate(parents):
@@ -255,7 +275,9 @@ def _check_authored_rotations(prim: Usd.Prim, joints: list[str], path: Path, whe
 
 
 def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: float | None,
-               path: Path) -> Clip:
+               path: Path, skel_prim: Usd.Prim | None = None) -> Clip:
+    """The Clip of an animation; with ``skel_prim``, its local-to-world transform at each
+    frame is folded into the root joints (as :func:`read_skeleton` does for the rest)."""
     prim = anim_query.GetPrim()
     where = str(prim.GetPath())
     joints = [str(t) for t in anim_query.GetJointOrder()]
@@ -322,6 +344,10 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
     rot = full("rotations", r_k, sk.rest_rotations)
     tr = full("translations", t_k, sk.rest_translations)
     sc = full("scales", s_k, sk.rest_scales)
+    if skel_prim is not None and T:
+        world = skeleton_world_xforms(skel_prim, None if len(times) == 0 else times)
+        if world is not None:
+            tr, rot, sc = fold_into_roots(sk.parents, world, tr, rot, sc)
     return Clip(sk, rate if len(times) else float(fps or tcps), rot, tr, sc, name=where, start_time=start)
 
 
@@ -368,7 +394,7 @@ def _uv_primvar(api: UsdGeom.PrimvarsAPI) -> UsdGeom.Primvar | None:
     return None
 
 
-def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path) -> SkinnedMesh:
+def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.ndarray | None = None) -> SkinnedMesh:
     prim = sq.GetPrim()
     where = str(prim.GetPath())
     mesh = UsdGeom.Mesh(prim)
@@ -415,6 +441,8 @@ def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path) -> SkinnedMes
         joint_indices, joint_weights = idx, w
     gbt = sq.GetGeomBindTransform(early)
     geom_bind = matrices_to_numpy([gbt if gbt is not None else Gf.Matrix4d(1)])[0]
+    if world is not None:  # the skeleton's local-to-world, folded into its joints and binds too
+        geom_bind = world @ geom_bind
 
     api = UsdGeom.PrimvarsAPI(prim)
     normals = _flattened(api.GetPrimvar("normals"), V, counts, where, path)

@@ -19,11 +19,13 @@ from usdhands.formats.usd_common import (
     SOURCE_JOINT_NAMES_KEY,
     SOURCE_SKELETON_KEY,
     bound_animation_path,
+    fold_into_roots,
     joint_tokens_for,
     numpy_to_matrices,
     open_stage,
     quiet_diagnostics,
     skeleton_tokens_and_names,
+    skeleton_world_xforms,
     unique_name,
     valid_identifier,
 )
@@ -490,6 +492,14 @@ def _put_clip(stage: Usd.Stage, clip: Clip, animation: str | None, source: Path,
         raise JointMismatchError(f"the clip lacks {len(lacking)} joint(s) the animation has: "
                                  f"{', '.join(repr(m) for m in lacking[:8])}", path=source,
                                  location=str(anim_prim.GetPath()))
+    tcps = float(stage.GetTimeCodesPerSecond())
+    codes = frame_time_codes(clip, tcps)
+    world = skeleton_world_xforms(skel_prim, codes)
+    if world is not None and clip.num_frames:
+        # the reader folds the Skeleton prim's local-to-world into the roots: unfold it
+        t, q, sc = fold_into_roots(clip.skeleton.parents, np.linalg.inv(world), clip.translations, clip.rotations,
+                                   clip.scales)
+        clip = clip.replace(translations=t, rotations=q, scales=sc)
     new_tokens = list(anim_tokens)
     have = set(anim_tokens)
     for i, t in enumerate(tokens):
@@ -498,7 +508,5 @@ def _put_clip(stage: Usd.Stage, clip: Clip, animation: str | None, source: Path,
         if _differs_from_rest(clip, usd_sk, clip_index[names[i]], i):
             new_tokens.append(t)
     cols = [clip_index[names[token_to_skel[t]]] for t in new_tokens]
-    tcps = float(stage.GetTimeCodesPerSecond())
-    codes = frame_time_codes(clip, tcps)
     author_animation(UsdSkel.Animation(anim_prim), clip, cols, new_tokens, codes, only_changed=only_changed)
     return codes, skel_prim, anim_prim
