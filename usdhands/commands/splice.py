@@ -132,6 +132,9 @@ def run(args) -> int:
     if args.blend < 0:
         raise UsdHandsError(f"bad --blend {args.blend}: expected a number of frames >= 0")
     check_output_path(args.output, args.body, args.hands)
+    opts = {"as_layer": True} if args.layer else {}
+    if args.layer and args.output.suffix.lower() not in (".usd", ".usda", ".usdc"):
+        raise UsdHandsError("--layer needs a USD output (.usd, .usda, .usdc)", path=args.output)
     body = read_clip(args.body, animation=args.animation)
     hands = read_clip(args.hands, animation=args.hands_animation)
     n, m0, hand_fps = body.num_frames, hands.num_frames, hands.fps
@@ -181,9 +184,6 @@ def run(args) -> int:
                               constraints=constraints, options=options, progress=progress)
     except ValueError as e:  # a band without a path and the like: the user's numbers
         raise UsdHandsError(str(e)) from None
-    opts = {"as_layer": True} if args.layer else {}
-    if args.layer and args.output.suffix.lower() not in (".usd", ".usda", ".usdc"):
-        raise UsdHandsError("--layer needs a USD output (.usd, .usda, .usdc)", path=args.output)
     write_clip(args.body, result.clip, args.output, **opts)
 
     for s in sides:
