@@ -164,3 +164,63 @@ def test_exit_status_from_the_installed_command(tmp_path):
     assert out.returncode == 2
     assert out.stderr.strip() == f"usdhands: error: {tmp_path / 'missing.usda'}: no such file"
     assert "Traceback" not in out.stderr
+
+
+def gltf_with_bad_rotation(tmp_path: Path, value, name: str) -> Path:
+    """A 2-joint glTF (data-URI buffer) whose second joint's rotation key 2 is ``value``."""
+    import base64
+    import json
+
+    import numpy as np
+
+    from usdhands.formats.io import write_asset
+    from usdhands.model import Clip, Skeleton
+    from usdhands.model.asset import Asset
+
+    sk = Skeleton(["Hips", "Hand"], [-1, 0], [[0, 0, 0], [0, 1, 0]], np.tile([0, 0, 0, 1.0], (2, 1)))
+    q = np.random.default_rng(0).normal(size=(4, 2, 4))
+    good = write_asset(Asset("mem", (sk,), (Clip(sk, 30, q / np.linalg.norm(q, axis=-1, keepdims=True),
+                                                 name="A"),)), tmp_path / "good.gltf")
+    d = json.loads(good.read_text())
+    good.unlink()
+    head, data = d["buffers"][0]["uri"].split(",", 1)
+    buf = bytearray(base64.b64decode(data))
+    channel = next(c for c in d["animations"][0]["channels"] if c["target"] == {"node": 1, "path": "rotation"})
+    acc = d["accessors"][d["animations"][0]["samplers"][channel["sampler"]]["output"]]
+    start = d["bufferViews"][acc["bufferView"]].get("byteOffset", 0) + acc.get("byteOffset", 0) + 2 * 16
+    buf[start:start + 16] = np.asarray(value, dtype="<f4").tobytes()
+    d["buffers"][0]["uri"] = head + "," + base64.b64encode(bytes(buf)).decode()
+    bad = tmp_path / name
+    bad.write_text(json.dumps(d))
+    return bad
+
+
+def test_gltf_nan_quaternion(tmp_path, capsys):
+    bad = gltf_with_bad_rotation(tmp_path, [float("nan"), 0, 0, 1], "nan.gltf")
+    check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.usda"],
+                f"{bad}: animation 'A' has NaN or infinite rotations (joint 'Hand', frame 2)", [bad])
+
+
+def test_gltf_zero_length_quaternion(tmp_path, capsys):
+    bad = gltf_with_bad_rotation(tmp_path, [0, 0, 0, 0], "zero.gltf")
+    check_error(capsys, tmp_path, ["inspect", bad],
+                f"{bad}: animation 'A' has a zero-length quaternion (joint 'Hand', frame 2)", [bad])
+
+
+def test_failing_write_leaves_nothing_behind(shared_assets, tmp_path):
+    """An error raised while the output is being written removes the temporary file."""
+    import pytest
+
+    from usdhands.errors import JointMismatchError
+    from usdhands.formats.io import read_clip, write_clip
+
+    src = leap_copy(shared_assets, tmp_path)
+    clip = read_clip(src)
+    sub = clip.skeleton.subset([clip.skeleton.index(n) for n in ("rForeArm", "rHand")])
+    partial = clip.replace(skeleton=sub, rotations=clip.rotations[:, :2], translations=clip.translations[:, :2],
+                           scales=clip.scales[:, :2])
+    before = sha(src)
+    with pytest.raises(JointMismatchError, match=r"the clip has no joint\(s\) rThumb1"):
+        write_clip(src, partial, tmp_path / "out.bvh")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.bvh"]
+    assert sha(src) == before
