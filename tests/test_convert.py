@@ -40,6 +40,11 @@ def test_gltf_usd_gltf_round_trip_keeps_motion_and_meshes(shared_assets, tmp_pat
     assert gltf_validator(back)[0]["numErrors"] == 0
     a, b = read_asset(src), read_asset(back)
     assert [c.name for c in b.clips] == [c.name for c in a.clips]
+    sa, sb = a.skeletons[0], b.skeletons[0]
+    idx = [sb.index(n) for n in sa.joint_names]
+    scale = np.abs(sa.bind_xforms[:, :3, 3]).max()
+    np.testing.assert_allclose(sb.bind_xforms[idx], sa.bind_xforms, atol=1e-6 * scale)  # inverse bind matrices
+    np.testing.assert_allclose(sb.rest_translations[idx], sa.rest_translations, atol=1e-6 * scale)
     for ca, cb in zip(a.clips, b.clips):
         assert_same_motion(ca, cb)
     assert len(b.meshes) == len(a.meshes) == 4
@@ -53,6 +58,7 @@ def test_gltf_usd_gltf_round_trip_keeps_motion_and_meshes(shared_assets, tmp_pat
         names_b = np.array(b.skeletons[0].joint_names)[mb.joint_indices]
         assert (names_a == names_b)[ma.joint_weights > 0].all()
         np.testing.assert_allclose(mb.joint_weights, ma.joint_weights, atol=1e-6)
+        np.testing.assert_allclose(mb.geom_bind_xform, ma.geom_bind_xform, atol=1e-9)
 
 
 def test_one_animation_by_name(shared_assets, tmp_path, capsys):
