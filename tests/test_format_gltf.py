@@ -227,6 +227,8 @@ def test_fps_option_and_detected_rates(tmp_path):
     for rate in (24, 30, 60, 40, 120):
         assert detect_fps((np.arange(50) / rate).astype(np.float32)) == rate
     assert detect_fps(np.arange(20) / 29.97) == 29.97            # regular spacing outside the list
+    # float32 keys every 0.027 s (a Leap BVH's frame time): exactly 1/0.027, so BVH -> glTF keeps the rate
+    assert detect_fps((np.arange(317) * 0.027).astype(np.float32)) == 1 / 0.027
     assert detect_fps(np.array([0, 1, 3, 10, 11]) / 24) == 24.0  # keyframes on a 24 fps grid
     assert detect_fps(np.array([0, 4, 12]) / 24) == 30.0         # sparse keys (every 1/6 s) fit 30 fps
     assert detect_fps([0.0, 1.0, 2.0]) == 30.0

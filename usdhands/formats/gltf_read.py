@@ -299,7 +299,9 @@ def detect_fps(times: np.ndarray) -> float:
 
     1. Keys on a regular grid of step ``d`` (the smallest key interval) with
        ``1/d >= 12``: sampled animation, read at ``1/d`` (snapped to a rate of
-       :data:`COMMON_FPS` within 0.01%, so float32 keys every 1/24 s give 24).
+       :data:`COMMON_FPS` within 0.01%, so float32 keys every 1/24 s give 24; else
+       to the inverse of a frame time of at most 6 decimals within 1e-6, so keys
+       every 0.027 s give 1/0.027; else to 7 significant digits).
     2. Otherwise (sparse or irregular keys) the first rate of :data:`COMMON_FPS`
        (30 first) whose frames fall on every key.
     3. Otherwise :data:`DEFAULT_FPS`.
@@ -324,7 +326,11 @@ def detect_fps(times: np.ndarray) -> float:
             for f in COMMON_FPS:
                 if abs(rate - f) < 1e-4 * f:
                     return f
-            return round(rate, 3)
+            # a frame time with at most 6 decimals (BVH "Frame Time: 0.027000"): its exact inverse
+            frame_time = round(1.0 / rate, 6)
+            if frame_time > 0 and abs(frame_time * rate - 1.0) < 1e-6:
+                return 1.0 / frame_time
+            return float(f"{rate:.7g}")
     for f in COMMON_FPS:
         x = rel * f
         if np.all(np.abs(x - np.round(x)) < 0.01):
