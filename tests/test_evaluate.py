@@ -149,3 +149,34 @@ def test_synthesize_needs_finger_joints(capsys, tmp_path):
     assert err.startswith(f"usdhands: error: {src}: no hand found in skeleton 'nofingers'; looked for finger joints")
     assert err.rstrip().endswith("saw 8 joints: Hips, Spine, LeftArm, LeftForeArm, LeftHand, RightArm, RightForeArm, RightHand")
     assert not (tmp_path / "o.bvh").exists()
+
+
+def test_synthesize_grafts_hands_onto_a_skeleton_without_fingers(gesture_files, capsys, tmp_path):
+    from synthesis_data import tiny_skeleton
+
+    folder, paths = gesture_files
+    db_path = tmp_path / "db"
+    assert _run(capsys, "db", "build", *paths, "-o", db_path, "--labels", r"^([a-z]+)_")[0] == 0
+    full = read_clip(paths[0])
+    sk = tiny_skeleton()
+    keep = [j for j, n in enumerate(sk.short_names) if "Hand" not in n or n.endswith("Hand")]
+    sub = full.skeleton.subset(keep)
+    body = full.replace(skeleton=sub, rotations=full.rotations[:, keep], translations=full.translations[:, keep],
+                        scales=full.scales[:, keep])
+    src = tmp_path / "bare.bvh"
+    write_asset(Asset("memory", [sub], [body], []), src)
+    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "o.bvh", "--db", db_path)
+    assert status == 2 and "no hand found" in err
+    status, out, err = _run(capsys, "synthesize", src, "-o", tmp_path / "o.bvh", "--db", db_path, "--graft-hands")
+    assert status == 0, err
+    assert "grafted 30 finger joints from the database's hands" in out
+    back = read_clip(tmp_path / "o.bvh")
+    from usdhands.model.hand_detection import detect_hands
+    from usdhands.model.rotations import quat_angle_deg
+
+    hm = detect_hands(back.skeleton)
+    assert [len(h.finger_joints) for h in hm.sides] == [15, 15]
+    idx = [back.skeleton.index(n) for n in sub.short_names]
+    assert quat_angle_deg(back.rotations[:, idx], body.rotations).max() < 1e-3
+    fj = [back.skeleton.index(j) for j in hm.left.finger_joints]
+    assert np.ptp(back.rotations[:, fj], axis=0).max() > 0.05  # the grafted fingers move

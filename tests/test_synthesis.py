@@ -428,3 +428,44 @@ def test_handmap_without_fingers_gives_no_database():
     hm = HandMap(left=HandSide("left", "LeftHand"))
     with pytest.raises(ValueError, match="No clip has a hand with finger joints"):
         build_database([DatabaseClip(gesture_set(1)[0][1], hm)])
+
+
+# -- grafting hands --------------------------------------------------------------------
+
+def _fingerless(sk):
+    keep = [j for j, n in enumerate(sk.short_names) if "Hand" not in n or n.endswith("Hand")]
+    return sk.subset(keep)
+
+
+def test_grafted_hand_rebuilds_the_database_hand_on_the_same_rig():
+    from usdhands.algorithms.hand_graft import find_wrists, graft_hands, hand_template, mirror_template
+
+    sk, hm = tiny_skeleton(), tiny_handmap()
+    bare = _fingerless(sk)
+    assert {s: bare.short_names[j] for s, j in find_wrists(bare).items()} == {"left": "LeftHand", "right": "RightHand"}
+    clip = Clip(bare, 30, np.broadcast_to(bare.rest_rotations, (5, bare.num_joints, 4)))
+    templates = {"left": hand_template(sk, hm.left), "right": mirror_template(hand_template(sk, hm.left))}
+    wrists = {s: HandSide(s, f"{s.capitalize()}Hand", f"{s.capitalize()}ForeArm", f"{s.capitalize()}Arm", "Hips")
+              for s in ("left", "right")}
+    out, grafted, added = graft_hands(clip, wrists, templates)
+    assert len(added) == 2 * 15 and out.num_joints == bare.num_joints + 30
+    assert np.array_equal(out.rotations[:, :bare.num_joints], clip.rotations)
+    want = sk.rest_world_positions()
+    got = out.skeleton.rest_world_positions()
+    for side in ("left", "right"):
+        for f in ("thumb", "index", "pinky"):
+            for a, b in zip(hm[side].fingers[f], grafted[side].fingers[f]):
+                assert np.allclose(got[out.skeleton.index(b)], want[sk.index(a)], atol=1e-6), (side, a)
+    # twice the body size: a hand twice as far from the wrist
+    big = _fingerless(tiny_skeleton(body_scale=2.0))
+    clip2 = Clip(big, 30, np.broadcast_to(big.rest_rotations, (5, big.num_joints, 4)))
+    out2, g2, _ = graft_hands(clip2, {"left": wrists["left"]}, templates)
+    p2 = out2.skeleton.rest_world_positions()
+    tip, wrist = out2.skeleton.index(g2.left.fingers["index"][-1]), out2.skeleton.index("LeftHand")
+    assert np.linalg.norm(p2[tip] - p2[wrist]) == pytest.approx(2 * np.linalg.norm(want[sk.index("LeftHandIndex3")] - want[sk.index("LeftHand")]))
+
+
+def test_database_keeps_hand_templates(small_db):
+    assert set(small_db.hands) == {"left", "right"}
+    slots = [j["slot"] for j in small_db.hands["left"]["joints"]]
+    assert slots[:3] == ["thumb.d2", "thumb.d1", "thumb.d0"] and len(slots) == 15

@@ -102,6 +102,8 @@ def test_bundled_database_holds_the_generated_gesture_set(gestures):
     assert all(c["source"] == f"samples:gestures/{c['name']}" for c in db.clips)
     assert len(db.tracks) == 2 * len(items) and set(db.tracks[:, 3]) == {0, 1}
     assert len(db.dof_index) == 45  # 5 fingers x 3 joints x 3 axes
+    assert set(db.hands) == {"left", "right"}  # hand templates for --graft-hands
+    assert len(db.hands["left"]["joints"]) == 20  # 15 finger joints and 5 end joints
     assert sum(f.stat().st_size for f in bundled_database_path().iterdir()) < 5e6
 
 

@@ -82,6 +82,9 @@ class FingerDatabase:
         ``{"name", "source", "animation", "label"}``.
     segmentation : dict
         The segmentation parameters used.
+    hands : dict
+        Per side, the rest geometry of a hand of the database
+        (:func:`usdhands.algorithms.hand_graft.hand_template`), for grafting.
     path : Path or None
     """
 
@@ -94,6 +97,7 @@ class FingerDatabase:
     segments: np.ndarray
     clips: list
     segmentation: dict = field(default_factory=dict)
+    hands: dict = field(default_factory=dict)
     path: Path | None = None
 
     @property
@@ -144,6 +148,7 @@ class FingerDatabase:
             "clips": [dict(c) for c in self.clips],
             "labels": self.labels,
             "segmentation": dict(self.segmentation),
+            "hands": dict(self.hands),
             "counts": {"frames": self.num_frames, "tracks": int(len(self.tracks)),
                        "segments": int(len(self.segments)), "clips": len(self.clips)},
             "arrays": {name: {"file": f"{name}.npy", "shape": list(getattr(self, name).shape),
@@ -178,8 +183,11 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
         No clip has a hand with fingers.
     """
     seg_cfg = segmentation or SegmentationConfig()
+    from usdhands.algorithms.hand_graft import hand_template, mirror_template
+
     prepared = []  # (clip index, side, features unscaled (T,6) pos in cm, curves, reach, rig mask)
     clips_meta = []
+    hands: dict = {}
     for ci, item in enumerate(items):
         clip = item.clip.resample(fps) if abs(item.clip.fps - fps) > 1e-9 else item.clip
         clips_meta.append({"name": clip.name, "source": str(item.source), "animation": clip.name,
@@ -192,10 +200,16 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
             feats = wrist_features(clip, hand, 1.0, world)
             curves = canonical_curves(clip, rig)
             prepared.append((ci, SIDES.index(hand.side), feats, curves, reach_cm(clip.skeleton, hand), rig.present))
+            if hand.side not in hands:
+                hands[hand.side] = hand_template(clip.skeleton, hand)
         if progress:
             progress(ci + 1, len(items), clip.name)
     if not prepared:
         raise ValueError("No clip has a hand with finger joints; nothing to put in the database")
+    if mirror:
+        for side, other in (("left", "right"), ("right", "left")):
+            if side not in hands and other in hands:
+                hands[side] = mirror_template(hands[other])
     ref_reach = float(np.median([p[4] for p in prepared]))
     present = np.logical_and.reduce([p[5] for p in prepared])
     dof_index = np.nonzero(np.repeat(present, 3))[0]
@@ -227,6 +241,7 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
         segments=np.array(segments, dtype=np.int64).reshape(-1, 3),
         clips=clips_meta,
         segmentation={k: float(v) for k, v in vars(seg_cfg).items()},
+        hands=hands,
     )
 
 
@@ -330,5 +345,5 @@ def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
         fps=float(manifest["fps"]), reach_cm=float(manifest["reach_cm"]),
         features=arrays["features"], fingers=arrays["fingers"], dof_index=dof_index,
         tracks=np.asarray(tr), segments=np.asarray(sg), clips=manifest["clips"],
-        segmentation=manifest.get("segmentation", {}), path=path,
+        segmentation=manifest.get("segmentation", {}), hands=manifest.get("hands", {}), path=path,
     )

@@ -27,6 +27,9 @@ def register(sub) -> None:
     p.add_argument("--handmap", type=Path, default=None, help="hand map JSON overriding detection")
     p.add_argument("--animation", default=None, help="animation name or index in the file (default the first)")
     p.add_argument("--layer", action="store_true", help="USD: write a sparse override layer on top of the input")
+    p.add_argument("--graft-hands", action="store_true",
+                   help="add finger joints from the database's hand to a skeleton without them (skeleton-only "
+                        "files: BVH, USD without skinned meshes); the output is a new file with the new joints")
     p.add_argument("--plot", type=Path, default=None, metavar="DIR",
                    help="write PNGs: wrist speed with segments, the graph with the chosen path, finger curves")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -40,8 +43,10 @@ def run(args) -> int:
     from usdhands.algorithms.synthesis import synthesize_clip
     from usdhands.commands._common import parse_list
     from usdhands.commands._synthesis_common import bundled_database_path, handmap_for, load_config
-    from usdhands.formats.io import read_clip, write_clip
-    from usdhands.model.handmap import SIDES
+    from usdhands.errors import NoHandsError
+    from usdhands.formats.io import read_asset, write_asset, write_clip
+    from usdhands.model.asset import Asset
+    from usdhands.model.handmap import SIDES, HandMap
 
     cfg = load_config(args.config)
     if args.k is not None:
@@ -51,14 +56,29 @@ def run(args) -> int:
     progress = Progress("synthesize")
     progress(0, 4, "reading")
     db = load_database(args.db or bundled_database_path())
-    clip = read_clip(args.file, animation=args.animation)
-    handmap = handmap_for(clip, args.file, args.handmap)
+    asset = read_asset(args.file)
+    try:
+        clip = asset.clip(args.animation)
+    except KeyError as e:
+        raise UsdHandsError(str(e.args[0]).split(": ", 1)[-1], path=args.file) from None
     wanted = parse_list(args.hands, SIDES) or list(SIDES)
+    try:
+        handmap = handmap_for(clip, args.file, args.handmap)
+    except NoHandsError:
+        if not args.graft_hands:
+            raise
+        handmap = HandMap()
     with_fingers = [s for s in wanted if handmap[s] is not None and handmap[s].finger_joints]
+    added = []
+    if args.graft_hands and len(with_fingers) < len(wanted):
+        clip, handmap, added = _graft(args, asset, clip, handmap, db, [s for s in wanted if s not in with_fingers],
+                                      explicit=bool(args.hands))
+        with_fingers = [s for s in wanted if handmap[s] is not None and handmap[s].finger_joints]
     if not with_fingers:
         found = ", ".join(f"{h.side} (wrist {h.wrist})" for h in handmap.sides) or "none"
         raise UsdHandsError(f"the skeleton has no finger joints on the {' or '.join(wanted)} hand "
-                            f"(hands found: {found}); synthesis needs a rig with finger joints", path=args.file)
+                            f"(hands found: {found}); synthesis needs a rig with finger joints "
+                            f"(or --graft-hands on a skeleton-only file)", path=args.file)
     if args.hands:
         missing = [s for s in wanted if s not in with_fingers]
         if missing:
@@ -70,9 +90,14 @@ def run(args) -> int:
     progress(1, 4, "synthesizing")
     result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers))
     progress(2, 4, "writing")
-    options = {"as_layer": True} if args.layer else {}
-    out = write_clip(args.file, result.clip, args.output, **options)
+    if added:
+        out = write_asset(Asset(str(args.file), (result.clip.skeleton,), (result.clip,), ()), args.output,
+                          inputs=(args.file,))
+    else:
+        options = {"as_layer": True} if args.layer else {}
+        out = write_clip(args.file, result.clip, args.output, **options)
     report = _report(result, db, cfg)
+    report["grafted_joints"] = added
     report["output"] = str(out)
     if args.plot is not None:
         report["plots"] = [str(p) for p in _plots(args.plot, clip, result, db, cfg)]
@@ -90,10 +115,51 @@ def run(args) -> int:
             print(f"{side}: no database counterpart, left as they were: {', '.join(m['no_source'])}")
         if m["dropped"]:
             print(f"{side}: database slots with no joint in this rig: {', '.join(m['dropped'])}")
+    if added:
+        print(f"grafted {len(added)} finger joints from the database's hands")
     for p in report.get("plots", []):
         print(f"wrote {p}")
     print(f"wrote {out}")
     return 0
+
+
+def _graft(args, asset, clip, handmap, db, sides, explicit):
+    """Add finger joints for ``sides`` (those with a wrist) from the database's hand templates."""
+    from usdhands.algorithms.hand_graft import find_wrists, graft_hands
+    from usdhands.model.handmap import HandMap, HandSide
+
+    if asset.meshes:
+        raise UsdHandsError("--graft-hands works on skeleton-only files (BVH, USD without skinned meshes): "
+                            "this file has skinned meshes, which would need new skin weights", path=args.file)
+    sk = clip.skeleton
+    wrists = find_wrists(sk)
+    todo = {}
+    for side in sides:
+        if handmap[side] is not None:
+            h = handmap[side]
+        elif side in wrists:
+            w = wrists[side]
+            chain = sk.chain_to_root(w)
+            name = lambda i: sk.joint_names[chain[i]] if i < len(chain) else None  # noqa: E731
+            h = HandSide(side, name(0), name(1), name(2), sk.joint_names[chain[-1]])
+        elif explicit:
+            raise UsdHandsError(f"--graft-hands: no {side} wrist joint found (looked for names with hand or wrist "
+                                f"and a side: LeftHand, hand_l, Wrist.R, ...)", path=args.file)
+        else:
+            continue
+        if side not in db.hands:
+            raise UsdHandsError(f"the database holds no {side} hand geometry to graft (rebuild it with this "
+                                f"version of usdhands, or with --mirror)", path=db.path)
+        todo[side] = h
+    if not todo:
+        raise UsdHandsError("--graft-hands: no wrist joint found (looked for names with hand or wrist and a side: "
+                            "LeftHand, hand_l, Wrist.R, ...); give --handmap", path=args.file)
+    clip, grafted, added = graft_hands(clip, todo, db.hands)
+    merged = {s: grafted[s] if s in todo else handmap[s] for s in SIDES_}
+    return clip, HandMap(**merged), added
+
+
+SIDES_ = ("left", "right")
 
 
 def _report(result, db, cfg) -> dict:
