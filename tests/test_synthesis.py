@@ -50,6 +50,9 @@ def test_config_file_round_trip_and_errors(tmp_path):
     p.write_text(json.dumps({"segment_cost": {"kk": 3}}))
     with pytest.raises(ConfigError, match=r"c\.json: invalid synthesis configuration at segment_cost: Additional properties are not allowed \('kk' was unexpected\)"):
         load_synthesis_config(p)
+    p.write_text(json.dumps({"segment_cost": {"lower_bound": "lb"}}))
+    with pytest.raises(ConfigError, match=r"at segment_cost/lower_bound: 'lb' is not one of \['kim', 'keogh', 'none'\]"):
+        load_synthesis_config(p)
     p.write_text(json.dumps({"stitching": {"blend_max_deg": -1}}))
     with pytest.raises(ConfigError, match="at stitching/blend_max_deg: -1 is less than the minimum of 0"):
         load_synthesis_config(p)

@@ -188,7 +188,8 @@ def leave_one_out(es: EvalSet, predictor: str, k: int = 5, config: SynthesisConf
         if not len(idx):
             continue
         res = knn_segments(fw, es.segments[idx], fw, es.segments[idx], k=k, length_factor=sc.length_factor,
-                           band=sc.dtw_band, query_groups=es.seg_clip[idx], db_groups=es.seg_clip[idx])
+                           band=sc.dtw_band, query_groups=es.seg_clip[idx], db_groups=es.seg_clip[idx],
+                           bound=sc.lower_bound)
         neighbours[idx] = np.where(res.index >= 0, idx[np.maximum(res.index, 0)], -1)
     found = neighbours >= 0
     same = found & (es.seg_label[np.maximum(neighbours, 0)] == es.seg_label[:, None])

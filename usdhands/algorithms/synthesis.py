@@ -164,7 +164,8 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     speed = wrist_speed(feats[:, :3], db.fps, cfg.segmentation.speed_smoothing_s)
     qb = np.stack([bounds[:-1], bounds[1:]], axis=1)
     dsegs = db.segments[seg_idx, :2]
-    res = knn_segments(qw, qb, dw, dsegs, k=sc.k, length_factor=sc.length_factor, band=sc.dtw_band)
+    res = knn_segments(qw, qb, dw, dsegs, k=sc.k, length_factor=sc.length_factor, band=sc.dtw_band,
+                       bound=sc.lower_bound)
     cand_local = res.index.copy()
     costs = res.cost.copy()
     missing = np.nonzero(cand_local[:, 0] < 0)[0]

@@ -46,6 +46,11 @@ class SegmentCostConfig:
     length_factor: float = 1.5
     dtw_band: float = 0.3
     k: int = 5
+    lower_bound: str = "kim"
+
+    def __post_init__(self) -> None:
+        if self.lower_bound not in ("kim", "keogh", "none"):
+            raise ValueError(f"Expected lower_bound 'kim', 'keogh' or 'none', got {self.lower_bound!r}")
 
 
 @dataclass(frozen=True)
