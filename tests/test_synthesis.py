@@ -472,3 +472,26 @@ def test_database_keeps_hand_templates(small_db):
     assert set(small_db.hands) == {"left", "right"}
     slots = [j["slot"] for j in small_db.hands["left"]["joints"]]
     assert slots[:3] == ["thumb.d2", "thumb.d1", "thumb.d0"] and len(slots) == 15
+
+
+def test_z_up_character_has_the_same_features_as_its_y_up_twin():
+    from usdhands.model.rotations import matrix_to_quat
+
+    sk, hm = tiny_skeleton(), tiny_handmap()
+    clip = gesture_clip(sk, "wipe", np.random.default_rng(4))
+    V = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # Y-up -> Z-up, +90 deg about X
+    qv = matrix_to_quat(V)
+    rest_q = np.array(sk.rest_rotations)
+    rest_t = np.array(sk.rest_translations)
+    rest_q[0] = quat_multiply(qv, rest_q[0])
+    rest_t[0] = V @ rest_t[0]
+    zsk = Skeleton(sk.joint_names, sk.parents, rest_t, rest_q, meters_per_unit=sk.meters_per_unit, up_axis="Z")
+    rot, tr = np.array(clip.rotations), np.array(clip.translations)
+    rot[:, 0] = quat_multiply(qv[None], rot[:, 0])
+    tr[:, 0] = tr[:, 0] @ V.T
+    zclip = Clip(zsk, clip.fps, rot, tr)
+    assert np.allclose(zclip.world_positions()[:, 5], clip.world_positions()[:, 5] @ V.T)
+    for side in ("left", "right"):
+        assert np.allclose(wrist_features(zclip, hm[side]), wrist_features(clip, hm[side]), atol=1e-6)
+    f, fz = arm_features(clip, hm.left), arm_features(zclip, hm.left)
+    assert all(np.allclose(f[k], fz[k], atol=1e-6) for k in f)
