@@ -531,3 +531,38 @@ def test_glb_header_is_written_consistently(tmp_path):
     raw = out.read_bytes()
     magic, version, length = struct.unpack_from("<4sII", raw)
     assert (magic, version, length) == (b"glTF", 2, len(raw)) and length % 4 == 0
+
+
+def test_write_clip_keeps_extensions_materials_extras_and_other_animations(tmp_path, gltf_validator):
+    src = build_test_gltf(tmp_path, "embedded")
+    d = json.loads(src.read_text())
+    d["extensionsUsed"] = ["KHR_materials_emissive_strength", "KHR_texture_transform"]
+    d["materials"] = [{"name": "skin", "emissiveFactor": [1, 0.5, 0],
+                       "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 3.0}},
+                       "extras": {"studio": "kept"}}]
+    d["meshes"][0]["primitives"][0]["material"] = 0
+    d["nodes"][0]["extras"] = {"rig": "v2"}
+    d["asset"]["extras"] = {"note": "from a DCC"}
+    other = json.loads(json.dumps(d["animations"][0]))
+    other["name"] = "Other"
+    d["animations"].append(other)
+    src.write_text(json.dumps(d))
+    clip = read_clip(src, animation="Anim")
+    hand = clip.skeleton.index("hand")
+    bent = clip.with_joint_rotations([hand], np.tile(qz(40), (clip.num_frames, 1, 1)))
+    out = write_clip(src, bent, tmp_path / "out.gltf", animation="Anim")
+    assert gltf_validator(out)[0]["numErrors"] == 0
+    e = json.loads(out.read_text())
+    for key in ("extensionsUsed", "scenes", "skins"):
+        assert e[key] == d[key], key
+    # pygltflib spells out the glTF defaults of a material; nothing else changes
+    defaults = {"alphaMode": "OPAQUE", "doubleSided": False, "alphaCutoff": 0.5}
+    assert {k: v for k, v in e["materials"][0].items() if defaults.get(k, object()) != v} == d["materials"][0]
+    assert e["asset"]["extras"] == {"note": "from a DCC"}
+    assert e["nodes"][0]["extras"] == {"rig": "v2"}
+    assert e["meshes"][0]["primitives"][0]["material"] == 0
+    assert [a["name"] for a in e["animations"]] == ["Anim", "Other"]
+    assert e["animations"][1] == d["animations"][1]  # the other animation, untouched
+    back = read_asset(out)
+    assert quat_angle_deg(back.clip("Anim").rotations[:, hand], qz(40)).max() < 1e-4
+    np.testing.assert_array_equal(back.clip("Other").rotations, read_asset(src).clip("Other").rotations)
