@@ -94,6 +94,13 @@ def test_z_up_usd_to_gltf_is_y_up(tmp_path, capsys):
     convert(capsys, src, out)
     head = read_asset(out).clips[0].world_positions()[0, 1]
     np.testing.assert_allclose(head, [0, 1.6, 0], atol=1e-6)
+    # to BVH: centimetres, +Y; to BVH in inches
+    convert(capsys, src, tmp_path / "yup.bvh")
+    np.testing.assert_allclose(read_asset(tmp_path / "yup.bvh").clips[0].world_positions()[0, 1], [0, 160, 0],
+                               atol=1e-5)
+    convert(capsys, src, tmp_path / "yup_in.bvh", "--bvh-units", "in")
+    np.testing.assert_allclose(read_asset(tmp_path / "yup_in.bvh", units="in").clips[0].world_positions()[0, 1],
+                               [0, 160 / 2.54, 0], atol=1e-5)
 
 
 def test_mesh_with_six_influences_survives_usd_and_gltf(tmp_path, capsys, gltf_validator):
