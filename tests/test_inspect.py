@@ -93,3 +93,29 @@ def test_commands_use_the_hand_map_a_usd_file_records_and_the_override(tmp_path,
     d = json.loads(json.dumps(detected.to_dict()))
     assert main(["inspect", "--json", str(marked), "--handmap", str(override)]) == 0
     assert json.loads(capsys.readouterr().out)["hands"] == d
+
+
+def test_file_with_two_skeletons_hands_per_skeleton(tmp_path, capsys):
+    """handmap --skeleton picks one; inspect reports hands per skeleton and the first found at the top."""
+    import numpy as np
+
+    from usdhands.formats.io import write_asset
+    from usdhands.model import Clip, Skeleton
+    from usdhands.model.asset import Asset
+    from usdhands.samples.humanoid import humanoid_skeleton
+
+    prop = Skeleton(["Lid", "Lid/Knob"], [-1, 0], [[0, 0, 0], [0, 1, 0]], np.tile([0, 0, 0, 1.0], (2, 1)), name="Prop")
+    body = humanoid_skeleton()
+    path = write_asset(Asset("mem", (prop, body), (Clip(prop, 30, np.tile(prop.rest_rotations, (2, 1, 1))),
+                                                   Clip(body, 30, np.tile(body.rest_rotations, (2, 1, 1))))),
+                       tmp_path / "two.usda")
+    assert main(["handmap", str(path)]) == 2  # the first skeleton has no hands
+    assert "no hand found in skeleton '/Root/PropRoot/Prop'" in capsys.readouterr().err
+    assert main(["handmap", str(path), "--skeleton", "1"]) == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert first.startswith(f"{path}: skeleton '/Root/") and "65 joints; hands detected" in first
+    d = inspect_json(capsys, path)
+    assert d["skeletons"][0]["hands"] == {"left": None, "right": None}
+    assert d["skeletons"][1]["hands"]["left"]["wrist"].endswith("/LeftHand")
+    assert d["hands"] == d["skeletons"][1]["hands"]
+    assert [a["skeleton"] for a in d["animations"]] == [0, 1]
