@@ -224,3 +224,21 @@ def test_failing_write_leaves_nothing_behind(shared_assets, tmp_path):
         write_clip(src, partial, tmp_path / "out.bvh")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.bvh"]
     assert sha(src) == before
+
+
+def test_animation_by_name_or_index_and_unknown_ones(shared_assets):
+    import pytest
+
+    from usdhands.errors import AssetReadError
+    from usdhands.formats.io import read_clip
+
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    assert read_clip(src).name == "Dance"  # the first by default
+    assert read_clip(src, animation="Wave").name == "Wave"
+    assert read_clip(src, animation=3).name == read_clip(src, animation="3").name == "Jump"
+    with pytest.raises(AssetReadError) as e:
+        read_clip(src, animation="Nope")
+    assert str(e.value).startswith(f"{src}: no animation named 'Nope'; there are 'Dance', 'Death', ")
+    with pytest.raises(AssetReadError) as e:
+        read_clip(src, animation=99)
+    assert str(e.value) == f"{src}: animation index 99 out of range 0..13"

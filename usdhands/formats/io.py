@@ -62,7 +62,7 @@ def read_clip(path: str | os.PathLike, *, animation: str | int | None = None,
     try:
         return asset.clip(animation)
     except KeyError as e:
-        raise AssetReadError(str(e.args[0]).split(": ", 1)[-1]) from None
+        raise AssetReadError(str(e.args[0]).split(": ", 1)[-1], path=path) from None
 
 
 def write_asset(asset: Asset, path: str | os.PathLike, *, inputs: tuple = (), **options) -> Path:
