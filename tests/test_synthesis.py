@@ -495,3 +495,10 @@ def test_z_up_character_has_the_same_features_as_its_y_up_twin():
         assert np.allclose(wrist_features(zclip, hm[side]), wrist_features(clip, hm[side]), atol=1e-6)
     f, fz = arm_features(clip, hm.left), arm_features(zclip, hm.left)
     assert all(np.allclose(f[k], fz[k], atol=1e-6) for k in f)
+
+
+def test_frame_rates_equal_up_to_file_rounding():
+    from usdhands.algorithms.finger_database import same_rate
+
+    assert same_rate(1 / 0.033333, 30.0)  # a BVH frame time of 0.033333 s
+    assert not same_rate(29.97, 30.0) and not same_rate(24.0, 30.0)

@@ -136,3 +136,23 @@ def test_bundled_database_on_robot_expressive(shared_assets, tmp_path, gltf_vali
 
     assert quat_angle_deg(back.rotations[:, fingers], res.clip.rotations[:, fingers]).max() < 0.01
     assert quat_angle_deg(back.rotations[:, body], clip.rotations[:, body]).max() < 0.01
+
+
+def test_finger_reference_input_undoes_a_zero_pose_that_is_not_the_bind_pose(gestures, gesture_db):
+    from usdhands.model import Skeleton
+
+    items, hm = gestures
+    clip = body_only(items[3][1])
+    sk = clip.skeleton
+    # what a BVH writer does with a rig that has rest rotations: same offsets, zero rotations
+    zero = Skeleton(sk.joint_names, sk.parents, sk.rest_translations, np.tile([0.0, 0, 0, 1], (sk.num_joints, 1)),
+                    meters_per_unit=sk.meters_per_unit, up_axis=sk.up_axis, name=sk.name)
+    zclip = clip.replace(skeleton=zero)
+    assert np.allclose(zclip.world_positions(), clip.world_positions())
+    a = synthesize_clip(clip, hm, gesture_db)
+    b = synthesize_clip(zclip, hm, gesture_db, finger_reference="input")
+    c = synthesize_clip(zclip, hm, gesture_db)
+    fingers = sorted(sk.index(j) for side in hm.sides for j in side.finger_joints)
+    pa, pb, pc = (r.clip.world_positions_cm()[:, fingers] for r in (a, b, c))
+    assert np.abs(pa - pb).max() < 1e-6
+    assert np.abs(pa - pc).max() > 1.0  # relative to the zero pose the thumbs point elsewhere

@@ -45,7 +45,7 @@ from usdhands.errors import ConfigError
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
 
-__all__ = ["FORMAT", "VERSION", "DatabaseClip", "FingerDatabase", "build_database", "load_database",
+__all__ = ["FORMAT", "VERSION", "same_rate", "DatabaseClip", "FingerDatabase", "build_database", "load_database",
            "save_database", "segment_track", "database_schema"]
 
 FORMAT = "usdhands-finger-database"
@@ -156,6 +156,15 @@ class FingerDatabase:
         }
 
 
+def same_rate(a: float, b: float) -> bool:
+    """Whether two frame rates are the same up to the rounding of file formats.
+
+    BVH stores the frame time with six decimals (30 fps reads back as 30.0003), so
+    rates within 1e-4 (relative) are taken as equal and not resampled.
+    """
+    return abs(a - b) <= 1e-4 * max(a, b)
+
+
 def segment_track(features: np.ndarray, fps: float, config: SegmentationConfig) -> np.ndarray:
     """Segment boundaries ``(N+1,)`` of one track from its wrist features ``(T, 6)``."""
     speed = wrist_speed(features[:, :3], fps, config.speed_smoothing_s)
@@ -189,7 +198,7 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
     clips_meta = []
     hands: dict = {}
     for ci, item in enumerate(items):
-        clip = item.clip.resample(fps) if abs(item.clip.fps - fps) > 1e-9 else item.clip
+        clip = item.clip if same_rate(item.clip.fps, fps) else item.clip.resample(fps)
         clips_meta.append({"name": clip.name, "source": str(item.source), "animation": clip.name,
                            "label": item.label})
         world = clip.world_xforms()

@@ -77,12 +77,21 @@ class HandRig:
         ``C = A⁻¹ W`` per slot, xyzw (identity where empty).
     unmapped : tuple of str
         Finger joints beyond four per finger, which get no motion.
+    reference : (NUM_SLOTS, 4) float or None
+        Local rotations the curves are relative to (xyzw); the rest rotations when None.
     """
 
     side: str
     slot_joint: np.ndarray
     frame: np.ndarray
     unmapped: tuple[str, ...] = ()
+    reference: np.ndarray | None = None
+
+    def reference_rotations(self, skeleton: Skeleton, slots: np.ndarray) -> np.ndarray:
+        """``(len(slots), 4)`` local rotations the curves of ``slots`` are relative to."""
+        if self.reference is None:
+            return skeleton.rest_rotations[self.slot_joint[slots]]
+        return self.reference[slots]
 
     @property
     def present(self) -> np.ndarray:
@@ -99,9 +108,23 @@ def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     return v / n if n > 1e-9 else fallback
 
 
-def hand_rig(skeleton: Skeleton, hand: HandSide) -> HandRig:
-    """Map a hand's finger chains onto the slots and compute their anatomical frames."""
-    rest = skeleton.rest_world_xforms()
+def hand_rig(skeleton: Skeleton, hand: HandSide, pose: Clip | None = None) -> HandRig:
+    """Map a hand's finger chains onto the slots and compute their anatomical frames.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    hand : HandSide
+    pose : Clip, optional
+        A clip whose first frame is the reference pose of the fingers instead of the
+        rest pose (the curves are then relative to it): for body-only inputs whose
+        frozen fingers hold the rig's natural pose while its rest (a BVH zero pose)
+        does not.
+    """
+    if pose is None:
+        rest = skeleton.rest_world_xforms()
+    else:
+        rest = pose.slice(0, 1).world_xforms()[0]
     pos = rest[:, :3, 3]
     rot = rest[:, :3, :3] / np.linalg.norm(rest[:, :3, :3], axis=-2, keepdims=True)
     w = skeleton.index(hand.wrist)
@@ -143,7 +166,13 @@ def hand_rig(skeleton: Skeleton, hand: HandSide) -> HandRig:
             slot = fi * SLOTS_PER_FINGER + d
             slot_joint[slot] = j
             frame[slot] = Rotation.from_matrix(C).as_quat()
-    return HandRig(hand.side, slot_joint, frame, tuple(unmapped))
+    reference = None
+    if pose is not None:
+        reference = np.zeros((NUM_SLOTS, 4))
+        reference[:, 3] = 1.0
+        ok = slot_joint >= 0
+        reference[ok] = pose.rotations[0, slot_joint[ok]]
+    return HandRig(hand.side, slot_joint, frame, tuple(unmapped), reference)
 
 
 def canonical_curves(clip: Clip, rig: HandRig) -> np.ndarray:
@@ -159,7 +188,7 @@ def canonical_curves(clip: Clip, rig: HandRig) -> np.ndarray:
     slots = np.nonzero(rig.present)[0]
     if len(slots):
         joints = rig.slot_joint[slots]
-        rest = clip.skeleton.rest_rotations[joints]
+        rest = rig.reference_rotations(clip.skeleton, slots)
         rel = quat_multiply(quat_conjugate(rest)[None], clip.rotations[:, joints])
         C = rig.frame[slots]
         can = quat_multiply(quat_multiply(C[None], rel), quat_conjugate(C)[None])
@@ -180,7 +209,7 @@ def apply_canonical_curves(clip: Clip, rig: HandRig, curves: np.ndarray) -> Clip
     can = euler_xyz_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots])
     C = rig.frame[slots]
     rel = quat_multiply(quat_multiply(quat_conjugate(C)[None], can), C[None])
-    local = quat_multiply(clip.skeleton.rest_rotations[joints][None], rel)
+    local = quat_multiply(rig.reference_rotations(clip.skeleton, slots)[None], rel)
     return clip.with_joint_rotations([int(j) for j in joints], local)
 
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from usdhands.algorithms.finger_database import FingerDatabase, segment_track
+from usdhands.algorithms.finger_database import FingerDatabase, same_rate, segment_track
 from usdhands.algorithms.finger_transfer import NUM_SLOTS, ORDER
 from usdhands.algorithms.segment_cost import knn_segments, weight_features
 from usdhands.algorithms.stitching import stitch_fragments
@@ -137,7 +137,7 @@ def prepare_eval_set(items: list[tuple[str, Clip, HandMap]], config: SynthesisCo
     segs, sclip, sside, slabel, idle, names = [], [], [], [], [], []
     start = 0
     for ci, (label, clip, handmap) in enumerate(items):
-        if abs(clip.fps - fps) > 1e-9:
+        if not same_rate(clip.fps, fps):
             clip = clip.resample(fps)
         names.append(clip.name)
         world = clip.world_xforms()

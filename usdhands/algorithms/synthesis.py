@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from usdhands.algorithms.finger_database import FingerDatabase, segment_track
+from usdhands.algorithms.finger_database import FingerDatabase, same_rate, segment_track
 from usdhands.algorithms.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
 from usdhands.algorithms.motion_graph import least_cost_path, transition_costs
 from usdhands.algorithms.segment_cost import SearchResult, dtw_align_fast, knn_segments, weight_features
@@ -225,12 +225,12 @@ def _mapping(rig: HandRig, db: FingerDatabase, skeleton) -> tuple[HandRig, dict]
         elif db_slots[s]:
             dropped.append(names[s])
     no_source.extend(rig.unmapped)
-    return (HandRig(rig.side, keep, rig.frame, rig.unmapped),
+    return (HandRig(rig.side, keep, rig.frame, rig.unmapped, rig.reference),
             {"mapped": mapped, "no_source": no_source, "dropped": dropped})
 
 
 def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: SynthesisConfig | None = None,
-                    hands: tuple[str, ...] = SIDES, exclude_clips=()) -> ClipSynthesis:
+                    hands: tuple[str, ...] = SIDES, exclude_clips=(), finger_reference: str = "rest") -> ClipSynthesis:
     """Give a clip finger motion from the database; every other joint is left as it was.
 
     Parameters
@@ -243,6 +243,11 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
         Hands to synthesize (those the hand map lacks are skipped).
     exclude_clips : sequence of int
         Database clips not to use.
+    finger_reference : {"rest", "input"}
+        What the synthesized finger rotations are relative to: the rig's rest pose, or
+        the pose the input's fingers hold at its first frame (for body-only clips whose
+        frozen fingers show the rig's natural pose while its rest pose does not, such
+        as a BVH whose zero pose is not the bind pose).
 
     Returns
     -------
@@ -252,6 +257,8 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
         the database slots the character has no joint for.
     """
     cfg = config or SynthesisConfig()
+    if finger_reference not in ("rest", "input"):
+        raise ValueError(f"Expected finger_reference 'rest' or 'input', got {finger_reference!r}")
     for h in hands:
         if h not in SIDES:
             raise ValueError(f"Expected hands among {SIDES}, got {h!r}")
@@ -264,11 +271,12 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
         hand = handmap[side]
         if hand is None or not hand.finger_joints:
             continue
-        rig, mapping[side] = _mapping(hand_rig(clip.skeleton, hand), db, clip.skeleton)
+        pose = clip if finger_reference == "input" else None
+        rig, mapping[side] = _mapping(hand_rig(clip.skeleton, hand, pose), db, clip.skeleton)
         scale = db.reach_cm / reach_cm(clip.skeleton, hand)
         scales[side] = scale
         feats = wrist_features(clip, hand, scale, world)
-        resampled = abs(clip.fps - db.fps) > 1e-9
+        resampled = not same_rate(clip.fps, db.fps)
         if resampled:
             n = int(np.floor(clip.duration * db.fps + 1e-6)) + 1
             feats = resample_rows(feats, clip.fps, db.fps, n)

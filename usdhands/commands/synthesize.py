@@ -30,6 +30,10 @@ def register(sub) -> None:
     p.add_argument("--graft-hands", action="store_true",
                    help="add finger joints from the database's hand to a skeleton without them (skeleton-only "
                         "files: BVH, USD without skinned meshes); the output is a new file with the new joints")
+    p.add_argument("--finger-reference", choices=("rest", "input"), default="rest",
+                   help="finger rotations relative to the rig's rest pose (default) or to the pose the input's "
+                        "fingers hold at its first frame (body-only clips from files whose rest/zero pose is not "
+                        "the bind pose, e.g. BVH written from a rig with rest rotations)")
     p.add_argument("--plot", type=Path, default=None, metavar="DIR",
                    help="write PNGs: wrist speed with segments, the graph with the chosen path, finger curves")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
@@ -88,7 +92,7 @@ def run(args) -> int:
         if s not in db_sides:
             raise UsdHandsError(f"the database has no {s}-hand motion; rebuild it with --mirror", path=db.path)
     progress(1, 4, "synthesizing")
-    result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers))
+    result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers), finger_reference=args.finger_reference)
     progress(2, 4, "writing")
     if added:
         out = write_asset(Asset(str(args.file), (result.clip.skeleton,), (result.clip,), ()), args.output,
