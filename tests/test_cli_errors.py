@@ -242,3 +242,16 @@ def test_animation_by_name_or_index_and_unknown_ones(shared_assets):
     with pytest.raises(AssetReadError) as e:
         read_clip(src, animation=99)
     assert str(e.value) == f"{src}: animation index 99 out of range 0..13"
+
+
+def test_usd_zero_length_and_nan_quaternion_with_translations(tmp_path, capsys):
+    """With translations authored UsdSkel's query hands the quaternions over; Clip.validate reports them."""
+    for value, what in (("(0, 0, 0, 0)", "a zero-length quaternion"), ("(nan, 0, 0, 0)", "NaN or infinite rotations")):
+        text = usd_skel('["Hips", "Hips/LeftHand"]', f"[(1, 0, 0, 0), {value}]").replace(
+            "            quatf[] rotations", "            float3[] translations = [(0, 0, 0), (0, 1, 0)]\n"
+                                         "            quatf[] rotations")
+        bad = tmp_path / "bad.usda"
+        bad.write_text(text)
+        check_error(capsys, tmp_path, ["convert", bad, tmp_path / "out.glb"],
+                    f"{bad}: animation '/Root/Skel/Anim' has {what} (joint 'Hips/LeftHand', frame 0)", [bad])
+        bad.unlink()

@@ -251,8 +251,8 @@ def frame_times(samples: list[float], tcps: float, fps: float | None) -> tuple[n
 def _check_authored_rotations(prim: Usd.Prim, joints: list[str], path: Path, where: str) -> None:
     """Raise InvalidAnimationError for a zero-length or NaN quaternion among the authored rotations.
 
-    UsdSkel's queries turn such values into matrices and back, which hides them, so the
-    authored samples are checked directly.
+    Used where UsdSkel's query gives no values at all (an animation without
+    translations), which would hide them, so the authored samples are checked directly.
     """
     attr = UsdSkel.Animation(prim).GetRotationsAttr()
     if not attr or not attr.HasAuthoredValue():
@@ -326,7 +326,11 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
                                          location=where)
             has[label] = True
             dst[f] = np.asarray(arr)
-    _check_authored_rotations(prim, joints, path, where)
+    if not has["rotations"]:
+        # the query answered nothing (no translations authored): check what is authored.
+        # Otherwise it hands the authored quaternions over as they are, and
+        # Clip.validate (in read_asset) reports NaN and zero-length ones.
+        _check_authored_rotations(prim, joints, path, where)
     if len(times) == 0 and not any(has.values()):
         T = 0  # no value at all: an animation of zero frames (read_asset reports it)
     everyone = K == J and bool((cols == np.arange(J)).all())
