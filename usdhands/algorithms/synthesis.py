@@ -26,6 +26,7 @@ import numpy as np
 from usdhands.algorithms.finger_database import FingerDatabase, same_rate, segment_track
 from usdhands.algorithms.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
 from usdhands.algorithms.motion_graph import least_cost_path, transition_costs
+from usdhands.algorithms.segmentation import wrist_speed
 from usdhands.algorithms.segment_cost import SearchResult, dtw_align_fast, knn_segments, weight_features
 from usdhands.algorithms.stitching import SeamReport, stitch_fragments
 from usdhands.algorithms.synthesis_config import SynthesisConfig
@@ -159,8 +160,6 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     if not len(seg_idx):
         raise ValueError(f"The database has no {side}-hand segments to choose from")
     bounds = segment_track(feats, db.fps, cfg.segmentation)
-    from usdhands.algorithms.segmentation import wrist_speed
-
     speed = wrist_speed(feats[:, :3], db.fps, cfg.segmentation.speed_smoothing_s)
     qb = np.stack([bounds[:-1], bounds[1:]], axis=1)
     dsegs = db.segments[seg_idx, :2]
