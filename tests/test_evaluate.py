@@ -180,3 +180,18 @@ def test_synthesize_grafts_hands_onto_a_skeleton_without_fingers(gesture_files, 
     assert quat_angle_deg(back.rotations[:, idx], body.rotations).max() < 1e-3
     fj = [back.skeleton.index(j) for j in hm.left.finger_joints]
     assert np.ptp(back.rotations[:, fj], axis=0).max() > 0.05  # the grafted fingers move
+
+
+def test_evaluate_needs_only_the_joints_its_predictors_name(capsys, tmp_path):
+    from usdhands.model import HandMap, HandSide
+
+    hm = tiny_handmap()
+    no_shoulder = HandMap(**{s: HandSide(s, hm[s].wrist, hm[s].forearm, None, hm[s].root, hm[s].fingers)
+                             for s in ("left", "right")})
+    items = [(lab, c, no_shoulder) for lab, c in gesture_set(2, seed=3)]
+    es = prepare_eval_set(items, predictors=["wrist_pos+0.5rot", "elbow_rot"])
+    assert sorted(es.features) == ["elbow_pos", "elbow_rot", "wrist_pos", "wrist_rot"]
+    with pytest.raises(ValueError, match="Hand 'left' of clip 'attention_00' has no shoulder joint for the predictors"):
+        prepare_eval_set(items, predictors=["shoulder_rot"])
+    status, _, err = _run(capsys, "evaluate", "--samples", "--predictors", "wrist_pos+hand_rot")
+    assert status == 2 and "term 'hand_rot' is not" in err

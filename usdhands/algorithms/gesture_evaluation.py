@@ -115,7 +115,8 @@ class EvalSet:
 
 
 def prepare_eval_set(items: list[tuple[str, Clip, HandMap]], config: SynthesisConfig | None = None,
-                     fps: float | None = None, idle_range_cm: float = 5.0) -> EvalSet:
+                     fps: float | None = None, idle_range_cm: float = 5.0,
+                     predictors=DEFAULT_PREDICTORS) -> EvalSet:
     """Segment and featurize labelled clips.
 
     Parameters
@@ -127,13 +128,18 @@ def prepare_eval_set(items: list[tuple[str, Clip, HandMap]], config: SynthesisCo
         Resample clips to this rate (default: the first clip's).
     idle_range_cm : float
         A hand whose wrist stays within this distance of its mean position is idle.
+    predictors : sequence of str
+        The predictors to be evaluated: only the joints they name must be in the hand
+        maps (the wrist always is).
     """
     cfg = config or SynthesisConfig()
     if not items:
         raise ValueError("Expected at least one labelled clip")
     fps = float(fps or items[0][1].fps)
     labels = sorted({lab for lab, _, _ in items})
-    feats = {f"{j}_{k}": [] for j in FEATURE_JOINTS for k in ("pos", "rot")}
+    roles = {"wrist"} | {key.split("_")[0] for p in predictors for key, _ in parse_predictor(p)}
+    roles = tuple(r for r in FEATURE_JOINTS if r in roles)
+    feats = {f"{j}_{k}": [] for j in roles for k in ("pos", "rot")}
     segs, sclip, sside, slabel, idle, names = [], [], [], [], [], []
     start = 0
     for ci, (label, clip, handmap) in enumerate(items):
@@ -142,10 +148,11 @@ def prepare_eval_set(items: list[tuple[str, Clip, HandMap]], config: SynthesisCo
         names.append(clip.name)
         world = clip.world_xforms()
         for hand in handmap.sides:
-            f = arm_features(clip, hand, 1.0, FEATURE_JOINTS, world)
-            missing = [key for key in feats if key not in f]
+            f = arm_features(clip, hand, 1.0, roles, world)
+            missing = sorted({key.split("_")[0] for key in feats if key not in f})
             if missing:
-                raise ValueError(f"Hand {hand.side!r} of clip {clip.name!r} lacks {missing} (no shoulder/elbow joint)")
+                raise ValueError(f"Hand {hand.side!r} of clip {clip.name!r} has no {' or '.join(missing)} joint "
+                                 f"for the predictors asked for")
             wp = f["wrist_pos"]
             if np.linalg.norm(wp - wp.mean(axis=0), axis=1).max() < idle_range_cm:
                 idle.append((clip.name, hand.side))

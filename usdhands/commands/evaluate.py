@@ -64,19 +64,27 @@ def run(args) -> int:
 
     if args.k < 1:
         raise UsdHandsError(f"--k must be at least 1, got {args.k}")
+    from usdhands.algorithms.gesture_evaluation import (
+        DEFAULT_PREDICTORS, evaluate_predictors, parse_predictor, prepare_eval_set,
+    )
+    from usdhands.commands._common import parse_list
+
     cfg = load_config(args.config)
+    predictors = parse_list(args.predictors) or list(DEFAULT_PREDICTORS)
+    for name in predictors:
+        try:
+            parse_predictor(name)
+        except ValueError as e:
+            raise UsdHandsError(str(e)) from None
     items = _items(args)
     if args.holdout:
         return _run_holdout(args, items, cfg)
-    from usdhands.algorithms.gesture_evaluation import DEFAULT_PREDICTORS, evaluate_predictors, prepare_eval_set
-    from usdhands.commands._common import parse_list
-
-    predictors = parse_list(args.predictors) or list(DEFAULT_PREDICTORS)
     unlabeled = [str(p) for p, lab, _, _ in items if lab is None]
     if unlabeled:
         raise UsdHandsError(f"clips without a label: {unlabeled[:3]}")
     try:
-        es = prepare_eval_set([(lab, clip, hm) for _, lab, clip, hm in items], cfg, args.fps)
+        es = prepare_eval_set([(lab, clip, hm) for _, lab, clip, hm in items], cfg, args.fps,
+                              predictors=predictors)
         result = evaluate_predictors(es, predictors, args.k, cfg)
     except ValueError as e:
         raise UsdHandsError(str(e)) from None
