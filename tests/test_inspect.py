@@ -119,3 +119,11 @@ def test_file_with_two_skeletons_hands_per_skeleton(tmp_path, capsys):
     assert d["skeletons"][1]["hands"]["left"]["wrist"].endswith("/LeftHand")
     assert d["hands"] == d["skeletons"][1]["hands"]
     assert [a["skeleton"] for a in d["animations"]] == [0, 1]
+
+
+def test_file_without_skeleton(shared_assets, capsys):
+    teapot = shared_assets / "usd_teapot" / "UtahTeapot.usd"
+    assert main(["inspect", str(teapot)]) == 0
+    assert capsys.readouterr().out == f"{teapot}\nno skeleton\n"
+    d = inspect_json(capsys, teapot)
+    assert d["skeletons"] == [] and d["animations"] == [] and d["hands"] == {"left": None, "right": None}

@@ -67,6 +67,13 @@ def run(args) -> int:
         print_json(report)
         return 0
     print(f"{report['file']}")
+    if not report["skeletons"]:
+        print("no skeleton")
+        if report["meshes"]:
+            print()
+            print_table([(m["name"], m["points"], m["faces"], m["influences"]) for m in report["meshes"]],
+                        ["mesh", "points", "faces", "influences"])
+        return 0
     print_table([(s["name"], s["num_joints"], s["meters_per_unit"], s["up_axis"]) for s in report["skeletons"]],
                 ["skeleton", "joints", "m/unit", "up"])
     print()
