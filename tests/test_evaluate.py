@@ -195,3 +195,22 @@ def test_evaluate_needs_only_the_joints_its_predictors_name(capsys, tmp_path):
         prepare_eval_set(items, predictors=["shoulder_rot"])
     status, _, err = _run(capsys, "evaluate", "--samples", "--predictors", "wrist_pos+hand_rot")
     assert status == 2 and "term 'hand_rot' is not" in err
+
+
+def test_evaluate_body_only_files_without_finger_joints(gesture_files, capsys, tmp_path):
+    folder, paths = gesture_files
+    bare_dir = tmp_path / "bare"
+    bare_dir.mkdir()
+    for p in paths:
+        c = read_clip(p)
+        keep = [j for j, n in enumerate(c.skeleton.short_names) if "Hand" not in n or n.endswith("Hand")]
+        sub = c.skeleton.subset(keep)
+        b = c.replace(skeleton=sub, rotations=c.rotations[:, keep], translations=c.translations[:, keep],
+                      scales=c.scales[:, keep])
+        write_asset(Asset("memory", [sub], [b], []), bare_dir / p.name)
+    args = ["--labels", r"^([a-z]+)_", "--json"]
+    s1, out1, err1 = _run(capsys, "evaluate", folder, *args)
+    s2, out2, err2 = _run(capsys, "evaluate", bare_dir, *args)
+    assert s1 == s2 == 0, err2
+    # the tiny rig's finger layout gives the same hand frame as the guess from the forearm
+    assert json.loads(out2)["predictors"] == pytest.approx(json.loads(out1)["predictors"])

@@ -22,7 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from usdhands.algorithms.finger_transfer import SLOTS_PER_FINGER
-from usdhands.algorithms.wrist_features import Z_UP_TO_Y_UP, reach_cm, world_rotations
+from usdhands.algorithms.wrist_features import guess_hand_frame, reach_cm, world_rotations
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandMap, HandSide
 from usdhands.model.skeleton import Skeleton, short_joint_name
@@ -90,22 +90,6 @@ def find_wrists(skeleton: Skeleton) -> dict:
                 if side not in found or depth < found[side][0]:
                     found[side] = (depth, j)
     return {side: j for side, (_, j) in found.items()}
-
-
-def guess_hand_frame(skeleton: Skeleton, wrist: int, forearm: int | None) -> np.ndarray:
-    """A hand frame ``(3, 3)`` in world rest coordinates for a wrist without fingers (see the module notes)."""
-    rest = skeleton.rest_world_positions()
-    U = Z_UP_TO_Y_UP if skeleton.up_axis == "Z" else np.eye(3)
-    parent = forearm if forearm is not None else int(skeleton.parents[wrist])
-    fwd = U @ (rest[wrist] - rest[parent])
-    fwd /= max(np.linalg.norm(fwd), 1e-12)
-    for guess in ([0.0, 0.0, 1.0], [0.0, 1.0, 0.0]):
-        side = np.asarray(guess) - fwd * np.dot(guess, fwd)
-        if np.linalg.norm(side) > 0.3:
-            break
-    side /= np.linalg.norm(side)
-    H = np.stack([fwd, side, np.cross(fwd, side)], axis=1)
-    return U.T @ H
 
 
 def mirror_template(template: dict) -> dict:

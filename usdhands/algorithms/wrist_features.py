@@ -47,7 +47,7 @@ from usdhands.model.handmap import FINGERS, HandSide
 from usdhands.model.skeleton import Skeleton
 
 __all__ = [
-    "FEATURE_JOINTS", "hand_point", "hand_frame", "REFERENCE_HAND", "reach_cm", "arm_features", "wrist_features",
+    "FEATURE_JOINTS", "hand_point", "hand_frame", "guess_hand_frame", "REFERENCE_HAND", "reach_cm", "arm_features", "wrist_features",
     "mirror_features", "Z_UP_TO_Y_UP", "world_rotations", "world_xforms_for",
 ]
 
@@ -112,6 +112,7 @@ def hand_frame(skeleton: Skeleton, hand: HandSide) -> np.ndarray:
     or from that mean to the thumb where the first joints coincide (RobotExpressive's
     palms); normal = forward × side. Built from local offsets only (rest
     translations, and rest rotations of joints between the wrist and a first joint).
+    A hand without fingers gets :func:`guess_hand_frame` (which needs a sensible rest pose).
     """
     w = skeleton.index(hand.wrist)
     local = skeleton.rest_local_xforms()
@@ -127,8 +128,10 @@ def hand_frame(skeleton: Skeleton, hand: HandSide) -> np.ndarray:
 
     firsts = {f: offset(skeleton.index(hand.fingers[f][0])) for f in FINGERS if hand.fingers[f]}
     non_thumb = [f for f in FINGERS[1:] if f in firsts]
-    if not firsts:
-        return np.eye(3)
+    if not firsts:  # no fingers: guess from the rest pose, in the wrist's local frame
+        rest_rot = world_rotations(skeleton.rest_world_xforms()[w])
+        fa = skeleton.index(hand.forearm) if hand.forearm else None
+        return rest_rot.T @ guess_hand_frame(skeleton, w, fa)
     mean = np.mean([firsts[f] for f in non_thumb], axis=0) if non_thumb else firsts["thumb"]
     fwd = mean / max(np.linalg.norm(mean), 1e-12)
     side = np.zeros(3)
@@ -141,6 +144,27 @@ def hand_frame(skeleton: Skeleton, hand: HandSide) -> np.ndarray:
         side = np.cross(fwd, [0.0, 0.0, 1.0]) if abs(fwd[2]) < 0.9 else np.cross(fwd, [1.0, 0.0, 0.0])
     side /= np.linalg.norm(side)
     return np.stack([fwd, side, np.cross(fwd, side)], axis=1)
+
+
+def guess_hand_frame(skeleton: Skeleton, wrist: int, forearm: int | None) -> np.ndarray:
+    """A hand frame ``(3, 3)`` in world rest coordinates for a wrist without fingers.
+
+    Forward along the forearm (elbow to wrist), side towards the character's front
+    (+Z, Y up: the thumb of a T-pose with palms down), or upwards where the forearm
+    points forwards; normal = forward × side.
+    """
+    rest = skeleton.rest_world_positions()
+    U = Z_UP_TO_Y_UP if skeleton.up_axis == "Z" else np.eye(3)
+    parent = forearm if forearm is not None else int(skeleton.parents[wrist])
+    fwd = U @ (rest[wrist] - rest[parent])
+    fwd /= max(np.linalg.norm(fwd), 1e-12)
+    for guess in ([0.0, 0.0, 1.0], [0.0, 1.0, 0.0]):
+        side = np.asarray(guess) - fwd * np.dot(guess, fwd)
+        if np.linalg.norm(side) > 0.3:
+            break
+    side /= np.linalg.norm(side)
+    H = np.stack([fwd, side, np.cross(fwd, side)], axis=1)
+    return U.T @ H
 
 
 def reach_cm(skeleton: Skeleton, hand: HandSide) -> float:

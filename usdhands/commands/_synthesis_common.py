@@ -79,15 +79,21 @@ def labeller(regex: str | None, labels_file: Path | None):
     return lambda path: None
 
 
-def read_labelled(paths: list[Path], label_of, fps, handmap_path, animation=None, progress=None):
-    """Read clips with their hand maps and labels: list of ``(path, label, clip, handmap)``."""
+def read_labelled(paths: list[Path], label_of, fps, handmap_path, animation=None, progress=None,
+                  fingerless: bool = False):
+    """Read clips with their hand maps and labels: list of ``(path, label, clip, handmap)``.
+
+    With ``fingerless``, a skeleton without finger joints gets a hand map of its arms
+    (wrists found by name, see :func:`usdhands.algorithms.hand_graft.find_wrists`).
+    """
     from usdhands.formats.io import read_clip
 
     out = []
     for i, p in enumerate(paths):
         label = label_of(p)
         clip = read_clip(p, animation=animation, fps=fps)
-        handmap = handmap_for(clip, p, handmap_path)
+        handmap = arms_only(clip, p) if fingerless and handmap_path is None else None
+        handmap = handmap or handmap_for(clip, p, handmap_path)
         out.append((p, label, clip, handmap))
         if progress:
             progress(i + 1, len(paths), p.name)
@@ -104,6 +110,25 @@ def handmap_for(clip, path, handmap_path):
         if e.path is None:
             raise type(e)(e.message, path=path, location=e.location) from None
         raise
+
+
+def arms_only(clip, path):
+    """The hand map of a skeleton, or of its arms when it has no finger joints (None if neither)."""
+    from usdhands.algorithms.hand_graft import find_wrists
+    from usdhands.errors import NoHandsError
+    from usdhands.model.hand_detection import detect_hands
+    from usdhands.model.handmap import HandMap, HandSide
+
+    sk = clip.skeleton
+    try:
+        return detect_hands(sk)
+    except NoHandsError:
+        sides = {}
+        for side, w in find_wrists(sk).items():
+            chain = sk.chain_to_root(w)
+            name = lambda i: sk.joint_names[chain[i]] if i < len(chain) else None  # noqa: E731
+            sides[side] = HandSide(side, name(0), name(1), name(2), sk.joint_names[chain[-1]])
+        return HandMap(**sides) if sides else None
 
 
 def load_config(path):

@@ -56,7 +56,7 @@ def _items(args):
     if not args.holdout and not (args.labels or args.labels_file):
         raise UsdHandsError("evaluate needs --labels REGEX or --labels-file CSV (or --holdout)")
     return read_labelled(paths, labeller(args.labels, args.labels_file), args.fps, args.handmap, args.animation,
-                         Progress("reading"))
+                         Progress("reading"), fingerless=not args.holdout)
 
 
 def run(args) -> int:
