@@ -19,8 +19,8 @@ GESTURES = ("attention", "big", "doubt", "ok", "pp", "small", "turn", "wipe")
 FPS = 30.0
 
 
-def tiny_skeleton(hand_scale: float = 1.0, body_scale: float = 1.0) -> Skeleton:
-    """The rig; ``body_scale`` scales every bone."""
+def tiny_skeleton(hand_scale: float = 1.0, body_scale: float = 1.0, metacarpals: bool = False) -> Skeleton:
+    """The rig; ``body_scale`` scales every bone; ``metacarpals`` adds ``<Finger>0`` joints (not the thumb)."""
     names, parents, trans = [], [], []
 
     def add(name, parent, t):
@@ -35,8 +35,12 @@ def tiny_skeleton(hand_scale: float = 1.0, body_scale: float = 1.0) -> Skeleton:
         add(f"{side}ForeArm", f"{side}Arm", (28 * sx, 0, 0))
         add(f"{side}Hand", f"{side}ForeArm", (25 * sx, 0, 0))
         for fi, f in enumerate(FINGERS):
-            base = (3 * sx, -1, 4) if f == "Thumb" else (9 * sx, 0, 3 - 2 * (fi - 1))
-            add(f"{side}Hand{f}1", f"{side}Hand", np.array(base) * hand_scale)
+            base = np.array((3 * sx, -1, 4) if f == "Thumb" else (9 * sx, 0, 3 - 2 * (fi - 1)))
+            parent = f"{side}Hand"
+            if metacarpals and f != "Thumb":
+                add(f"{side}Hand{f}0", parent, np.array((2 * sx, 0, base[2])) * hand_scale)
+                parent, base = f"{side}Hand{f}0", base - np.array((2 * sx, 0, base[2]))
+            add(f"{side}Hand{f}1", parent, base * hand_scale)
             add(f"{side}Hand{f}2", f"{side}Hand{f}1", np.array((4 * sx, 0, 0)) * hand_scale)
             add(f"{side}Hand{f}3", f"{side}Hand{f}2", np.array((3 * sx, 0, 0)) * hand_scale)
     J = len(names)
@@ -45,13 +49,14 @@ def tiny_skeleton(hand_scale: float = 1.0, body_scale: float = 1.0) -> Skeleton:
     return Skeleton(names, np.array(parents), np.array(trans), rest_q, meters_per_unit=0.01, name="Tiny")
 
 
-def tiny_handmap() -> HandMap:
+def tiny_handmap(metacarpals: bool = False) -> HandMap:
     sides = {}
     for side in ("left", "right"):
         S = side.capitalize()
+        first = lambda f: (0, 1, 2, 3) if metacarpals and f != "Thumb" else (1, 2, 3)  # noqa: E731
         sides[side] = HandSide(side=side, wrist=f"{S}Hand", forearm=f"{S}ForeArm", shoulder=f"{S}Arm",
                                root="Hips",
-                               fingers={f.lower(): tuple(f"{S}Hand{f}{i}" for i in (1, 2, 3)) for f in FINGERS})
+                               fingers={f.lower(): tuple(f"{S}Hand{f}{i}" for i in first(f)) for f in FINGERS})
     return HandMap(**sides)
 
 

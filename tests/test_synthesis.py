@@ -502,3 +502,19 @@ def test_frame_rates_equal_up_to_file_rounding():
 
     assert same_rate(1 / 0.033333, 30.0)  # a BVH frame time of 0.033333 s
     assert not same_rate(29.97, 30.0) and not same_rate(24.0, 30.0)
+
+
+def test_metacarpals_without_database_counterpart_are_reported_and_left_alone(small_db):
+    from usdhands.algorithms.synthesis import synthesize_clip
+
+    sk, hm = tiny_skeleton(metacarpals=True), tiny_handmap(metacarpals=True)
+    clip = gesture_clip(sk, "ok", np.random.default_rng(2), with_fingers=False)
+    res = synthesize_clip(clip, hm, small_db)
+    m = res.mapping["left"]
+    assert sorted(m["no_source"]) == [f"LeftHand{f}0" for f in ("Index", "Middle", "Pinky", "Ring")]
+    assert len(m["mapped"]) == 15 and m["dropped"] == []
+    assert dict(m["mapped"])["LeftHandIndex1"] == "index.d2"
+    meta = [sk.index(f"{s}Hand{f}0") for s in ("Left", "Right") for f in ("Index", "Middle", "Ring", "Pinky")]
+    assert np.array_equal(res.clip.rotations[:, meta], clip.rotations[:, meta])
+    moved = [sk.index(j) for j in hm.left.finger_joints if not j.endswith("0")]
+    assert np.ptp(res.clip.rotations[:, moved], axis=0).max() > 0.05
