@@ -205,3 +205,13 @@ def test_several_skeletons_to_bvh_says_which_was_taken(tmp_path, capsys):
     want = read_asset(src).clip("/Root/BRoot/WaveB")
     assert second.skeleton.num_joints == 4
     assert quat_angle_deg(second.rotations, want.rotations).max() < 1e-3
+
+
+def test_fps_option_resamples(shared_assets, tmp_path, capsys):
+    src = shared_assets / "leap_hands" / "fingers-ok.bvh"  # 245 frames at 40 fps
+    out = tmp_path / "ok20.usda"
+    convert(capsys, src, out, "--fps", "20")
+    a, b = read_asset(src).clips[0], read_asset(out).clips[0]
+    assert b.fps == 20.0 and b.num_frames == 123
+    idx = [b.skeleton.index(n) for n in a.skeleton.joint_names]
+    np.testing.assert_allclose(b.world_positions()[:, idx] * 0.01, a.world_positions()[::2] * 0.01, atol=1e-6)
