@@ -518,3 +518,19 @@ def test_metacarpals_without_database_counterpart_are_reported_and_left_alone(sm
     assert np.array_equal(res.clip.rotations[:, meta], clip.rotations[:, meta])
     moved = [sk.index(j) for j in hm.left.finger_joints if not j.endswith("0")]
     assert np.ptp(res.clip.rotations[:, moved], axis=0).max() > 0.05
+
+
+def test_saving_over_a_database_replaces_it_and_refuses_other_folders(small_db, tmp_path):
+    path = save_database(small_db, tmp_path / "db")
+    (tmp_path / ".db.old").mkdir()  # debris of an interrupted save
+    (tmp_path / ".db.old" / "x").write_text("x")
+    save_database(small_db, path)
+    assert sorted(f.name for f in path.iterdir()) == ["features.npy", "fingers.npy", "manifest.json",
+                                                      "segments.npy", "tracks.npy"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["db"]
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "a.txt").write_text("keep")
+    with pytest.raises(ConfigError, match="is a non-empty folder that is not a finger database; refusing to overwrite"):
+        save_database(small_db, other)
+    assert (other / "a.txt").read_text() == "keep"

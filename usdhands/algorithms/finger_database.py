@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -284,18 +285,14 @@ def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
         (tmp / "manifest.json").write_text(json.dumps(db.manifest(), indent=1) + "\n")
         if path.exists():
             old = path.with_name(f".{path.name}.old")
+            shutil.rmtree(old, ignore_errors=True)  # left by an interrupted earlier save
             os.replace(path, old)
             os.replace(tmp, path)
-            for f in old.iterdir():
-                f.unlink()
-            old.rmdir()
+            shutil.rmtree(old)
         else:
             os.replace(tmp, path)
     finally:
-        if tmp.exists():
-            for f in tmp.iterdir():
-                f.unlink()
-            tmp.rmdir()
+        shutil.rmtree(tmp, ignore_errors=True)
     return path
 
 
