@@ -151,13 +151,29 @@ def guess_hand_frame(skeleton: Skeleton, wrist: int, forearm: int | None) -> np.
 
     Forward along the forearm (elbow to wrist), side towards the character's front
     (+Z, Y up: the thumb of a T-pose with palms down), or upwards where the forearm
-    points forwards; normal = forward × side.
+    points forwards; normal = forward × side. Where the wrist sits on its forearm
+    joint (a Leap Motion BVH: ``rHand`` at offset 0 from the root ``rForeArm``),
+    forward comes from the next ancestor away from the wrist, else from the wrist
+    towards the mean of its children, else it is +X.
     """
     rest = skeleton.rest_world_positions()
     U = Z_UP_TO_Y_UP if skeleton.up_axis == "Z" else np.eye(3)
+    span = float(np.ptp(rest, axis=0).max()) if len(rest) > 1 else 0.0
+    tiny = 1e-9 * max(span, 1e-300)
+    fwd = np.zeros(3)
     parent = forearm if forearm is not None else int(skeleton.parents[wrist])
-    fwd = U @ (rest[wrist] - rest[parent])
-    fwd /= max(np.linalg.norm(fwd), 1e-12)
+    while parent is not None and parent >= 0:
+        fwd = rest[wrist] - rest[parent]
+        if np.linalg.norm(fwd) > tiny:
+            break
+        parent = int(skeleton.parents[parent])
+    if np.linalg.norm(fwd) <= tiny:
+        kids = skeleton.children(wrist)
+        fwd = rest[kids].mean(axis=0) - rest[wrist] if len(kids) else np.zeros(3)
+    if np.linalg.norm(fwd) <= tiny:
+        fwd = U.T @ np.array([1.0, 0.0, 0.0])
+    fwd = U @ fwd
+    fwd /= np.linalg.norm(fwd)
     for guess in ([0.0, 0.0, 1.0], [0.0, 1.0, 0.0]):
         side = np.asarray(guess) - fwd * np.dot(guess, fwd)
         if np.linalg.norm(side) > 0.3:
