@@ -42,3 +42,37 @@ def test_db_build_on_leap_bvhs_whose_wrist_sits_on_the_root(shared_assets, capsy
     assert status == 0, err
     back, clip = read_clip(tmp_path / "o.bvh"), read_clip(src)
     assert back.num_frames == clip.num_frames
+
+
+def test_a_clip_shorter_than_half_of_every_database_segment_gets_the_closest_uniform_sample():
+    from usdhands.algorithms.finger_transfer import NUM_DOFS
+    from usdhands.algorithms.synthesis import db_side_segments, synthesize_hand
+    from usdhands.commands._synthesis_common import bundled_database_path
+
+    db = load_database(bundled_database_path())
+    right = db_side_segments(db, "right")
+    lengths = db.segments[right, 1] - db.segments[right, 0]
+    assert lengths.min() >= 9  # no warp with steps <= 2 maps 3 or 4 frames onto any of them
+    s = int(right[np.argmax(lengths)])
+    a, b = int(db.segments[s, 0]), int(db.segments[s, 1])
+    for n in (1, 3, 4):
+        rows = a + np.round(np.linspace(0, b - a - 1, n)).astype(np.int64)
+        res = synthesize_hand(np.asarray(db.features[rows], dtype=np.float64), db, "right")
+        assert res.chosen.tolist() == [s] and res.segment_costs[0, 0] == 0.0
+        assert (res.candidates[0] >= 0).all() and np.all(np.diff(res.segment_costs[0]) >= 0)
+        assert res.curves.shape == (n, NUM_DOFS)
+        assert np.array_equal(res.curves[:, db.dof_index], np.asarray(db.fingers[rows], dtype=np.float64))
+
+
+def test_synthesize_a_clip_of_a_few_frames(sample_assets, capsys, tmp_path):
+    from usdhands.formats.io import write_clip
+
+    src = sample_assets / "conversation_bodyonly.bvh"
+    clip = read_clip(src)
+    for n in (1, 2, 5):
+        short = tmp_path / f"short{n}.bvh"
+        write_clip(src, clip.slice(0, n), short)
+        status, out, err = _run(capsys, "synthesize", short, "-o", tmp_path / f"o{n}.bvh")
+        assert status == 0, err
+        back = read_clip(tmp_path / f"o{n}.bvh")
+        assert back.num_frames == n

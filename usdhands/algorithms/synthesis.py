@@ -125,6 +125,25 @@ def _candidate_ends(db: FingerDatabase, cand: np.ndarray):
     return (np.where(z, 0.0, starts), np.where(z, 0.0, ends), np.where(z, 0.0, vstart), np.where(z, 0.0, vend))
 
 
+def _uniform_knn(query: np.ndarray, db_weighted: np.ndarray, segments: np.ndarray, k: int):
+    """The ``k`` cheapest segments when each is sampled uniformly at the query's length.
+
+    ``query (n, D)`` and ``db_weighted (F, D)`` weighted features, ``segments (N, 2)``
+    frame ranges. Returns indices ``(k,)`` into ``segments`` (-1 past N) and their
+    eq. 1 costs ``(k,)`` (inf past N); ties go to the lower index.
+    """
+    n = len(query)
+    cost = np.empty(len(segments))
+    for s, (a, b) in enumerate(segments):
+        j = a + np.round(np.linspace(0, b - a - 1, n)).astype(np.int64)
+        cost[s] = float(((query - db_weighted[j]) ** 2).sum()) / n
+    order = np.argsort(cost, kind="stable")[:k]
+    idx = np.full(k, -1, dtype=np.int64)
+    out = np.full(k, np.inf)
+    idx[:len(order)], out[:len(order)] = order, cost[order]
+    return idx, out
+
+
 def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config: SynthesisConfig | None = None,
                     exclude_clips=(), db_weighted: np.ndarray | None = None) -> HandSynthesis:
     """Synthesize one hand's canonical finger curves from its wrist features.
@@ -173,8 +192,10 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         wide = knn_segments(qw, qb[missing], dw, dsegs, k=sc.k, length_factor=1e6, band=1.0)
         cand_local[missing] = wide.index
         costs[missing] = wide.cost
-    if (cand_local[:, 0] < 0).any():
-        raise ValueError(f"No database segment can be aligned to input segments {np.nonzero(cand_local[:, 0] < 0)[0].tolist()}")
+    for i in np.nonzero(cand_local[:, 0] < 0)[0]:
+        # shorter than half of every database segment (a clip of a few frames): no warp
+        # with steps of at most 2 fits, so compare with each segment sampled uniformly
+        cand_local[i], costs[i] = _uniform_knn(qw[qb[i, 0]:qb[i, 1]], dw, dsegs, sc.k)
     cand = np.where(cand_local >= 0, seg_idx[np.maximum(cand_local, 0)], -1)
     N, k = cand.shape
     starts, ends, vstart, vend = _candidate_ends(db, cand)
