@@ -76,3 +76,61 @@ def test_synthesize_a_clip_of_a_few_frames(sample_assets, capsys, tmp_path):
         assert status == 0, err
         back = read_clip(tmp_path / f"o{n}.bvh")
         assert back.num_frames == n
+
+
+def _damaged_copy(tmp_path, name, change):
+    """A copy of the bundled database with one array changed in place."""
+    import shutil
+
+    from usdhands.commands._synthesis_common import bundled_database_path
+
+    path = tmp_path / name
+    shutil.copytree(bundled_database_path(), path)
+    a = np.load(path / f"{change[0]}.npy")
+    change[1](a)
+    np.save(path / f"{change[0]}.npy", a)
+    return path
+
+
+def test_damaged_databases_are_refused_with_the_reason(capsys, tmp_path, sample_assets):
+    from usdhands.errors import ConfigError
+
+    def empty_segment(a):
+        a[5, 1] = a[5, 0]
+
+    def outside_track(a):
+        a[7, 0] = -1  # before the first frame of its track
+
+    def nan_feature(a):
+        a[5, 1] = np.nan
+
+    def bad_side(a):
+        a[2, 3] = 7
+
+    cases = [
+        ("segments", empty_segment, r"segments.npy: segment 5 \(\d+\.\.\d+\) is empty or outside its track; 1 such"),
+        ("segments", outside_track, r"segments.npy: segment 7 \(-1\.\.\d+\) is empty or outside its track"),
+        ("features", nan_feature, r"features.npy: features hold NaN or infinite values \(first at frame 5\)"),
+        ("tracks", bad_side, "tracks with no frames, or a side or mirror flag other than 0 and 1"),
+    ]
+    for i, (array, change, message) in enumerate(cases):
+        path = _damaged_copy(tmp_path, f"db{i}", (array, change))
+        with pytest.raises(ConfigError, match=message):
+            load_database(path)
+    # on the command line: one line, exit 2, nothing written
+    out = tmp_path / "o.glb"
+    status, _, err = _run(capsys, "synthesize", sample_assets / "conversation_bodyonly.glb", "-o", out,
+                          "--db", tmp_path / "db0")
+    assert status == 2 and err.count("\n") == 1 and "segment 5" in err and not out.exists()
+    status, _, err = _run(capsys, "synthesize", sample_assets / "conversation_bodyonly.glb", "-o", out,
+                          "--db", sample_assets / "humanoid.glb")
+    assert status == 2 and not out.exists()
+    assert err == (f"usdhands: error: {sample_assets / 'humanoid.glb'}: is a file, not a finger database "
+                   f"(a folder made by 'usdhands db build')\n")
+    status, _, err = _run(capsys, "synthesize", sample_assets / "conversation_bodyonly.glb", "-o", out,
+                          "--db", tmp_path / "missing")
+    assert status == 2 and err == f"usdhands: error: {tmp_path / 'missing'}: no such finger database folder\n"
+    (tmp_path / "db1" / "manifest.json").write_text('{"format": "usdhands-finger-database", "version": 1')
+    status, _, err = _run(capsys, "synthesize", sample_assets / "conversation_bodyonly.glb", "-o", out,
+                          "--db", tmp_path / "db1")
+    assert status == 2 and "manifest.json: manifest is not valid JSON: Expecting ',' delimiter" in err

@@ -296,6 +296,11 @@ def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
     return path
 
 
+def _spec_file(manifest: dict, name: str) -> str:
+    """File name of array ``name`` in a (validated) manifest."""
+    return manifest["arrays"][name]["file"]
+
+
 def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
     """Load a database folder; arrays memory-mapped unless ``mmap`` is False.
 
@@ -309,6 +314,8 @@ def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
 
     path = Path(path)
     mf = path / "manifest.json"
+    if path.exists() and not path.is_dir():
+        raise ConfigError("is a file, not a finger database (a folder made by 'usdhands db build')", path=path)
     if not path.is_dir():
         raise ConfigError("no such finger database folder", path=path)
     if not mf.is_file():
@@ -342,11 +349,25 @@ def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
     F = arrays["features"].shape[0]
     if arrays["fingers"].shape != (F, len(dof_index)) or arrays["features"].shape[1] != 6:
         raise ConfigError("features and fingers arrays do not match the manifest's DOFs", path=path)
-    tr, sg = arrays["tracks"], arrays["segments"]
-    if len(tr) and (tr[:, 1].max() > F or tr[:, 2].max() >= len(manifest["clips"])):
+    tr, sg = np.asarray(arrays["tracks"]), np.asarray(arrays["segments"])
+    if len(tr) and ((tr[:, 0] < 0).any() or (tr[:, 1] > F).any() or (tr[:, 2] < 0).any()
+                    or (tr[:, 2] >= len(manifest["clips"])).any()):
         raise ConfigError("tracks refer to frames or clips the database does not have", path=path)
-    if len(sg) and (sg[:, 2].max() >= len(tr) or sg[:, 1].max() > F):
+    if len(tr) and ((tr[:, 1] <= tr[:, 0]).any() or ~np.isin(tr[:, 3:5], (0, 1)).all()):
+        raise ConfigError("tracks with no frames, or a side or mirror flag other than 0 and 1", path=path)
+    if len(sg) and ((sg[:, 2] < 0).any() or (sg[:, 2] >= len(tr)).any()):
         raise ConfigError("segments refer to tracks or frames the database does not have", path=path)
+    if len(sg):
+        own = tr[sg[:, 2]]
+        bad = np.nonzero((sg[:, 0] < own[:, 0]) | (sg[:, 1] > own[:, 1]) | (sg[:, 1] <= sg[:, 0]))[0]
+        if len(bad):
+            raise ConfigError(f"segment {int(bad[0])} ({int(sg[bad[0], 0])}..{int(sg[bad[0], 1])}) is empty or "
+                              f"outside its track; {len(bad)} such segments", path=path / _spec_file(manifest, "segments"))
+    # synthesis reads every feature row anyway (F x 6): check them here, not the fingers
+    finite = np.isfinite(arrays["features"]).all(axis=1)
+    if not finite.all():
+        raise ConfigError(f"features hold NaN or infinite values (first at frame {int(np.argmin(finite))})",
+                          path=path / _spec_file(manifest, "features"))
     return FingerDatabase(
         fps=float(manifest["fps"]), reach_cm=float(manifest["reach_cm"]),
         features=arrays["features"], fingers=arrays["fingers"], dof_index=dof_index,
