@@ -1,7 +1,27 @@
-"""usdhands: finger animation for skeletal characters in USD, glTF and BVH files."""
+"""usdhands: finger animation for skeletal characters in USD, glTF and BVH files.
+
+The everyday API::
+
+    import usdhands
+    clip = usdhands.read_clip("take.usda")          # a Clip: time-major arrays, xyzw quaternions
+    hands = usdhands.detect_hands(clip.skeleton)    # a HandMap
+    usdhands.write_clip("take.usda", clip, "take_out.usda")
+
+Importing usdhands imports neither ``pxr`` nor ``pygltflib``; a format's library is
+imported when a file of that format is first read or written.
+"""
 
 __version__ = "0.1.0"
 
 from usdhands.errors import UsdHandsError  # noqa: E402
+from usdhands.formats.io import read_asset, read_clip, write_asset, write_clip  # noqa: E402
+from usdhands.model import (  # noqa: E402
+    FINGERS, SIDES, Clip, FingerCurves, HandMap, HandSide, Skeleton, apply_finger_curves, finger_curves,
+)
+from usdhands.model.hand_detection import detect_hands, load_handmap  # noqa: E402
 
-__all__ = ["__version__", "UsdHandsError"]
+__all__ = [
+    "__version__", "UsdHandsError", "read_asset", "read_clip", "write_asset", "write_clip", "Clip",
+    "Skeleton", "HandMap", "HandSide", "FINGERS", "SIDES", "FingerCurves", "finger_curves",
+    "apply_finger_curves", "detect_hands", "load_handmap",
+]
