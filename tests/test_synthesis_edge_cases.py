@@ -134,3 +134,93 @@ def test_damaged_databases_are_refused_with_the_reason(capsys, tmp_path, sample_
     status, _, err = _run(capsys, "synthesize", sample_assets / "conversation_bodyonly.glb", "-o", out,
                           "--db", tmp_path / "db1")
     assert status == 2 and "manifest.json: manifest is not valid JSON: Expecting ',' delimiter" in err
+
+
+@pytest.fixture(scope="module")
+def tiny_db():
+    from synthesis_data import gesture_set, tiny_handmap
+
+    from usdhands.algorithms.finger_database import DatabaseClip, build_database
+
+    hm = tiny_handmap()
+    return build_database([DatabaseClip(c, hm, lab, c.name) for lab, c in gesture_set(2)], fps=30, mirror=True)
+
+
+def test_a_120_fps_input_gets_the_30_fps_result_at_every_fourth_frame(tiny_db):
+    from synthesis_data import gesture_clip, tiny_handmap, tiny_skeleton
+
+    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.model.rotations import quat_angle_deg
+
+    hm = tiny_handmap()
+    clip = gesture_clip(tiny_skeleton(), "ok", np.random.default_rng(7), with_fingers=False)
+    fast = clip.resample(120.0)
+    assert fast.num_frames == 4 * (clip.num_frames - 1) + 1
+    a = synthesize_clip(clip, hm, tiny_db)
+    b = synthesize_clip(fast, hm, tiny_db)
+    assert b.clip.fps == 120.0 and b.clip.num_frames == fast.num_frames
+    fingers = sorted(clip.skeleton.index(j) for s in hm.sides for j in s.finger_joints)
+    for side in ("left", "right"):  # the same decisions, at the database's rate
+        assert np.array_equal(a.hands[side].chosen, b.hands[side].chosen)
+        assert np.array_equal(a.hands[side].bounds, b.hands[side].bounds)
+    assert quat_angle_deg(b.clip.rotations[::4, fingers], a.clip.rotations[:, fingers]).max() < 1e-3
+    assert np.ptp(b.clip.rotations[:, fingers], axis=0).max() > 0.05
+
+
+def test_database_at_another_rate_serves_a_30_fps_clip(tiny_db):
+    from synthesis_data import gesture_clip, gesture_set, tiny_handmap, tiny_skeleton
+
+    from usdhands.algorithms.finger_database import DatabaseClip, build_database
+    from usdhands.algorithms.synthesis import synthesize_clip
+
+    hm = tiny_handmap()
+    db24 = build_database([DatabaseClip(c, hm, lab, c.name) for lab, c in gesture_set(2)], fps=24)
+    assert db24.fps == 24.0
+    # the same takes, fewer frames; segments still 0.33 s (8 frames) to 2 s (48 frames)
+    assert db24.num_frames < tiny_db.num_frames / 2 * 0.85
+    lengths = db24.segments[:, 1] - db24.segments[:, 0]
+    assert lengths.min() >= 8 and lengths.max() <= 48
+    clip = gesture_clip(tiny_skeleton(), "wipe", np.random.default_rng(9), with_fingers=False)
+    res = synthesize_clip(clip, hm, db24)
+    assert res.clip.fps == clip.fps and res.clip.num_frames == clip.num_frames
+    h = res.hands["left"]
+    assert h.bounds[-1] == int(np.floor(clip.duration * 24 + 1e-6)) + 1  # searched at 24 fps
+    labels = db24.segment_labels()
+    assert sum(labels[s] == "wipe" for s in h.chosen) >= len(h.chosen) - 1
+
+
+def test_z_up_usd_through_the_cli_gets_the_fingers_of_its_y_up_twin(tiny_db, capsys, tmp_path):
+    from synthesis_data import gesture_clip, tiny_skeleton
+
+    from usdhands.algorithms.finger_database import save_database
+    from usdhands.formats.io import read_asset, write_asset
+    from usdhands.model import Clip, Skeleton
+    from usdhands.model.asset import Asset
+    from usdhands.model.rotations import matrix_to_quat, quat_angle_deg, quat_multiply
+
+    sk = tiny_skeleton()
+    clip = gesture_clip(sk, "big", np.random.default_rng(11), with_fingers=False)
+    V = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])  # Y-up -> Z-up
+    qv = matrix_to_quat(V)
+    rest_q, rest_t = np.array(sk.rest_rotations), np.array(sk.rest_translations)
+    rest_q[0], rest_t[0] = quat_multiply(qv, rest_q[0]), V @ rest_t[0]
+    zsk = Skeleton(sk.joint_names, sk.parents, rest_t, rest_q, meters_per_unit=sk.meters_per_unit, up_axis="Z",
+                   name=sk.name)
+    rot, tr = np.array(clip.rotations), np.array(clip.translations)
+    rot[:, 0], tr[:, 0] = quat_multiply(qv[None], rot[:, 0]), tr[:, 0] @ V.T
+    zclip = Clip(zsk, clip.fps, rot, tr, name=clip.name)
+    y_in, z_in = tmp_path / "y.usda", tmp_path / "z.usda"
+    write_asset(Asset("memory", [sk], [clip], []), y_in)
+    write_asset(Asset("memory", [zsk], [zclip], []), z_in)
+    db = save_database(tiny_db, tmp_path / "db")
+    for src in (y_in, z_in):
+        status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / f"out_{src.name}", "--db", db)
+        assert status == 0, err
+    ya, za = read_asset(tmp_path / "out_y.usda"), read_asset(tmp_path / "out_z.usda")
+    assert za.skeletons[0].up_axis == "Z" and ya.skeletons[0].up_axis == "Y"
+    yc, zc = ya.clips[0], za.clips[0]
+    fingers = [j for j, n in enumerate(sk.short_names) if "Hand" in n and not n.endswith("Hand")]
+    assert np.ptp(yc.rotations[:, fingers], axis=0).max() > 0.05
+    assert quat_angle_deg(yc.rotations[:, fingers], zc.rotations[:, fingers]).max() < 1e-3
+    body = [j for j in range(sk.num_joints) if j not in fingers]
+    assert quat_angle_deg(zc.rotations[:, body], zclip.rotations[:, body]).max() < 1e-3
