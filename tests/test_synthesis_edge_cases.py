@@ -224,3 +224,47 @@ def test_z_up_usd_through_the_cli_gets_the_fingers_of_its_y_up_twin(tiny_db, cap
     assert quat_angle_deg(yc.rotations[:, fingers], zc.rotations[:, fingers]).max() < 1e-3
     body = [j for j in range(sk.num_joints) if j not in fingers]
     assert quat_angle_deg(zc.rotations[:, body], zclip.rotations[:, body]).max() < 1e-3
+
+
+def test_synthesize_usd_as_an_override_layer_and_bad_outputs_before_any_work(sample_assets, capsys, tmp_path,
+                                                                              monkeypatch):
+    from pxr import Sdf
+
+    from usdhands.algorithms import synthesis
+    from usdhands.model.hand_detection import detect_hands
+    from usdhands.model.rotations import quat_angle_deg
+
+    src = sample_assets / "conversation_bodyonly.usdc"
+    full, layer = tmp_path / "full.usda", tmp_path / "layer.usda"
+    assert _run(capsys, "synthesize", src, "-o", full)[0] == 0
+    status, _, err = _run(capsys, "synthesize", src, "-o", layer, "--layer")
+    assert status == 0, err
+    lay = Sdf.Layer.FindOrOpen(str(layer))
+    assert [Sdf.ComputeAssetPathRelativeToLayer(lay, p) for p in lay.subLayerPaths] == [str(src)]
+    specs = []
+    lay.Traverse("/", lambda path: specs.append(lay.GetObjectAtPath(path)))
+    prims = [x for x in specs if isinstance(x, Sdf.PrimSpec)]
+    assert prims and all(x.specifier == Sdf.SpecifierOver for x in prims)  # overrides only, no new prims
+    props = {x.name for x in specs if isinstance(x, Sdf.PropertySpec)}
+    assert props == {"rotations"}  # the joint rotations, nothing else (no meshes, translations, joints)
+    a, b, c = read_clip(src), read_clip(layer), read_clip(full)
+    hm = detect_hands(a.skeleton)
+    fingers = sorted(a.skeleton.index(j) for s in hm.sides for j in s.finger_joints)
+    body = [j for j in range(a.num_joints) if j not in fingers]
+    assert quat_angle_deg(b.rotations, c.rotations).max() < 1e-3  # the layer composes to the full output
+    assert quat_angle_deg(b.rotations[:, body], a.rotations[:, body]).max() < 1e-3
+    assert np.array_equal(b.translations, a.translations)
+    # a bad output fails at once, before reading or synthesizing anything
+    monkeypatch.setattr(synthesis, "synthesize_clip", lambda *a, **k: pytest.fail("synthesized"))
+    glb = sample_assets / "conversation_bodyonly.glb"
+    for argv, message in (
+        ([glb, "-o", tmp_path / "x.usda", "--layer"], f"{glb}: --layer needs a USD input: the layer sublayers it"),
+        ([src, "-o", tmp_path / "x.glb", "--layer"], f"{tmp_path / 'x.glb'}: --layer needs a USD output"),
+        ([src, "-o", tmp_path / "x.glb"], f"{tmp_path / 'x.glb'}: the output is the input file with fingers added, "
+                                          f"so it must have the input's format (.usdc)"),
+        ([src, "-o", src], f"{src}: output path equals the input"),
+        ([src, "-o", tmp_path / "no" / "x.usda"], f"{tmp_path / 'no' / 'x.usda'}: output folder"),
+    ):
+        status, _, err = _run(capsys, "synthesize", *argv)
+        assert status == 2 and err.startswith(f"usdhands: error: {message}"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full.usda", "layer.usda"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.commands._output import layer_options
 from usdhands.errors import UsdHandsError
 
 
@@ -52,6 +53,7 @@ def run(args) -> int:
     from usdhands.model.asset import Asset
     from usdhands.model.handmap import SIDES, HandMap
 
+    _check_output(args)
     cfg = load_config(args.config)
     if args.k is not None:
         if args.k < 1:
@@ -98,8 +100,7 @@ def run(args) -> int:
         out = write_asset(Asset(str(args.file), (result.clip.skeleton,), (result.clip,), ()), args.output,
                           inputs=(args.file,))
     else:
-        options = {"as_layer": True} if args.layer else {}
-        out = write_clip(args.file, result.clip, args.output, **options)
+        out = write_clip(args.file, result.clip, args.output, **layer_options(args.layer, args.file, args.output))
     report = _report(result, db, cfg)
     report["grafted_joints"] = added
     report["output"] = str(out)
@@ -125,6 +126,20 @@ def run(args) -> int:
         print(f"wrote {p}")
     print(f"wrote {out}")
     return 0
+
+
+def _check_output(args) -> None:
+    """Refuse a bad output before any work: the input itself, a missing folder, --layer
+    without USD on both sides, or another format than the input's (without --graft-hands,
+    which writes a new file in any format)."""
+    from usdhands.formats.registry import check_output_path, handler_for
+
+    check_output_path(args.output, args.file)
+    layer_options(args.layer, args.file, args.output)
+    if not args.graft_hands and args.file.exists():
+        if handler_for(args.output, "write") is not handler_for(args.file, "read"):
+            raise UsdHandsError(f"the output is the input file with fingers added, so it must have the input's "
+                                f"format ({args.file.suffix}); use 'usdhands convert' first or after", path=args.output)
 
 
 def _graft(args, asset, clip, handmap, db, sides, explicit):
