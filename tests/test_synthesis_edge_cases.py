@@ -268,3 +268,37 @@ def test_synthesize_usd_as_an_override_layer_and_bad_outputs_before_any_work(sam
         status, _, err = _run(capsys, "synthesize", *argv)
         assert status == 2 and err.startswith(f"usdhands: error: {message}"), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["full.usda", "layer.usda"]
+
+
+def test_db_build_labels_file_mirror_fps_and_refusals(shared_assets, sample_assets, capsys, tmp_path):
+    leap = sorted((shared_assets / "leap_hands").glob("*.bvh"))
+    csv = tmp_path / "labels.csv"
+    csv.write_text("# file,label\nfingers-ok.bvh,ok\ngesture-pointing,point\n"
+                   f"{leap[2]},type\n")
+    status, out, err = _run(capsys, "db", "build", *leap, "-o", tmp_path / "db", "--labels-file", csv,
+                            "--mirror", "--fps", "20", "--json")
+    assert status == 0, err
+    info = json.loads(out)
+    assert info["labels"] == ["ok", "point", "type"] and info["tracks"] == 6
+    db = load_database(tmp_path / "db")
+    assert db.fps == 20.0 and [c["label"] for c in db.clips] == ["ok", "point", "type"]
+    # mirrored twins: right-hand recordings also serve the left hand, features flipped in x
+    assert sorted(db.tracks[:, 3].tolist()) == [0, 0, 0, 1, 1, 1] and set(db.hands) == {"left", "right"}
+    r, m = db.tracks[0], db.tracks[1]
+    assert (r[3], r[4], m[3], m[4]) == (1, 0, 0, 1)
+    fr, fm = np.asarray(db.features[r[0]:r[1]]), np.asarray(db.features[m[0]:m[1]])
+    assert np.allclose(fm[:, 0], -fr[:, 0]) and np.allclose(fm[:, 1:4], fr[:, 1:4])
+    # 245 frames at 40 fps = 6.1 s -> 123 frames at 20 fps
+    assert r[1] - r[0] == 123
+    for argv, message in (
+        ([leap[0], "-o", tmp_path / "x", "--labels-file", tmp_path / "none.csv"], "no such labels file"),
+        ([leap[0], "-o", tmp_path / "x", "--labels", "(", ], "bad --labels regular expression '('"),
+        ([leap[0], "-o", tmp_path / "x", "--labels", "x", "--labels-file", csv], "give --labels or --labels-file, not both"),
+        ([sample_assets / "conversation_bodyonly.glb", leap[0], "-o", tmp_path / "x", "--labels-file", csv],
+         "no label for 'conversation_bodyonly.glb'"),
+        ([shared_assets / "usd_cesiumman" / "CesiumMan.usdz", "-o", tmp_path / "x"], "no hand found"),
+        ([leap[0], "-o", tmp_path / "x", "--fps", "0"], "--fps must be positive, got 0.0"),
+    ):
+        status, _, err = _run(capsys, "db", "build", *argv)
+        assert status == 2 and message in err and err.count("\n") == 1, err
+    assert not (tmp_path / "x").exists()
