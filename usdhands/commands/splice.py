@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.commands._output import add_layer_argument, layer_options
 from usdhands.errors import UsdHandsError
 
 MATCH_RE = re.compile(r"^(\d+):(\d+)(?::(\d+))?$")
@@ -55,7 +56,7 @@ def register(sub) -> None:
     p.add_argument("--hands-animation", default=None, help="HANDS animation name or index (default the first)")
     p.add_argument("--body-handmap", type=Path, default=None, help="hand map JSON for BODY (overrides detection)")
     p.add_argument("--hands-handmap", type=Path, default=None, help="hand map JSON for HANDS (overrides detection)")
-    p.add_argument("--layer", action="store_true", help="USD: write a sparse override layer over BODY")
+    add_layer_argument(p, "BODY")
     p.set_defaults(func=run)
 
 
@@ -132,9 +133,7 @@ def run(args) -> int:
     if args.blend < 0:
         raise UsdHandsError(f"bad --blend {args.blend}: expected a number of frames >= 0")
     check_output_path(args.output, args.body, args.hands)
-    opts = {"as_layer": True} if args.layer else {}
-    if args.layer and args.output.suffix.lower() not in (".usd", ".usda", ".usdc"):
-        raise UsdHandsError("--layer needs a USD output (.usd, .usda, .usdc)", path=args.output)
+    opts = layer_options(args.layer, args.body, args.output)
     body = read_clip(args.body, animation=args.animation)
     hands = read_clip(args.hands, animation=args.hands_animation)
     n, m0, hand_fps = body.num_frames, hands.num_frames, hands.fps
