@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from usdhands.algorithms.reduction import (
-    RangeRule, RmsdRule, continuous_euler_curves, pair_rmsd, paper_style_names, parse_steps, reduce_curves, standardise,
+    RangeRule, RmsdRule, align_euler_branches, continuous_euler_curves, pair_rmsd, paper_style_names, parse_steps, reduce_curves, standardise,
 )
 from usdhands.algorithms.reduction_model import Constant, ReductionModel, Relation
 from usdhands.errors import ConfigError
@@ -514,7 +514,11 @@ def test_reduce_then_expand_reproduces_the_reduced_clip(shared_assets, tmp_path,
     assert quat_angle_deg(r_red, r_again).max() < 2e-6
 
     # the reduced clip really is the model's rebuild of the original: dependents follow their controllers
-    _, _, curves, _ = load_finger_curves(reduced, None, None, None, "XYZ")
+    # (read as expand reads curves for a model: continuity and Euler branch judged on the free curves)
+    from usdhands.algorithms.reduction import model_curves
+
+    red_clip = read_clip(reduced)
+    curves = model_curves(red_clip, [red_clip.skeleton.index(c.rsplit(".", 1)[0]) for c in m.curves[::3]], m)
     v = curves.values
     col = {n: k for k, n in enumerate(curves.names)}
     for r in m.relations:
@@ -567,7 +571,8 @@ def test_cli_user_mistakes(shared_assets, tmp_path, capsys):
     model.save(tmp_path / "m.json")
     code, _, err = run_cli(capsys, "expand", src, "--model", tmp_path / "m.json", "-o", tmp_path / "o.bvh")
     assert code == 2
-    assert err == f"usdhands: error: {src}: joint 'LeftHandIndex1' of the reduction model m.json is not in the file\n"
+    assert err == (f"usdhands: error: {src}: none of the joints of the reduction model m.json is in the file "
+                   "(the model has LeftHandIndex1)\n")
     assert not (tmp_path / "o.bvh").exists()
 
 
@@ -690,3 +695,157 @@ def test_reduce_expand_through_usd(sample_assets, tmp_path, capsys):
     assert quat_angle_deg(r_red, r_orig).max() < 1e-9
     assert quat_angle_deg(r_red, r_again).max() < 2e-5  # USD stores quatf (float32): about 6e-6 degrees
     assert quat_angle_deg(r_red, read_clip(src).rotations).max() > 0.1
+
+
+def _renamed(path, out, renames: dict):
+    """Write the clip of ``path`` as BVH with some joints renamed: a rig that lacks those joints."""
+    import dataclasses
+
+    from usdhands.formats.io import read_clip, write_asset
+    from usdhands.model.asset import Asset
+
+    clip = read_clip(path)
+    sk = dataclasses.replace(clip.skeleton, joint_names=tuple(renames.get(n, n) for n in clip.skeleton.joint_names))
+    clip = clip.replace(skeleton=sk)
+    write_asset(Asset(path=None, skeletons=(sk,), clips=(clip,)), out)
+    return out
+
+
+def test_expand_onto_another_clip_of_the_same_rig(shared_assets, tmp_path, capsys):
+    """A model made on one recording rebuilds another of the same rig from that recording's free curves."""
+    from usdhands.algorithms.reduction import model_curves
+    from usdhands.formats.io import read_clip
+    from usdhands.model.finger_dofs import apply_finger_curves
+    from usdhands.model.rotations import quat_angle_deg
+
+    model = tmp_path / "typing.json"
+    assert run_cli(capsys, "reduce", shared_assets.joinpath(*LEAP), "--model", model)[0] == 0
+    m = ReductionModel.load(model)
+    other = shared_assets / "leap_hands" / "gesture-pointing.bvh"
+    out = tmp_path / "pointing.bvh"
+    code, _, err = run_cli(capsys, "expand", other, "--model", model, "-o", out)
+    assert code == 0, err
+    clip = read_clip(other)
+    joints = [clip.skeleton.index(c.rsplit(".", 1)[0]) for c in m.curves[::3]]
+    before = model_curves(clip, joints, m)
+    col = {n: k for k, n in enumerate(before.names)}
+    b = before.values
+    want = m.apply(b, before.names)
+    for c in m.free_curves:  # the other take's own keyed curves are kept
+        assert np.array_equal(want[:, col[c]], b[:, col[c]])
+    for r in m.relations:  # the dependents follow the other take's controllers by the stored map
+        assert np.allclose(want[:, col[r.dependent]], r.scale * b[:, col[r.controlling]] + r.offset)
+    for c in m.constants:
+        assert np.all(want[:, col[c.curve]] == c.value)
+    expected = apply_finger_curves(clip, before.with_values(want))
+    got = read_clip(out)
+    assert quat_angle_deg(got.rotations, expected.rotations).max() < 1e-4  # BVH stores 6 decimals
+    assert quat_angle_deg(got.rotations, clip.rotations).max() > 1.0  # something was rebuilt
+    # expanding the expansion changes nothing, though this recording's rotations jump between frames
+    # (tracking glitches) and rebuilt curves leave the first frame's Euler range
+    again = tmp_path / "again.bvh"
+    assert run_cli(capsys, "expand", out, "--model", model, "-o", again)[0] == 0
+    assert quat_angle_deg(read_clip(again).rotations, got.rotations).max() < 1e-4
+
+
+def test_expand_onto_a_rig_lacking_joints(shared_assets, tmp_path, capsys):
+    src = shared_assets.joinpath(*LEAP)
+    model = tmp_path / "typing.json"
+    assert run_cli(capsys, "reduce", src, "--model", model)[0] == 0
+    m = ReductionModel.load(model)
+    assert "rIndex2.y" in m.controlling_curves and "rPinky3.x" in m.constant_curves
+    # a controlling joint missing: nothing can be rebuilt from it
+    no_ctrl = _renamed(src, tmp_path / "no_index2.bvh", {"rIndex2": "rIndexB"})
+    code, out, err = run_cli(capsys, "expand", no_ctrl, "--model", model, "-o", tmp_path / "o.bvh")
+    driven = ", ".join(r.dependent for r in m.relations if r.controlling.startswith("rIndex2."))
+    assert code == 2 and out == ""
+    assert err == (f"usdhands: error: {no_ctrl}: controlling joint rIndex2 of the reduction model typing.json is not "
+                   f"in the file (needed to rebuild {driven})\n")
+    assert not (tmp_path / "o.bvh").exists()
+    # a joint with constant curves only missing: the rest is rebuilt, with a note
+    no_tip = _renamed(src, tmp_path / "no_pinky3.bvh", {"rPinky3": "rPinkyTip"})
+    out_path = tmp_path / "o2.bvh"
+    code, out, err = run_cli(capsys, "expand", no_tip, "--model", model, "-o", out_path)
+    assert code == 0, err
+    assert err == "usdhands: note: joints of the reduction model typing.json that no_pinky3.bvh lacks are skipped: " \
+                  "rPinky3\n"
+    assert f"rebuilt {len(m.relations)} dependent curves" in out and f"set {len(m.constants) - 3} constants" in out
+    # no joint at all in common
+    none = _renamed(src, tmp_path / "none.bvh", {n: n + "_x" for n in ("rThumb1", "rThumb2", "rThumb3", "rIndex1",
+                                                                         "rIndex2", "rIndex3", "rMid1", "rMid2",
+                                                                         "rMid3", "rRing1", "rRing2", "rRing3",
+                                                                         "rPinky1", "rPinky2", "rPinky3")})
+    code, _, err = run_cli(capsys, "expand", none, "--model", model, "-o", tmp_path / "o3.bvh")
+    assert code == 2 and err.startswith(f"usdhands: error: {none}: none of the joints of the reduction model "
+                                        "typing.json is in the file (the model has rThumb1, rThumb2, rThumb3, "
+                                        "rIndex1, rIndex2, rIndex3, ... (15 in all))")
+
+
+def test_model_subset_keeps_what_rebuilds_the_kept_curves():
+    m = ReductionModel(("a.x", "b.x", "c.x", "d.x"), (Constant("d.x", 2.0),),
+                       (Relation("b.x", "a.x", "rmsd1", 0.1, 2.0, 1.0),))
+    s = m.subset(["a.x", "b.x", "c.x"])
+    assert s.curves == ("a.x", "b.x", "c.x") and s.constants == () and s.relations == m.relations
+    assert m.subset(["a.x", "c.x", "d.x"]).relations == ()
+    with pytest.raises(ValueError, match="Curve 'b.x' is rebuilt from 'a.x', which is not kept"):
+        m.subset(["b.x", "c.x"])
+
+
+def test_reduce_and_expand_write_usd_override_layers(sample_assets, tmp_path, capsys):
+    from usdhands.formats.io import read_clip
+    from usdhands.model.rotations import quat_angle_deg
+
+    src = sample_assets / "humanoid.usda"
+    full, layer, model = tmp_path / "full.usda", tmp_path / "layer.usda", tmp_path / "m.json"
+    assert run_cli(capsys, "reduce", src, "-o", full, "--model", model)[0] == 0
+    code, _, err = run_cli(capsys, "reduce", src, "-o", layer, "--layer")
+    assert code == 0, err
+    text = layer.read_text()
+    assert "subLayers" in text[:600] and "humanoid.usda" in text[:600] and "def Mesh" not in text
+    assert len(text) < full.stat().st_size
+    assert quat_angle_deg(read_clip(layer).rotations, read_clip(full).rotations).max() < 1e-5
+    again = tmp_path / "again.usda"
+    code, _, err = run_cli(capsys, "expand", layer, "--model", model, "-o", again, "--layer")
+    assert code == 0, err
+    assert "@./layer.usda@" in again.read_text()[:600]
+    assert quat_angle_deg(read_clip(again).rotations, read_clip(full).rotations).max() < 2e-5
+    for argv, message in ((["reduce", src, "-o", tmp_path / "x.glb", "--layer"],
+                           f"{tmp_path / 'x.glb'}: --layer needs a USD output (.usd, .usda, .usdc)"),
+                          (["reduce", src, "--layer"], "--layer needs -o OUT"),
+                          (["expand", shared_bvh(), "--model", model, "-o", tmp_path / "x.usda", "--layer"],
+                           f"{shared_bvh()}: --layer needs a USD input: the layer sublayers it")):
+        code, out, err = run_cli(capsys, *argv)
+        assert code == 2 and err == f"usdhands: error: {message}\n", argv
+
+
+def shared_bvh() -> Path:
+    return ROOT / "sample_assets" / "humanoid.bvh"
+
+
+def test_align_euler_branches_puts_each_joint_on_the_reference_branch():
+    t = np.linspace(0, 1, 50)
+    e = np.stack([30 + 20 * t, 60 + 50 * t, -40 + 10 * t,   # joint 0: the middle angle passes 90
+                  10 * t, 5 * t, -5 * t], axis=1)            # joint 1
+    alt = e.copy()
+    alt[:, 0:3] = np.stack([e[:, 0] + 180 - 360, 180 - e[:, 1], e[:, 2] + 180], axis=1)  # same rotations
+    ref = e.mean(axis=0)
+    back = align_euler_branches(alt, ref)
+    assert np.allclose(back, e)
+    assert np.allclose(align_euler_branches(e, ref), e)
+    # judged only where there is a reference; without one a joint stays as it is
+    only_x = np.where(np.arange(6) == 0, ref, np.nan)
+    assert np.allclose(align_euler_branches(alt, only_x)[:, :3], e[:, :3])
+    assert np.array_equal(align_euler_branches(alt, np.full(6, np.nan)), alt)
+    with pytest.raises(ValueError, match=r"Expected reference to have shape \(6,\), got \(3,\)"):
+        align_euler_branches(e, ref[:3])
+
+
+def test_continuity_measured_on_chosen_angles():
+    """Jumps in angles that will be rebuilt must not decide the branch when continuity is measured on the kept ones."""
+    v = np.array([[10.0, 80.0, 30.0], [185.0, 82.0, 205.0]])  # x and z jump by 175 (a tracking glitch)
+    # on all angles the twin of frame 1, (5, 98, 25), is nearer frame 0 (distance 28 against 352)
+    assert np.allclose(continuous_euler_curves(v)[1], [5.0, 98.0, 25.0])
+    # on y alone, 82 is nearer 80 than 98 is
+    assert np.allclose(continuous_euler_curves(v, use=np.array([False, True, False])), v)
+    with pytest.raises(ValueError, match=r"Expected use to have shape \(3,\), got \(2,\)"):
+        continuous_euler_curves(v, use=np.array([True, False]))

@@ -64,8 +64,8 @@ from usdhands.model.skeleton import short_joint_name
 
 __all__ = [
     "DEFAULT_STEPS", "DEGENERATE_RANGE_DEG", "RangeRule", "RmsdRule", "parse_steps", "format_steps",
-    "curve_statistics", "standardise", "pair_rmsd", "StepResult", "ReductionResult", "reduce_curves",
-    "paper_style_names", "continuous_euler_curves",
+    "curve_statistics", "standardise", "align_euler_branches", "pair_rmsd", "StepResult", "ReductionResult", "reduce_curves",
+    "paper_style_names", "continuous_euler_curves", "model_curves", "expand_clip",
 ]
 
 DEFAULT_STEPS = "range<1,rmsd<0.3,range<5,rmsd<0.5"
@@ -450,7 +450,8 @@ def reduce_curves(values: np.ndarray, names, steps=DEFAULT_STEPS, *, groups=None
             relations.append(Relation.from_statistics(names[i], names[f], kind, float(dist),
                                                       mean[i], std[i], mean[f], std[f]))
         model = ReductionModel(names, constants, tuple(relations), order=order, condition=condition,
-                               source=source, metadata=metadata)
+                               source=source, metadata=metadata,
+                               means={n: float(mean[k]) for k, n in enumerate(names)})
         free = ~constant & (final < 0)
         by_group = {g: int(np.sum(free[codes == c])) for c, g in _group_items(group_labels, codes)}
         rms, mx, per_curve, per_curve_max = _errors(v, constant, final, sign, mean, std, vmin, vmax,
@@ -568,7 +569,7 @@ def _group_items(labels, codes):
 
 
 # ---------------------------------------------------------------------------- Euler branches
-def continuous_euler_curves(values: np.ndarray) -> np.ndarray:
+def continuous_euler_curves(values: np.ndarray, use: np.ndarray | None = None) -> np.ndarray:
     """Euler curves that follow the rotation through gimbal regions without jumps.
 
     Every rotation has two Tait-Bryan triples, ``(a, b, c)`` and
@@ -584,6 +585,11 @@ def continuous_euler_curves(values: np.ndarray) -> np.ndarray:
     values : (T, 3N) float
         Degrees; columns ``3i, 3i+1, 3i+2`` are the three angles of joint ``i`` in the
         order's sequence (the layout of :class:`~usdhands.model.finger_dofs.FingerCurves`).
+    use : (3N,) bool, optional
+        The angles that measure nearness (all when omitted; all of a joint none of whose
+        angles is used). ``usdhands expand`` measures on the curves it keeps, so that a
+        rotation jump (a tracking glitch) is followed the same way in a clip and in its
+        expansion.
 
     Returns
     -------
@@ -598,9 +604,16 @@ def continuous_euler_curves(values: np.ndarray) -> np.ndarray:
         return v.copy()
     e = v.reshape(T, -1, 3)
     alt = np.stack([e[..., 0] + 180.0, 180.0 - e[..., 1], e[..., 2] + 180.0], axis=-1)
+    w = np.ones(e.shape[1:])
+    if use is not None:
+        u = np.asarray(use, dtype=bool)
+        if u.shape != (v.shape[1],):
+            raise ValueError(f"Expected use to have shape ({v.shape[1]},), got {u.shape}")
+        u = u.reshape(-1, 3)
+        w = np.where(u.any(axis=1, keepdims=True), u, True).astype(np.float64)
 
-    def dist(a, b):  # L1 distance of triples, each angle modulo 360
-        return np.abs((a - b + 180.0) % 360.0 - 180.0).sum(axis=-1)
+    def dist(a, b):  # L1 distance of triples over the used angles, each angle modulo 360
+        return (np.abs((a - b + 180.0) % 360.0 - 180.0) * w).sum(axis=-1)
 
     # (a, b, c) -> (a+180, 180-b, c+180) preserves these distances, so whether frame t
     # switches branch relative to frame t-1 does not depend on the branch t-1 is on:
@@ -612,6 +625,112 @@ def continuous_euler_curves(values: np.ndarray) -> np.ndarray:
     steps = np.round(np.diff(chosen, axis=0) / 360.0)
     shift = np.concatenate([np.zeros((1,) + chosen.shape[1:]), -360.0 * np.cumsum(steps, axis=0)])
     return (chosen + shift).reshape(v.shape)
+
+
+def align_euler_branches(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Continuous Euler curves put, joint by joint, on the branch whose means are nearest ``reference``.
+
+    A continuous curve triple ``(a, b, c)`` has a continuous twin ``(a + 180, 180 - b,
+    c + 180)`` describing the same rotations. Read back from rotations, a triple starts
+    on the branch with ``|b| <= 90`` at the first frame (:func:`continuous_euler_curves`),
+    which need not be the branch the curves were made on: a rebuilt curve can leave that
+    range. This picks, per joint, the triple or its twin (shifted by whole turns so that
+    its first frame lies in ``(-180, 180]``, as a curve read from rotations starts),
+    whichever has means nearer the reference (squared distance over the angles that have
+    a reference; the triple on a tie or without a reference).
+
+    Parameters
+    ----------
+    values : (T, 3N) float
+        Degrees, continuous (:func:`continuous_euler_curves`), joint ``i`` in columns
+        ``3i .. 3i+2``.
+    reference : (3N,) float
+        Degrees: the means to match; NaN where unknown.
+
+    Returns
+    -------
+    (T, 3N) float64
+        Degrees; the same rotations frame by frame.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    ref = np.asarray(reference, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] % 3:
+        raise ValueError(f"Expected values to have shape (T, 3N), got {v.shape}")
+    if ref.shape != (v.shape[1],):
+        raise ValueError(f"Expected reference to have shape ({v.shape[1]},), got {ref.shape}")
+    T = v.shape[0]
+    if T == 0:
+        return v.copy()
+    e = v.reshape(T, -1, 3)
+    r = ref.reshape(-1, 3)
+    known = np.isfinite(r)
+    alt = np.stack([e[..., 0] + 180.0, 180.0 - e[..., 1], e[..., 2] + 180.0], axis=-1)
+    alt = alt - 360.0 * np.ceil((alt[:1] - 180.0) / 360.0)  # first frame into (-180, 180]
+
+    def dist(c):
+        return np.where(known, (c.mean(axis=0) - np.where(known, r, 0.0)) ** 2, 0.0).sum(axis=-1)
+
+    take = dist(alt) < dist(e) - 1e-9  # (N,)
+    return np.where(take[None, :, None], alt, e).reshape(v.shape)
+
+
+def model_curves(clip, joints, model: ReductionModel):
+    """A clip's finger curves read for a model: continuous, on the Euler branch the model was made on.
+
+    Continuity (:func:`continuous_euler_curves`) and the branch
+    (:func:`align_euler_branches`, against ``model.means``) are both judged on the
+    model's free curves, which :meth:`ReductionModel.apply` keeps: a clip and its
+    expansion are read the same way, so expanding an expansion changes nothing even
+    where a recording's rotations jump (tracking glitches).
+
+    Parameters
+    ----------
+    clip : Clip
+    joints : sequence of int
+        Skeleton indices of the model's joints, in the model's curve order.
+    model : ReductionModel
+
+    Returns
+    -------
+    FingerCurves
+        Degrees, in ``model.order``.
+    """
+    from usdhands.model.finger_dofs import finger_curves
+
+    curves = finger_curves(clip, list(joints), model.order)
+    free = set(model.free_curves)
+    use = np.array([c in free for c in curves.names])
+    values = continuous_euler_curves(curves.values, use=use)
+    if model.means:
+        values = align_euler_branches(values, np.array([model.means.get(c, np.nan) if u else np.nan
+                                                        for c, u in zip(curves.names, use)]))
+    return curves.with_values(values)
+
+
+def expand_clip(clip, joints, model: ReductionModel):
+    """The clip with every constant and dependent finger curve of ``model`` rebuilt from its free curves.
+
+    Parameters
+    ----------
+    clip : Clip
+    joints : sequence of int
+        Skeleton indices of the model's joints, in the model's curve order.
+    model : ReductionModel
+
+    Returns
+    -------
+    Clip
+        Only the model's joints' rotations change.
+
+    Raises
+    ------
+    ValueError
+        The joints' curve names (``<joint>.<axis>`` in ``model.order``) do not cover the model's curves.
+    """
+    from usdhands.model.finger_dofs import apply_finger_curves
+
+    curves = model_curves(clip, joints, model)
+    return apply_finger_curves(clip, curves.with_values(model.apply(curves.values, curves.names)))
 
 
 # ---------------------------------------------------------------------------- naming

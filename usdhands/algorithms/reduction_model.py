@@ -24,7 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
@@ -130,6 +130,10 @@ class ReductionModel:
         The simplification the model was made with (``"range < 5 + rmsd < 0.5"``).
     source : str
         Where it was made from (a file name), for the record.
+    means : dict of str to float
+        Mean (degrees) of each curve the model was made from, for the curves it knows;
+        they pick the Euler branch when curves are read back from rotations
+        (:func:`~usdhands.algorithms.reduction.align_euler_branches`).
     """
 
     curves: tuple[str, ...]
@@ -139,9 +143,11 @@ class ReductionModel:
     condition: str = ""
     source: str = ""
     metadata: dict = field(default_factory=dict)
+    means: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "curves", tuple(self.curves))
+        object.__setattr__(self, "means", {str(k): float(v) for k, v in dict(self.means).items()})
         object.__setattr__(self, "constants", tuple(self.constants))
         object.__setattr__(self, "relations", tuple(self.relations))
         known = set(self.curves)
@@ -162,6 +168,8 @@ class ReductionModel:
             if r.dependent in seen:
                 raise ValueError(f"Curve {r.dependent!r} is rebuilt twice")
             seen.add(r.dependent)
+        if not set(self.means) <= known:
+            raise ValueError(f"Means of curves {sorted(set(self.means) - known)[:3]} that are not among the model's")
         for r in self.relations:
             if r.controlling in seen:
                 raise ValueError(f"Controlling curve {r.controlling!r} is itself rebuilt; chains must be resolved")
@@ -193,6 +201,28 @@ class ReductionModel:
     def dofs_left(self) -> int:
         """Number of free curves."""
         return len(self.free_curves)
+
+    def subset(self, curves) -> "ReductionModel":
+        """The model restricted to ``curves``: their constants and the relations rebuilding them.
+
+        Parameters
+        ----------
+        curves : iterable of str
+            Curve names to keep (names not in the model are ignored).
+
+        Raises
+        ------
+        ValueError
+            A kept dependent curve's controlling curve is not kept (quoting both).
+        """
+        keep = set(curves)
+        for r in self.relations:
+            if r.dependent in keep and r.controlling not in keep:
+                raise ValueError(f"Curve {r.dependent!r} is rebuilt from {r.controlling!r}, which is not kept")
+        return replace(self, curves=tuple(c for c in self.curves if c in keep),
+                       constants=tuple(c for c in self.constants if c.curve in keep),
+                       relations=tuple(r for r in self.relations if r.dependent in keep),
+                       means={c: v for c, v in self.means.items() if c in keep})
 
     # ------------------------------------------------------------------ rebuilding
     def apply(self, values: np.ndarray, names: list[str] | tuple[str, ...] | None = None) -> np.ndarray:
@@ -245,6 +275,7 @@ class ReductionModel:
             "free": list(self.free_curves),
             "constants": [c.to_dict() for c in self.constants],
             "relations": [r.to_dict() for r in self.relations],
+            **({"means": dict(self.means)} if self.means else {}),
             "metadata": dict(self.metadata),
         }
 
@@ -260,6 +291,7 @@ class ReductionModel:
             condition=d.get("condition", ""),
             source=d.get("source", ""),
             metadata=dict(d.get("metadata", {})),
+            means=dict(d.get("means", {})),
         )
 
     def save(self, path: str | os.PathLike) -> Path:

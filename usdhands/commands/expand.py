@@ -9,9 +9,11 @@ controlling curves, it fills in the rest.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from usdhands.commands._common import print_json
+from usdhands.commands._output import add_layer_argument, layer_options
 from usdhands.errors import JointMismatchError, UsdHandsError
 
 
@@ -22,6 +24,7 @@ def register(sub) -> None:
     p.add_argument("file", type=Path, help="input animation (.usd/.usda/.usdc/.usdz, .gltf/.glb, .bvh)")
     p.add_argument("--model", type=Path, required=True, help="reduction model JSON from 'usdhands reduce --model'")
     p.add_argument("-o", "--output", type=Path, required=True, help="output file (same format as the input)")
+    add_layer_argument(p)
     p.add_argument("--animation", default=None, help="animation name or index in the file (default the first)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=run)
@@ -37,29 +40,50 @@ def model_joints(model) -> list[str]:
     return joints
 
 
+def _names(items: list[str], most: int = 6) -> str:
+    return ", ".join(items[:most]) + (f", ... ({len(items)} in all)" if len(items) > most else "")
+
+
+def _without_joints(model, absent: list[str], args):
+    """The model without the curves of joints the file lacks; an error when a controlling curve is among them."""
+    gone = {c for c in model.curves if c.rsplit(".", 1)[0] in absent}
+    if len(gone) == len(model.curves):
+        raise JointMismatchError(f"none of the joints of the reduction model {args.model.name} is in the file "
+                                 f"(the model has {_names(absent)})", path=args.file)
+    lost = [r for r in model.relations if r.controlling in gone and r.dependent not in gone]
+    if lost:
+        ctrl = [j for j in absent if any(r.controlling.rsplit(".", 1)[0] == j for r in lost)]
+        raise JointMismatchError(f"controlling joint{'s' if len(ctrl) > 1 else ''} {_names(ctrl)} of the reduction "
+                                 f"model {args.model.name} {'are' if len(ctrl) > 1 else 'is'} not in the file "
+                                 f"(needed to rebuild {_names([r.dependent for r in lost])})", path=args.file)
+    print(f"usdhands: note: joints of the reduction model {args.model.name} that {args.file.name} lacks are "
+          f"skipped: {_names(absent)}", file=sys.stderr)
+    return model.subset(c for c in model.curves if c not in gone)
+
+
 def run(args) -> int:
-    from usdhands.algorithms.reduction import continuous_euler_curves
+    from usdhands.algorithms.reduction import expand_clip
     from usdhands.algorithms.reduction_model import ReductionModel
     from usdhands.formats.io import read_clip, write_clip
-    from usdhands.model.finger_dofs import apply_finger_curves, finger_curves
 
+    write_opts = layer_options(args.layer, args.file, args.output)
     model = ReductionModel.load(args.model)
     clip = read_clip(args.file, animation=args.animation)
-    joints = []
+    joints, absent = [], []
     for name in model_joints(model):
         try:
             joints.append(clip.skeleton.index(name))
         except KeyError:
-            raise JointMismatchError(f"joint {name!r} of the reduction model {args.model.name} is not in the file",
-                                     path=args.file) from None
-    curves = finger_curves(clip, joints, model.order)
-    curves = curves.with_values(continuous_euler_curves(curves.values))  # as 'reduce' reads them
-    missing = [c for c in model.curves if c not in set(curves.names)]
+            absent.append(name)
+    if absent:
+        model = _without_joints(model, absent, args)
+        joints = [clip.skeleton.index(name) for name in model_joints(model)]
+    names = {f"{clip.skeleton.short_names[j]}.{a}" for j in joints for a in model.order.lower()}
+    missing = [c for c in model.curves if c not in names]
     if missing:  # only when the model's axis letters do not match its Euler order
         raise UsdHandsError(f"curves {missing[:3]} of the model do not match its Euler order {model.order}",
                             path=args.model)
-    rebuilt = model.apply(curves.values, curves.names)
-    out = write_clip(args.file, apply_finger_curves(clip, curves.with_values(rebuilt)), args.output)
+    out = write_clip(args.file, expand_clip(clip, joints, model), args.output, **write_opts)
     summary = {
         "file": str(args.file), "model": str(args.model), "output": str(out),
         "frames": int(clip.num_frames), "curves": len(model.curves),

@@ -9,9 +9,11 @@ input, ``--model`` saves the model that ``usdhands expand`` rebuilds a hand from
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from usdhands.commands._common import parse_list, print_json, print_table
+from usdhands.commands._output import add_layer_argument, layer_options
 from usdhands.errors import OutputPathError, UsdHandsError
 
 
@@ -32,6 +34,7 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print JSON instead of tables")
     p.add_argument("-o", "--output", type=Path, default=None,
                    help="write the simplified animation (every finger curve rebuilt) into a copy of the input")
+    add_layer_argument(p)
     p.add_argument("--model", type=Path, default=None, help="save the reduction model as JSON (for 'usdhands expand')")
     p.add_argument("--plot", type=Path, default=None, metavar="DIR",
                    help="draw histograms, scatter plots and original-vs-rebuilt curves as PNGs into DIR")
@@ -90,6 +93,9 @@ def run(args) -> int:
     from usdhands.commands._common import Progress
 
     steps = parse_steps(args.steps)
+    write_opts = layer_options(args.layer, args.file, args.output) if args.output is not None else {}
+    if args.layer and args.output is None:
+        raise UsdHandsError("--layer needs -o OUT")
     if args.model is not None:
         for other in (args.file, args.output):
             if other is not None and args.model.resolve() == Path(other).resolve():
@@ -109,20 +115,20 @@ def run(args) -> int:
 
     if args.output is not None or args.model is not None or args.plot is not None:
         progress(2, 3, "writing")
-    rebuilt = chosen.model.apply(curves.values, curves.names)
     written = []
     if args.output is not None:
+        from usdhands.algorithms.reduction import expand_clip
         from usdhands.formats.io import write_clip
-        from usdhands.model.finger_dofs import apply_finger_curves
 
-        out_clip = apply_finger_curves(clip, curves.with_values(rebuilt))
-        written.append(write_clip(args.file, out_clip, args.output))
+        # what 'usdhands expand' gives for this clip and model (the curves read for the model: the
+        # same as these unless rotations jump between frames)
+        out_clip = expand_clip(clip, curves.joints, chosen.model)
+        written.append(write_clip(args.file, out_clip, args.output, **write_opts))
     if args.model is not None:
         model = chosen.model
-        model = type(model)(model.curves, model.constants, model.relations, order=model.order,
-                            condition=model.condition, source=model.source,
-                            metadata={**model.metadata, "paper_names": {c: paper[c] for c in model.curves if c in paper},
-                                      "frames": int(clip.num_frames), "fps": float(clip.fps)})
+        model = dataclasses.replace(model, metadata={
+            **model.metadata, "paper_names": {c: paper[c] for c in model.curves if c in paper},
+            "frames": int(clip.num_frames), "fps": float(clip.fps)})
         written.append(model.save(args.model))
     if args.plot is not None:
         from usdhands.commands._reduction_plots import plot_reduction
