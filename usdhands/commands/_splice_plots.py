@@ -9,7 +9,7 @@ import numpy as np
 
 
 def plot_alignment(alignment, path: str | Path, *, title: str = "", constraints: Sequence = (),
-                   truth: np.ndarray | None = None, dpi: int = 64) -> Path:
+                   truth: np.ndarray | None = None, hand_label: str = "hand frame", dpi: int = 64) -> Path:
     """Draw both passes of one hand's alignment into a PNG.
 
     Left: the first-pass cost (eq. 6) inside its band; middle: the second-pass cost
@@ -26,6 +26,8 @@ def plot_alignment(alignment, path: str | Path, *, title: str = "", constraints:
         Drawn on the matrices.
     truth : (n,) float, optional
         A known correct alignment, drawn dashed (for examples built with a known warp).
+    hand_label : str
+        Axis label of the hand frames (say so when HANDS was resampled).
     """
     import matplotlib
 
@@ -47,7 +49,7 @@ def plot_alignment(alignment, path: str | Path, *, title: str = "", constraints:
             ax.errorbar([c.body], [c.hand], yerr=[[c.tolerance], [c.tolerance]], fmt="x", color="yellow",
                         ms=8, mew=2, capsize=3)
         ax.set_xlabel("body frame")
-        ax.set_ylabel("hand frame")
+        ax.set_ylabel(hand_label)
         ax.set_title(label, fontsize=10)
         fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02)
     ax = axes[2]
@@ -59,7 +61,7 @@ def plot_alignment(alignment, path: str | Path, *, title: str = "", constraints:
         ax.plot(alignment.phases[:, 0], alignment.phases[:, 1], "o", ms=3, color="tab:blue",
                 label="phase boundaries")
     ax.set_xlabel("body frame")
-    ax.set_ylabel("hand frame used")
+    ax.set_ylabel(f"{hand_label} used")
     ax.set_title("merged alignment", fontsize=10)
     ax.legend(fontsize=8, loc="upper left")
     if title:

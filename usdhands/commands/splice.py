@@ -205,7 +205,8 @@ def run(args) -> int:
 
         for s in sides:
             plot_alignment(result.sides[s], args.plot / f"splice_{s}.png", constraints=constraints,
-                           title=f"{args.body.name} + {args.hands.name}: {s} hand")
+                           title=f"{args.body.name} + {args.hands.name}: {s} hand",
+                           hand_label=f"hand frame (resampled to {body.fps:g} fps)" if resampled else "hand frame")
     if args.json:
         out = {
             "body": str(args.body), "hands": str(args.hands), "output": str(args.output),
