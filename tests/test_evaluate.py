@@ -49,7 +49,14 @@ def test_evaluate_json_matches_the_library_on_the_same_files(gesture_files, caps
                             "--plot", tmp_path / "plots")
     assert status == 0, err
     r = json.loads(out)
+    # the layout of the issue: {"k", "segments", "predictors", "best", "confusion": {"labels", "matrix"}}
+    assert [key for key in r if key in ("k", "segments", "predictors", "best", "confusion")] == [
+        "k", "segments", "predictors", "best", "confusion"]
     assert r["k"] == 5 and list(r["predictors"]) == list(DEFAULT_PREDICTORS)
+    assert "wrist_pos+0.5rot" in r["predictors"] and all(0 <= v <= 1 for v in r["predictors"].values())
+    n_labels = len(r["confusion"]["labels"])
+    matrix = np.array(r["confusion"]["matrix"])
+    assert matrix.shape == (n_labels, n_labels) and np.allclose(matrix.sum(axis=1), 1.0)
     assert r["best"] == max(r["predictors"], key=r["predictors"].get)
     assert r["confusion"]["labels"] == sorted({p.name.split("_")[0] for p in paths})
     hm = tiny_handmap()
@@ -99,6 +106,17 @@ def test_holdout_beats_the_baselines(gesture_files, capsys):
     assert m["synthesis"]["error_deg"] < m["random_segments"]["error_deg"]
     assert m["mean_pose"]["speed_deg_s"] == pytest.approx(0.0, abs=1e-6)
     assert r["clips"] == len(paths)
+    # the mean angular speed of the fingers, against the ground truth's: synthesis moves like
+    # the truth, the frame-by-frame nearest neighbour flickers between takes
+    truth = r["ground_truth_speed_deg_s"]
+    assert truth > 1.0
+    assert abs(m["synthesis"]["speed_deg_s"] - truth) < abs(m["nearest_wrist"]["speed_deg_s"] - truth)
+    assert abs(m["synthesis"]["speed_deg_s"] - truth) < 0.5 * truth
+    status, out, err = _run(capsys, "evaluate", "--holdout", *paths)
+    assert status == 0, err
+    lines = out.splitlines()
+    assert lines[0].startswith(f"held-out synthesis over {len(paths)} clips") and "ground truth mean angular speed" in lines[0]
+    assert [ln.split()[0] for ln in lines[3:7]] == ["synthesis", "mean_pose", "random_segments", "nearest_wrist"]
 
 
 def test_db_build_and_synthesize_files(gesture_files, capsys, tmp_path):
