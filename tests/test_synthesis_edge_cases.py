@@ -302,3 +302,30 @@ def test_db_build_labels_file_mirror_fps_and_refusals(shared_assets, sample_asse
         status, _, err = _run(capsys, "db", "build", *argv)
         assert status == 2 and message in err and err.count("\n") == 1, err
     assert not (tmp_path / "x").exists()
+
+
+def test_gltf_with_several_animations_gets_fingers_in_one_and_keeps_the_others(shared_assets, capsys, tmp_path):
+    from usdhands.formats.io import read_asset
+    from usdhands.model.hand_detection import detect_hands
+
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    out = tmp_path / "robot.glb"
+    status, text, err = _run(capsys, "synthesize", src, "-o", out)
+    assert status == 0, err
+    assert text.splitlines()[0] == ("animation 'Dance', the first of 14 in the file (--animation NAME for another; "
+                                    "the others are written unchanged)")
+    status, text, err = _run(capsys, "synthesize", src, "-o", tmp_path / "wave.glb", "--animation", "Wave", "--json")
+    assert status == 0, err
+    report = json.loads(text)
+    assert report["animation"] == "Wave" and report["animations_in_file"] == 14
+    a, b = read_asset(src), read_asset(out)
+    assert [c.name for c in b.clips] == [c.name for c in a.clips] and len(b.meshes) == len(a.meshes)
+    hm = detect_hands(a.skeletons[0])
+    fingers = sorted(a.clips[0].skeleton.index(j) for s in hm.sides for j in s.finger_joints)
+    for ca, cb in zip(a.clips, b.clips):
+        if ca.name == "Dance":
+            body = [j for j in range(ca.num_joints) if j not in fingers]
+            assert np.array_equal(ca.rotations[:, body], cb.rotations[:, body])
+            assert not np.allclose(ca.rotations[:, fingers], cb.rotations[:, fingers], atol=1e-3)
+        else:
+            assert np.array_equal(ca.rotations, cb.rotations) and np.array_equal(ca.translations, cb.translations)

@@ -104,6 +104,8 @@ def run(args) -> int:
     report = _report(result, db, cfg)
     report["grafted_joints"] = added
     report["output"] = str(out)
+    report["animation"] = clip.name
+    report["animations_in_file"] = len(asset.clips)
     if args.plot is not None:
         report["plots"] = [str(p) for p in _plots(args.plot, clip, result, db, cfg)]
     progress(4, 4, "done")
@@ -114,6 +116,9 @@ def run(args) -> int:
     for side, h in report["hands"].items():
         rows.append([side, h["segments"], h["top_labels"], f"{h['mean_segment_cost']:.1f}",
                      f"{h['seams_blended']}/{h['seams']}", f"{100 * h['pruned_share']:.0f}%"])
+    if len(asset.clips) > 1 and args.animation is None:
+        print(f"animation {clip.name!r}, the first of {len(asset.clips)} in the file (--animation NAME for another; "
+              f"the others are written unchanged)")
     print_table(rows, ["hand", "segments", "labels chosen", "mean cS", "seams blended", "pruned"])
     for side, m in report["mapping"].items():
         if m["no_source"]:
