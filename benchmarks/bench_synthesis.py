@@ -8,6 +8,10 @@ them, the time a plain per-pair NumPy DTW (:func:`segment_cost.dtw_align`) and
 ``dtaidistance`` per pair (``dtw_ndim.distance`` with the same band, C library)
 would take for the search. Also the share of candidate pairs the lower bound pruned.
 
+It also times ``usdhands synthesize`` file to file (USD, glTF, BVH input of the
+same 3 minutes, the database saved and loaded memory-mapped), in-process and as a
+fresh command.
+
 Run: ``python benchmarks/bench_synthesis.py [--input-min 3] [--db-min 10] [--pairs 1500]``
 """
 
@@ -37,6 +41,43 @@ def make_clips(minutes: float, first_seed: int):
         total += c.duration
         seed += 1
     return clips
+
+
+def file_to_file(inp, db, repeat: int) -> dict:
+    """Seconds of ``usdhands synthesize`` on files: ``{format: (in-process best, fresh process best, bytes)}``."""
+    import contextlib
+    import io
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    from usdhands.algorithms.finger_database import save_database
+    from usdhands.cli import main as cli
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+
+    out = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        db_path = save_database(db, tmp / "db")
+        for ext in (".usdc", ".glb", ".bvh"):
+            src = tmp / f"input{ext}"
+            write_asset(Asset("memory", [inp.skeleton], [inp], []), src)
+            argv = ["synthesize", str(src), "-o", str(tmp / f"out{ext}"), "--db", str(db_path), "--json"]
+            inproc, fresh = [], []
+            for _ in range(repeat):
+                t = time.perf_counter()
+                subprocess.run([sys.executable, "-m", "usdhands", *argv], check=True, capture_output=True)
+                fresh.append(time.perf_counter() - t)
+                t = time.perf_counter()
+                with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+                    status = cli(argv)
+                inproc.append(time.perf_counter() - t)
+                if status != 0:
+                    raise RuntimeError(f"usdhands {' '.join(argv)} failed")
+            out[ext[1:]] = (min(inproc), min(fresh), src.stat().st_size)
+    return out
 
 
 def main() -> None:
@@ -120,8 +161,14 @@ def main() -> None:
     numpy_total = numpy_per_pair * len(pairs)
     dtai_total = dtai_per_pair * len(pairs)
 
+    files = file_to_file(inp, db, args.repeat)
+
     print(f"end to end (synthesize_clip, both hands): {end_to_end:.3f} s (best of {args.repeat}; "
           f"target < 2 s); segments: left {len(res.hands['left'].chosen)}, right {len(res.hands['right'].chosen)}")
+    for fmt, (inproc, fresh, size) in files.items():
+        print(f"  file to file, {fmt} ({size / 1e6:.1f} MB): 'usdhands synthesize IN -o OUT --db DB' in-process "
+              f"{inproc:.3f} s (read, load the database memory-mapped, synthesize, write); as a fresh command "
+              f"{fresh:.2f} s (with Python start-up, imports and loading the cached numba kernels)")
     search_t = bound_t["kim"]
     print(f"search (numba kernel, 2 threads, default end-point bound): {search_t:.3f} s over {cand} candidate pairs;"
           f" {100 * bound_pruned['kim'] / cand:.1f}% pruned by the bound, "
