@@ -511,3 +511,111 @@ def test_cli_reports_finger_joints_without_counterpart(bvh_case, capsys):
             "RightHandThumb1, RightHandThumb2, RightHandThumb3, RightHandPinky1") in err
     rep = json.loads(stdout)
     assert ["RightHandPinky2", "rPinky2"] in rep["pairs"]["right"] and len(rep["pairs"]["right"]) == 11
+
+
+def _write_markers_csv(path, markers: dict, frame_column=True):
+    names = ("wrist_a", "wrist_b", "forearm", "hand")
+    sides = list(markers)
+    header = (["frame"] if frame_column else []) + [f"{s}.{mk}.{a}" for s in sides for mk in names for a in "xyz"]
+    T = next(iter(markers.values())).shape[0]
+    lines = [",".join(header)]
+    for t in range(T):
+        vals = [f"{markers[s][t, k, a]:.6f}" for s in sides for k in range(4) for a in range(3)]
+        lines.append(",".join(([str(t)] if frame_column else []) + vals))
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _real_markers(clip, sides_map, seed):
+    """Markers elsewhere than the joint-derived ones (wider wrist bar, forearm marker further back), with jitter."""
+    rng = np.random.default_rng(seed)
+    out = {}
+    for s, side in sides_map.items():
+        off = default_marker_offsets(clip.skeleton, side, wrist_width=0.4, forearm_distance=1.5)
+        out[s] = markers_from_joints(clip, side, off) + rng.normal(scale=0.2, size=(clip.num_frames, 4, 3))
+    return out
+
+
+def test_cli_real_marker_positions_from_csv(bvh_case, capsys):
+    import json
+
+    from usdhands.formats.io import read_clip
+    from usdhands.model.hand_detection import detect_hands
+
+    c, body, hands, d = bvh_case
+    bclip, hclip = read_clip(body), read_clip(hands)
+    bmap, hmap = detect_hands(bclip.skeleton), detect_hands(hclip.skeleton)
+    bm = _real_markers(bclip, {s: bmap[s] for s in SIDES}, 1)
+    hm = _real_markers(hclip, {s: hmap[s] for s in SIDES}, 2)
+    bcsv = _write_markers_csv(d / "body_markers.csv", bm)
+    hcsv = _write_markers_csv(d / "hand_markers.csv", hm, frame_column=False)
+    status, stdout, err = _run(["splice", str(body), str(hands), "-o", str(d / "m.bvh"), "--json"], capsys)
+    assert status == 0, err
+    plain = json.loads(stdout)
+    status, stdout, err = _run(["splice", str(body), str(hands), "-o", str(d / "m.bvh"), "--json",
+                                "--body-markers", str(bcsv), "--hands-markers", str(hcsv)], capsys)
+    assert status == 0, err
+    rep = json.loads(stdout)
+    assert rep["markers"] == {"body": str(bcsv), "hands": str(hcsv)} and plain["markers"] == {"body": "joints",
+                                                                                           "hands": "joints"}
+    # the markers were used (the first pass compares them) and give the library's result with them
+    lib = splice_clips(bclip, hclip, {s: bmap[s] for s in SIDES}, {s: hmap[s] for s in SIDES},
+                       body_markers=bm, hand_markers=hm)
+    for s in SIDES:
+        assert rep["costs"][s]["first_pass"] != plain["costs"][s]["first_pass"]
+        assert rep["costs"][s]["first_pass"] == pytest.approx(lib.sides[s].first.cost, abs=1e-3)
+        assert np.allclose(rep["alignment"][s], np.round(lib.sides[s].alignment, 3))
+        assert np.abs(np.array(rep["alignment"][s]) - c.truth).mean() <= 1.5
+
+
+def test_cli_real_markers_of_a_resampled_hand_take(bvh_case, shared_assets, capsys):
+    import json
+
+    from usdhands.formats.io import read_clip
+    from usdhands.model.hand_detection import detect_hands
+
+    c, body, _, d = bvh_case
+    leap = shared_assets / "leap_hands" / "gesture-typing.bvh"
+    lclip = read_clip(leap)
+    hm = {"right": markers_from_joints(lclip, detect_hands(lclip.skeleton).right)}
+    csv = _write_markers_csv(d / "leap_markers.csv", hm)  # 317 rows at 37.04 fps, the recording's frames
+    status, stdout, err = _run(["splice", str(body), str(leap), "-o", str(d / "lm.bvh"), "--json"], capsys)
+    plain = json.loads(stdout)
+    status, stdout, err = _run(["splice", str(body), str(leap), "-o", str(d / "lm.bvh"), "--json",
+                                "--hands-markers", str(csv)], capsys)
+    assert status == 0, err
+    rep = json.loads(stdout)
+    # the same positions as the joint-derived markers, resampled linearly instead of by slerp: nearly the same costs
+    assert rep["costs"]["right"]["first_pass"] == pytest.approx(plain["costs"]["right"]["first_pass"], rel=0.05)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace("right.hand.z", "right.palm.z"), "unknown column 'right.palm.z': expected "
+                                                           "<side>.<marker>.<axis> with side left or right"),
+    (lambda t: "\n".join(t.splitlines()[:-1]) + "\n", "239 rows of markers for a clip of 240 frames"),
+    (lambda t: t.replace(",right.hand.z", "").replace(t.splitlines()[1], t.splitlines()[1].rsplit(",", 1)[0]),
+     "the right hand's markers lack columns right.hand.z"),
+    (lambda t: t.replace(t.splitlines()[3], t.splitlines()[3].rsplit(",", 1)[0] + ",nan"),
+     "bad_markers.csv: row 4: column 'right.hand.z': expected a finite number, got 'nan'"),
+    (lambda t: "\n".join(["frame," + ",".join(f"right.{m}.{a}" for m in ("wrist_a", "wrist_b", "forearm", "hand") for a in "xyz")]
+               + [f"{k + 1}," + ",".join(["0"] * 12) for k in range(240)]) + "\n",
+     "bad_markers.csv: row 2: frame column: expected 0, got '1'"),
+])
+def test_cli_bad_marker_files_exit_2(bvh_case, capsys, edit, message):
+    c, body, hands, d = bvh_case
+    good = _write_markers_csv(d / "good.csv", {"right": np.zeros((240, 4, 3))})
+    bad = d / "bad_markers.csv"
+    bad.write_text(edit(good.read_text()))
+    status, _, err = _run(["splice", str(body), str(hands), "-o", str(d / "bad.bvh"), "--body-markers", str(bad)],
+                          capsys)
+    assert status == 2 and message in err and err.count("\n") == 1, err
+    assert not (d / "bad.bvh").exists()
+
+
+def test_cli_markers_for_no_spliced_hand_is_an_error(bvh_case, capsys):
+    c, body, hands, d = bvh_case
+    only_right = _write_markers_csv(d / "right_markers.csv", {"right": np.zeros((240, 4, 3))})
+    status, _, err = _run(["splice", str(body), str(hands), "-o", str(d / "bad.bvh"), "--side", "left",
+                           "--body-markers", str(only_right)], capsys)
+    assert status == 2
+    assert err == f"usdhands: error: {only_right}: no markers for the left hand spliced from BODY\n"

@@ -1084,6 +1084,7 @@ class SpliceResult:
 def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
                  constraints: Sequence[Constraint] = (), options: SpliceOptions = SpliceOptions(),
                  body_offsets: dict | None = None, hand_offsets: dict | None = None,
+                 body_markers: dict | None = None, hand_markers: dict | None = None,
                  progress=None) -> SpliceResult:
     """Splice the fingers of ``hands`` onto ``body``, each hand on its own.
 
@@ -1100,6 +1101,11 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
     options : SpliceOptions
     body_offsets, hand_offsets : dict of str to MarkerOffsets, optional
         Marker placement per hand; :func:`default_marker_offsets` otherwise.
+    body_markers, hand_markers : dict of str to (T, 4, 3) float, optional
+        Real marker positions per hand (p1, p2 wrist, p3 forearm, p4 hand; centimetres,
+        Y up; one row per frame of ``body`` / ``hands``), used instead of markers placed
+        on the joints. The second pass with ``forearm_align="frame"`` still compares the
+        joints' frames; ``"vector"`` uses these markers (eq. 8–9).
     progress : callable, optional
         ``progress(done, total, label)``.
 
@@ -1121,8 +1127,10 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         bs, hs = body_sides[s], hand_sides[s]
         bo = (body_offsets or {}).get(s) or default_marker_offsets(body.skeleton, bs)
         ho = (hand_offsets or {}).get(s) or default_marker_offsets(hands.skeleton, hs)
-        bm = markers_from_joints(body, bs, bo, wb)
-        hm = markers_from_joints(hands, hs, ho, wh)
+        bm = _given_markers(body_markers, s, body.num_frames, "body") if body_markers and s in body_markers \
+            else markers_from_joints(body, bs, bo, wb)
+        hm = _given_markers(hand_markers, s, hands.num_frames, "hand") if hand_markers and s in hand_markers \
+            else markers_from_joints(hands, hs, ho, wh)
         bref = _ref(body, bs, wb)
         href = _ref(hands, hs, wh)
         yb = yh = None
@@ -1151,6 +1159,15 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         if progress is not None:
             progress(k + 1, len(order), s)
     return SpliceResult(out, sides, transfers, pairs_all, bun, hun, modes)
+
+
+def _given_markers(markers: dict, side: str, frames: int, what: str) -> np.ndarray:
+    m = np.asarray(markers[side], dtype=np.float64)
+    if m.shape != (frames, 4, 3):
+        raise ValueError(f"Expected {what} markers of the {side} hand of shape ({frames}, 4, 3), got {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"Expected finite {what} markers of the {side} hand, got NaN or infinite values")
+    return m
 
 
 def partial_world_xforms(clip: Clip, joints: Sequence[int]) -> np.ndarray:

@@ -54,6 +54,12 @@ def register(sub) -> None:
                    help="draw the cost matrices with band and path (splice_<side>.png) into DIR")
     p.add_argument("--animation", default=None, help="BODY animation name or index (default the first)")
     p.add_argument("--hands-animation", default=None, help="HANDS animation name or index (default the first)")
+    p.add_argument("--body-markers", type=Path, default=None, metavar="CSV",
+                   help="real marker positions for BODY instead of markers placed on the joints: one row per "
+                        "frame, columns <side>.<marker>.<x|y|z> with marker wrist_a, wrist_b, forearm, hand "
+                        "(centimetres, Y up; an optional first column 'frame')")
+    p.add_argument("--hands-markers", type=Path, default=None, metavar="CSV",
+                   help="real marker positions for HANDS, as --body-markers (HANDS's own frames)")
     p.add_argument("--body-handmap", type=Path, default=None, help="hand map JSON for BODY (overrides detection)")
     p.add_argument("--hands-handmap", type=Path, default=None, help="hand map JSON for HANDS (overrides detection)")
     add_layer_argument(p, "BODY")
@@ -81,6 +87,89 @@ def parse_band(text: str) -> tuple[float, float]:
     if len(vals) != 2 or not all(0 < v and math.isfinite(v) for v in vals):
         raise UsdHandsError(f"bad --band {text!r}: expected two positive fractions W1,W2 such as 0.3,0.1")
     return vals
+
+
+MARKER_NAMES = ("wrist_a", "wrist_b", "forearm", "hand")
+
+
+def read_markers_csv(path: Path, frames: int) -> dict:
+    """Marker positions from a CSV file: ``{side: (frames, 4, 3) float}``, centimetres, Y up.
+
+    The header names the columns ``<side>.<marker>.<axis>`` (``right.wrist_a.x``), markers
+    :data:`MARKER_NAMES` in the paper's order p1, p2, p3, p4; every marker of a side must
+    be there. An optional first column ``frame`` must count 0, 1, 2, ... One row per frame.
+
+    Raises
+    ------
+    UsdHandsError
+        Unreadable file, unknown or missing columns, a wrong number of rows, a value
+        that is not a finite number (with the row and column).
+    """
+    import csv
+
+    import numpy as np
+
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = [r for r in csv.reader(f) if r and any(c.strip() for c in r)]
+    except FileNotFoundError:
+        raise UsdHandsError("no such marker file", path=path) from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise UsdHandsError(f"cannot read marker file: {e}", path=path) from None
+    if not rows:
+        raise UsdHandsError("empty marker file: expected a header of <side>.<marker>.<axis> columns", path=path)
+    header = [h.strip() for h in rows[0]]
+    has_frame = header[0].lower() == "frame"
+    cols = {}
+    for k, h in enumerate(header[1:] if has_frame else header, start=1 if has_frame else 0):
+        parts = h.split(".")
+        if len(parts) != 3 or parts[0] not in ("left", "right") or parts[1] not in MARKER_NAMES \
+                or parts[2] not in ("x", "y", "z"):
+            raise UsdHandsError(f"unknown column {h!r}: expected <side>.<marker>.<axis> with side left or right, "
+                                f"marker {', '.join(MARKER_NAMES)}, axis x, y or z", path=path, location="row 1")
+        cols[(parts[0], MARKER_NAMES.index(parts[1]), "xyz".index(parts[2]))] = k
+    data = rows[1:]
+    if len(data) != frames:
+        raise UsdHandsError(f"{len(data)} rows of markers for a clip of {frames} frames", path=path)
+    out = {}
+    for side in ("left", "right"):
+        have = [key for key in cols if key[0] == side]
+        if not have:
+            continue
+        missing = [f"{side}.{MARKER_NAMES[mk]}.{'xyz'[ax]}" for mk in range(4) for ax in range(3)
+                   if (side, mk, ax) not in cols]
+        if missing:
+            raise UsdHandsError(f"the {side} hand's markers lack columns {', '.join(missing)}", path=path)
+        out[side] = np.zeros((frames, 4, 3))
+    for r, row in enumerate(data):
+        if has_frame and row[0].strip() != str(r):
+            raise UsdHandsError(f"frame column: expected {r}, got {row[0].strip()!r}", path=path,
+                                location=f"row {r + 2}")
+        for (side, mk, ax), k in cols.items():
+            try:
+                v = float(row[k])
+            except (IndexError, ValueError):
+                v = float("nan")
+            if not math.isfinite(v):
+                cell = row[k] if k < len(row) else ""
+                raise UsdHandsError(f"column {header[k]!r}: expected a finite number, got {cell!r}", path=path,
+                                    location=f"row {r + 2}")
+            out[side][r, mk, ax] = v
+    return out
+
+
+def _resample_markers(markers: dict, fps_from: float, fps_to: float, frames_to: int) -> dict:
+    """Markers sampled at the frames of a clip resampled from ``fps_from`` to ``fps_to`` (linear)."""
+    import numpy as np
+
+    out = {}
+    for side, m in markers.items():
+        src = np.minimum(np.arange(frames_to) / fps_to * fps_from, m.shape[0] - 1)
+        i0 = np.clip(np.floor(src).astype(int), 0, max(m.shape[0] - 2, 0))
+        i1 = np.minimum(i0 + 1, m.shape[0] - 1)
+        w = (src - i0)[:, None, None]
+        out[side] = (1 - w) * m[i0] + w * m[i1]
+    return out
 
 
 def _sides(args, body_map, hand_map) -> list[str]:
@@ -158,6 +247,12 @@ def run(args) -> int:
             except ValueError as e:
                 raise UsdHandsError(f"{role}: {e}", path=path) from None
 
+    body_markers = read_markers_csv(args.body_markers, n) if args.body_markers is not None else None
+    hand_markers = read_markers_csv(args.hands_markers, m0) if args.hands_markers is not None else None
+    for markers, path, role in ((body_markers, args.body_markers, "BODY"), (hand_markers, args.hands_markers, "HANDS")):
+        if markers is not None and not set(sides) & set(markers):
+            raise UsdHandsError(f"no markers for the {' or '.join(sides)} hand spliced from {role}", path=path)
+
     ratio = 1.0
     resampled = abs(hand_fps - body.fps) > 1e-6 * body.fps
     if resampled:
@@ -167,6 +262,8 @@ def run(args) -> int:
               f"to {body.fps:.4g} fps ({m0} -> {hands.num_frames} frames); --match and the reported alignment "
               "use HANDS's own frame numbers (constraints hold to within one resampled frame)", file=sys.stderr)
         m = hands.num_frames
+        if hand_markers is not None:
+            hand_markers = _resample_markers(hand_markers, hand_fps, body.fps, m)
         conv = [Constraint(c.body, min(int(round(c.hand * ratio)), m - 1), int(math.floor(c.tolerance * ratio)))
                 for c in constraints]
         try:
@@ -180,7 +277,8 @@ def run(args) -> int:
     progress = Progress("splice")
     try:
         result = splice_clips(body, hands, {s: body_map[s] for s in sides}, {s: hand_map[s] for s in sides},
-                              constraints=constraints, options=options, progress=progress)
+                              constraints=constraints, options=options, progress=progress,
+                              body_markers=body_markers, hand_markers=hand_markers)
     except ValueError as e:  # a band without a path and the like: the user's numbers
         raise UsdHandsError(str(e)) from None
     write_clip(args.body, result.clip, args.output, **opts)
@@ -219,6 +317,8 @@ def run(args) -> int:
             "pairs": {s: [list(p) for p in result.pairs[s]] for s in sides},
             "body_unmatched": result.body_unmatched, "hands_unmatched": result.hand_unmatched,
             "transfer": result.transfer_modes,
+            "markers": {"body": str(args.body_markers) if args.body_markers else "joints",
+                        "hands": str(args.hands_markers) if args.hands_markers else "joints"},
             "constraints": [str(c) for c in (parse_match(t) for t in args.match)],
         }
         print_json(out)
