@@ -329,3 +329,25 @@ def test_gltf_with_several_animations_gets_fingers_in_one_and_keeps_the_others(s
             assert not np.allclose(ca.rotations[:, fingers], cb.rotations[:, fingers], atol=1e-3)
         else:
             assert np.array_equal(ca.rotations, cb.rotations) and np.array_equal(ca.translations, cb.translations)
+
+
+def test_bundled_database_is_what_the_current_code_builds():
+    # a change to features, segmentation or finger transfer must come with
+    # `usdhands db build --samples -o usdhands/data/gesture_db`
+    from usdhands.algorithms.finger_database import build_database
+    from usdhands.commands._synthesis_common import bundled_database_path, sample_database_items
+
+    shipped = load_database(bundled_database_path())
+    fresh = build_database(sample_database_items(), fps=30.0)
+    for name in ("tracks", "segments", "dof_index"):
+        assert np.array_equal(np.asarray(getattr(shipped, name)), getattr(fresh, name)), name
+    for name in ("features", "fingers"):  # float32 on disk; allow last-bit differences of other BLAS builds
+        assert np.allclose(np.asarray(getattr(shipped, name)), getattr(fresh, name), rtol=0, atol=1e-3), name
+    ms, mf = shipped.manifest(), fresh.manifest()
+    for key in ("fps", "dofs", "clips", "labels", "segmentation", "counts"):
+        assert ms[key] == mf[key], key
+    assert ms["reach_cm"] == pytest.approx(mf["reach_cm"])
+    for side in ("left", "right"):
+        a, b = ms["hands"][side]["joints"], mf["hands"][side]["joints"]
+        assert [(j["name"], j["parent"], j["slot"]) for j in a] == [(j["name"], j["parent"], j["slot"]) for j in b]
+        assert np.allclose([j["offset_cm"] + j["rotation"] for j in a], [j["offset_cm"] + j["rotation"] for j in b])
