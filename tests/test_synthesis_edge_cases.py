@@ -351,3 +351,52 @@ def test_bundled_database_is_what_the_current_code_builds():
         a, b = ms["hands"][side]["joints"], mf["hands"][side]["joints"]
         assert [(j["name"], j["parent"], j["slot"]) for j in a] == [(j["name"], j["parent"], j["slot"]) for j in b]
         assert np.allclose([j["offset_cm"] + j["rotation"] for j in a], [j["offset_cm"] + j["rotation"] for j in b])
+
+
+def test_cesium_man_without_fingers_is_refused_clearly(shared_assets, capsys, tmp_path):
+    src = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "c.usdz")
+    assert status == 2 and "unknown file extension '.usdz'; writable: .bvh, .glb, .gltf, .usd, .usda, .usdc" in err
+    out = tmp_path / "c.usdc"  # a package is read, written as a plain USD layer
+    status, _, err = _run(capsys, "synthesize", src, "-o", out)
+    assert status == 2 and err.count("\n") == 1
+    assert err.startswith(f"usdhands: error: {src}: no hand found in skeleton ")
+    assert "saw 19 joints: Skeleton_torso_joint_1" in err
+    status, _, err = _run(capsys, "synthesize", src, "-o", out, "--graft-hands")
+    assert status == 2 and err == (f"usdhands: error: {src}: --graft-hands works on skeleton-only files (BVH, USD "
+                                   f"without skinned meshes): this file has skinned meshes, which would need new "
+                                   f"skin weights\n")
+    assert not out.exists()
+
+
+def test_graft_hands_on_a_usd_skeleton_rebuilds_the_removed_fingers(sample_assets, capsys, tmp_path):
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+    from usdhands.model.hand_detection import detect_hands
+
+    full = read_clip(sample_assets / "conversation_bodyonly.usdc")
+    sk = full.skeleton
+    hm = detect_hands(sk)
+    fingers = {sk.index(j) for h in hm.sides for j in h.finger_joints}
+    keep = [j for j in range(sk.num_joints) if not fingers.intersection(sk.chain_to_root(j))]
+    sub = sk.subset(keep)
+    body = full.replace(skeleton=sub, rotations=full.rotations[:, keep], translations=full.translations[:, keep],
+                        scales=full.scales[:, keep])
+    src = tmp_path / "body_without_fingers.usda"
+    write_asset(Asset("memory", [sub], [body], []), src)
+    status, out, err = _run(capsys, "synthesize", src, "-o", tmp_path / "grafted.usda", "--graft-hands", "--json")
+    assert status == 0, err
+    report = json.loads(out)
+    assert len(report["grafted_joints"]) == sk.num_joints - len(keep) == 40
+    back = read_clip(tmp_path / "grafted.usda")
+    assert back.skeleton.up_axis == sk.up_axis and back.skeleton.meters_per_unit == sk.meters_per_unit
+    names = back.skeleton.short_names
+    # the database's hand is the generated humanoid's: the grafted joints are the removed ones, in place
+    assert sorted(names) == sorted(sk.short_names)
+    order = [names.index(n) for n in sk.short_names]
+    assert np.abs(back.skeleton.rest_world_positions()[order] - sk.rest_world_positions()).max() < 1e-9
+    kept = [names.index(n) for n in sub.short_names]
+    assert np.array_equal(back.rotations[:, kept], body.rotations) or \
+        np.abs(back.rotations[:, kept] - body.rotations).max() < 1e-6
+    new = [names.index(sk.short_names[j]) for j in sorted(fingers)]
+    assert np.ptp(back.rotations[:, new], axis=0).max() > 0.05
