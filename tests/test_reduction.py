@@ -511,7 +511,8 @@ def test_reduce_then_expand_reproduces_the_reduced_clip(shared_assets, tmp_path,
                           f"{len(m.controlling_curves)} controlling curves and set {len(m.constants)} constants")
     r_red, r_orig, r_again = (read_clip(p).rotations for p in (reduced, from_orig, again))
     assert quat_angle_deg(r_red, r_orig).max() < 1e-9
-    assert quat_angle_deg(r_red, r_again).max() < 2e-6
+    # 6 decimals: 5e-7 degrees per angle, times the relations' scales for the rebuilt curves
+    assert quat_angle_deg(r_red, r_again).max() < 1e-5
 
     # the reduced clip really is the model's rebuild of the original: dependents follow their controllers
     # (read as expand reads curves for a model: continuity and Euler branch judged on the free curves)
