@@ -850,3 +850,11 @@ def test_continuity_measured_on_chosen_angles():
     assert np.allclose(continuous_euler_curves(v, use=np.array([False, True, False])), v)
     with pytest.raises(ValueError, match=r"Expected use to have shape \(3,\), got \(2,\)"):
         continuous_euler_curves(v, use=np.array([True, False]))
+
+
+def test_cli_every_curve_constant(sample_assets, capsys):
+    code, out, err = run_cli(capsys, "reduce", sample_assets / "humanoid.usda", "--steps", "range<1000")
+    assert code == 0, err
+    assert out.rstrip().endswith("step 1 (range < 1000) keeps 0 of 90 curves: none")
+    means = [line.split()[-1] for line in out.splitlines() if line.startswith(("LeftHand", "RightHand"))]
+    assert len(means) == 90 and "-0" not in means  # a mean rounded to zero prints as 0

@@ -176,7 +176,7 @@ def run(args) -> int:
                 what = f"constant curves besides those of step {prev_constants[0]}"
             print(f"\nstep {i} ({s.condition}): {len(new)} {what}")
             if new:
-                print_table([(c.curve, pname(c.curve), round(c.range, 3), round(c.value, 2)) for c in new],
+                print_table([(c.curve, pname(c.curve), round(c.range, 3), round(c.value, 2) + 0.0) for c in new],
                             ["curve", "paper name", "range", "mean"])
             prev_constants = (i, {c.curve for c in model.constants})
         else:
@@ -194,7 +194,7 @@ def run(args) -> int:
                             ["dependent", "paper name", "controlling", "paper name", "rmsd"])
             prev_relations = (i, {r.dependent: (r.controlling, r.kind) for r in model.relations})
     print(f"\nstep {k} ({chosen.condition}) keeps {chosen.dofs_left} of {len(curves.names)} curves: "
-          + ", ".join(f"{c} ({pname(c)})" if c in paper else c for c in chosen.model.free_curves))
+          + (", ".join(f"{c} ({pname(c)})" if c in paper else c for c in chosen.model.free_curves) or "none"))
     for w in written:
         print(f"wrote {w}")
     return 0
