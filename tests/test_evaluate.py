@@ -232,3 +232,27 @@ def test_evaluate_body_only_files_without_finger_joints(gesture_files, capsys, t
     assert s1 == s2 == 0, err2
     # the tiny rig's finger layout gives the same hand frame as the guess from the forearm
     assert json.loads(out2)["predictors"] == pytest.approx(json.loads(out1)["predictors"])
+
+
+def test_default_predictors_leave_out_joints_the_hand_maps_lack(gesture_files, capsys, tmp_path):
+    folder, paths = gesture_files
+    hm = tiny_handmap()
+    override = {s: {"wrist": hm[s].wrist, "forearm": hm[s].forearm, "shoulder": None, "root": hm[s].root,
+                    "fingers": {f: list(c) for f, c in hm[s].fingers.items()}} for s in ("left", "right")}
+    hm_file = tmp_path / "handmap.json"
+    hm_file.write_text(json.dumps(override))
+    status, out, err = _run(capsys, "evaluate", *paths, "--labels", r"^([a-z]+)_", "--handmap", hm_file, "--json")
+    assert status == 0, err
+    r = json.loads(out)
+    assert r["left_out_predictors"] == ["shoulder_pos", "shoulder_rot"]
+    assert list(r["predictors"]) == [p for p in DEFAULT_PREDICTORS if not p.startswith("shoulder")]
+    status, out, _ = _run(capsys, "evaluate", *paths, "--labels", r"^([a-z]+)_", "--json")
+    full = json.loads(out)
+    assert "left_out_predictors" not in full
+    assert r["predictors"] == pytest.approx({k: v for k, v in full["predictors"].items() if k in r["predictors"]})
+    status, out, _ = _run(capsys, "evaluate", *paths, "--labels", r"^([a-z]+)_", "--handmap", hm_file)
+    assert status == 0 and "left out (joints missing from a hand map): shoulder_pos, shoulder_rot" in out
+    # asked for by name, a predictor the rig cannot answer is an error
+    status, _, err = _run(capsys, "evaluate", *paths, "--labels", r"^([a-z]+)_", "--handmap", hm_file,
+                          "--predictors", "shoulder_rot")
+    assert status == 2 and "has no shoulder joint for the predictors asked for" in err

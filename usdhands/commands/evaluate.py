@@ -82,6 +82,9 @@ def run(args) -> int:
     unlabeled = [str(p) for p, lab, _, _ in items if lab is None]
     if unlabeled:
         raise UsdHandsError(f"clips without a label: {unlabeled[:3]}")
+    left_out = []
+    if args.predictors is None:  # the default list: leave out what these rigs cannot answer
+        predictors, left_out = _answerable(predictors, items)
     try:
         es = prepare_eval_set([(lab, clip, hm) for _, lab, clip, hm in items], cfg, args.fps,
                               predictors=predictors)
@@ -89,6 +92,8 @@ def run(args) -> int:
     except ValueError as e:
         raise UsdHandsError(str(e)) from None
     result["idle_hands"] = [f"{c}:{s}" for c, s in es.idle]
+    if left_out:
+        result["left_out_predictors"] = left_out
     written = []
     if args.plot is not None:
         from usdhands.commands._synthesis_plots import plot_confusion, plot_predictors
@@ -107,6 +112,8 @@ def run(args) -> int:
     rows = [[name, f"{100 * share:.1f}%"] for name, share in result["predictors"].items()]
     rows.append(["(chance)", f"{100 * result['chance']:.1f}%"])
     print_table(rows, ["predictor", "correct type"])
+    if left_out:
+        print(f"left out (joints missing from a hand map): {', '.join(left_out)}")
     print(f"best: {result['best']}")
     conf = result["confusion"]
     print(f"\nconfusion ({conf['predictor']}), % of the closest segments by type:")
@@ -116,6 +123,18 @@ def run(args) -> int:
     for w in written:
         print(f"wrote {w}")
     return 0
+
+
+def _answerable(predictors, items):
+    """Split predictors into those every hand map has the joints for and the others."""
+    from usdhands.algorithms.gesture_evaluation import parse_predictor
+
+    have = {"wrist", "elbow", "shoulder"}
+    for _, _, _, handmap in items:
+        for hand in handmap.sides:
+            have &= {"wrist"} | ({"elbow"} if hand.forearm else set()) | ({"shoulder"} if hand.shoulder else set())
+    keep = [p for p in predictors if all(key.split("_")[0] in have for key, _ in parse_predictor(p))]
+    return keep, [p for p in predictors if p not in keep]
 
 
 def _run_holdout(args, items, cfg) -> int:
