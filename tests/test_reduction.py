@@ -858,3 +858,33 @@ def test_cli_every_curve_constant(sample_assets, capsys):
     assert out.rstrip().endswith("step 1 (range < 1000) keeps 0 of 90 curves: none")
     means = [line.split()[-1] for line in out.splitlines() if line.startswith(("LeftHand", "RightHand"))]
     assert len(means) == 90 and "-0" not in means  # a mean rounded to zero prints as 0
+
+
+def test_usd_joints_sharing_short_names_are_named_by_path(sample_assets, tmp_path, capsys):
+    """``.../LeftHand/Index1`` and ``.../RightHand/Index1``: curves named by the full joint paths."""
+    import dataclasses
+    import re
+
+    from usdhands.formats.io import read_clip, write_asset
+    from usdhands.model.asset import Asset
+    from usdhands.model.rotations import quat_angle_deg
+
+    clip = read_clip(sample_assets / "humanoid.usda")
+    names = tuple(re.sub(r"(Left|Right)Hand(Thumb|Index|Middle|Ring|Pinky)(\d)$", r"\2\3", n)
+                  for n in clip.skeleton.joint_names)
+    sk = dataclasses.replace(clip.skeleton, joint_names=names)
+    src = tmp_path / "shared_names.usda"
+    write_asset(Asset(path=None, skeletons=(sk,), clips=(clip.replace(skeleton=sk),)), src)
+    reduced, model = tmp_path / "reduced.usda", tmp_path / "m.json"
+    code, out, err = run_cli(capsys, "reduce", src, "--json", "-o", reduced, "--model", model)
+    assert code == 0, err
+    report = json.loads(out)
+    assert report["curves"] == 90
+    m = ReductionModel.load(model)
+    left_index1 = "Hips/Spine/Spine1/Spine2/LeftShoulder/LeftArm/LeftForeArm/LeftHand/Index1.x"
+    assert left_index1 in m.curves and len(set(m.curves)) == 90
+    assert m.metadata["paper_names"][left_index1] == "leIndexMCPx"
+    again = tmp_path / "again.usda"
+    code, out, err = run_cli(capsys, "expand", reduced, "--model", model, "-o", again)
+    assert code == 0, err
+    assert quat_angle_deg(read_clip(reduced).rotations, read_clip(again).rotations).max() < 2e-5

@@ -65,7 +65,7 @@ from usdhands.model.skeleton import short_joint_name
 __all__ = [
     "DEFAULT_STEPS", "DEGENERATE_RANGE_DEG", "RangeRule", "RmsdRule", "parse_steps", "format_steps",
     "curve_statistics", "standardise", "align_euler_branches", "pair_rmsd", "StepResult", "ReductionResult", "reduce_curves",
-    "paper_style_names", "continuous_euler_curves", "model_curves", "expand_clip",
+    "paper_style_names", "continuous_euler_curves", "model_curves", "expand_clip", "curve_names", "curve_joint_name",
 ]
 
 DEFAULT_STEPS = "range<1,rmsd<0.3,range<5,rmsd<0.5"
@@ -693,17 +693,18 @@ def model_curves(clip, joints, model: ReductionModel):
     Returns
     -------
     FingerCurves
-        Degrees, in ``model.order``.
+        Degrees, in ``model.order``; their names are :func:`curve_names`.
     """
     from usdhands.model.finger_dofs import finger_curves
 
     curves = finger_curves(clip, list(joints), model.order)
+    names = curve_names(clip.skeleton, joints, model.order)
     free = set(model.free_curves)
-    use = np.array([c in free for c in curves.names])
+    use = np.array([c in free for c in names])
     values = continuous_euler_curves(curves.values, use=use)
     if model.means:
         values = align_euler_branches(values, np.array([model.means.get(c, np.nan) if u else np.nan
-                                                        for c, u in zip(curves.names, use)]))
+                                                        for c, u in zip(names, use)]))
     return curves.with_values(values)
 
 
@@ -730,7 +731,8 @@ def expand_clip(clip, joints, model: ReductionModel):
     from usdhands.model.finger_dofs import apply_finger_curves
 
     curves = model_curves(clip, joints, model)
-    return apply_finger_curves(clip, curves.with_values(model.apply(curves.values, curves.names)))
+    names = curve_names(clip.skeleton, joints, model.order)
+    return apply_finger_curves(clip, curves.with_values(model.apply(curves.values, names)))
 
 
 # ---------------------------------------------------------------------------- naming
@@ -740,7 +742,23 @@ _JOINT_LABELS = {
 }
 
 
-def paper_style_names(handmap: HandMap, order: str = "XYZ") -> dict[str, str]:
+def curve_joint_name(skeleton, joint: int) -> str:
+    """The joint part of a curve name: the joint's short name, or its full name where the short one is not unique.
+
+    USD joint names are paths: ``.../LeftHand/Index1`` and ``.../RightHand/Index1`` share
+    the short name ``Index1``, so their curves are named by the full paths. Either form
+    finds the joint again with ``skeleton.index``.
+    """
+    short = skeleton.short_names[joint]
+    return short if skeleton.short_names.count(short) == 1 else skeleton.joint_names[joint]
+
+
+def curve_names(skeleton, joints, order: str = "XYZ") -> tuple[str, ...]:
+    """Curve names ``"<joint>.<axis>"`` of joints (:func:`curve_joint_name`), in the layout of ``FingerCurves``."""
+    return tuple(f"{curve_joint_name(skeleton, int(j))}.{a.lower()}" for j in joints for a in order)
+
+
+def paper_style_names(handmap: HandMap, order: str = "XYZ", skeleton=None) -> dict[str, str]:
     """Paper-style names (``riRingMCPy``) of the finger curves of a hand map.
 
     Joints are labelled from the distal end of each chain: ``IP, MCP, CMC`` for the
@@ -752,11 +770,14 @@ def paper_style_names(handmap: HandMap, order: str = "XYZ") -> dict[str, str]:
     handmap : HandMap
     order : str
         Euler order: the axis letters.
+    skeleton : Skeleton, optional
+        Keys curves as :func:`curve_names` does (full names where short ones repeat);
+        short joint names otherwise.
 
     Returns
     -------
     dict
-        ``"<short joint name>.<axis>"`` to ``"<le|ri><Finger><Joint><axis>"``.
+        ``"<joint>.<axis>"`` to ``"<le|ri><Finger><Joint><axis>"``.
     """
     out: dict[str, str] = {}
     for hand in handmap.sides:
@@ -768,6 +789,8 @@ def paper_style_names(handmap: HandMap, order: str = "XYZ") -> dict[str, str]:
             for k, joint in enumerate(chain):
                 from_distal = n - 1 - k
                 label = labels[from_distal] if from_distal < len(labels) else f"J{from_distal + 1}"
+                key = short_joint_name(joint) if skeleton is None else \
+                    curve_joint_name(skeleton, skeleton.index(joint))
                 for axis in order:
-                    out[f"{short_joint_name(joint)}.{axis.lower()}"] = f"{prefix}{finger.capitalize()}{label}{axis.lower()}"
+                    out[f"{key}.{axis.lower()}"] = f"{prefix}{finger.capitalize()}{label}{axis.lower()}"
     return out

@@ -62,7 +62,7 @@ def _without_joints(model, absent: list[str], args):
 
 
 def run(args) -> int:
-    from usdhands.algorithms.reduction import expand_clip
+    from usdhands.algorithms.reduction import curve_names, expand_clip
     from usdhands.algorithms.reduction_model import ReductionModel
     from usdhands.formats.io import read_clip, write_clip
 
@@ -78,7 +78,7 @@ def run(args) -> int:
     if absent:
         model = _without_joints(model, absent, args)
         joints = [clip.skeleton.index(name) for name in model_joints(model)]
-    names = {f"{clip.skeleton.short_names[j]}.{a}" for j in joints for a in model.order.lower()}
+    names = set(curve_names(clip.skeleton, joints, model.order))
     missing = [c for c in model.curves if c not in names]
     if missing:  # only when the model's axis letters do not match its Euler order
         raise UsdHandsError(f"curves {missing[:3]} of the model do not match its Euler order {model.order}",

@@ -52,7 +52,8 @@ def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | Non
     Returns ``(clip, handmap, curves, sides)``: ``curves`` a FingerCurves over the chosen
     hands' finger joints (left first), kept continuous through gimbal regions
     (:func:`~usdhands.algorithms.reduction.continuous_euler_curves`); ``sides`` the side
-    of each curve.
+    of each curve. Curve names: :func:`~usdhands.algorithms.reduction.curve_names` (not
+    ``curves.names``, which repeat when two joints share a short name).
     """
     from usdhands.algorithms.reduction import continuous_euler_curves
     from usdhands.formats.io import read_clip
@@ -89,7 +90,7 @@ def _check_order(order: str) -> None:
 
 
 def run(args) -> int:
-    from usdhands.algorithms.reduction import RangeRule, paper_style_names, parse_steps, reduce_curves
+    from usdhands.algorithms.reduction import RangeRule, curve_names, paper_style_names, parse_steps, reduce_curves
     from usdhands.commands._common import Progress
 
     steps = parse_steps(args.steps)
@@ -104,14 +105,15 @@ def run(args) -> int:
     progress(0, 3, "reading")
     clip, handmap, curves, sides = load_finger_curves(args.file, args.animation, args.handmap, args.hands, args.order)
     progress(1, 3, "reducing")
-    result = reduce_curves(curves.values, curves.names, steps,
+    names = curve_names(clip.skeleton, curves.joints, curves.order)
+    result = reduce_curves(curves.values, names, steps,
                            groups=sides, across_groups=args.across_hands, order=curves.order,
                            source=args.file.name)
     k = len(result.steps) if args.step is None else args.step
     if not 1 <= k <= len(result.steps):
         raise UsdHandsError(f"--step {args.step} is out of range: {len(result.steps)} step(s) given")
     chosen = result.steps[k - 1]
-    paper = paper_style_names(handmap, curves.order)
+    paper = paper_style_names(handmap, curves.order, clip.skeleton)
 
     if args.output is not None or args.model is not None or args.plot is not None:
         progress(2, 3, "writing")
@@ -151,12 +153,12 @@ def run(args) -> int:
         return 0
 
     by_hand = ", ".join(f"{s} {sides.count(s)}" for s in ("left", "right") if s in sides)
-    print(f"{args.file}: {len(curves.names)} finger curves ({by_hand}), {clip.num_frames} frames at {clip.fps:g} fps")
+    print(f"{args.file}: {len(names)} finger curves ({by_hand}), {clip.num_frames} frames at {clip.fps:g} fps")
     print()
     def pname(c: str) -> str:
         return paper.get(c, "-")
 
-    rows = [("original", len(curves.names), 0.0, 0.0, "-")]
+    rows = [("original", len(names), 0.0, 0.0, "-")]
     rows += [(s.condition, s.dofs_left, s.rms_error_deg, s.max_error_deg,
               "-" if s.worst_curve is None else f"{s.worst_curve} ({pname(s.worst_curve)})") for s in result.steps]
     print_table(rows, ["condition", "DOFs left", "RMS error (deg)", "max error (deg)", "max error at"])
@@ -193,7 +195,7 @@ def run(args) -> int:
                               f"{r.kind} = {r.rmsd:.2f}") for r in changed],
                             ["dependent", "paper name", "controlling", "paper name", "rmsd"])
             prev_relations = (i, {r.dependent: (r.controlling, r.kind) for r in model.relations})
-    print(f"\nstep {k} ({chosen.condition}) keeps {chosen.dofs_left} of {len(curves.names)} curves: "
+    print(f"\nstep {k} ({chosen.condition}) keeps {chosen.dofs_left} of {len(names)} curves: "
           + (", ".join(f"{c} ({pname(c)})" if c in paper else c for c in chosen.model.free_curves) or "none"))
     for w in written:
         print(f"wrote {w}")
