@@ -888,3 +888,15 @@ def test_usd_joints_sharing_short_names_are_named_by_path(sample_assets, tmp_pat
     code, out, err = run_cli(capsys, "expand", reduced, "--model", model, "-o", again)
     assert code == 0, err
     assert quat_angle_deg(read_clip(reduced).rotations, read_clip(again).rotations).max() < 2e-5
+
+
+def test_cli_one_frame_and_bad_hands_exit_2(shared_assets, tmp_path, capsys):
+    from usdhands.formats.io import read_clip, write_clip
+
+    src = shared_assets.joinpath(*LEAP)
+    one = tmp_path / "one.bvh"
+    write_clip(src, read_clip(src).slice(0, 1), one)
+    code, out, err = run_cli(capsys, "reduce", one)
+    assert code == 2 and err == f"usdhands: error: {one}: the animation has 1 frame(s); finger curves need at least 2\n"
+    code, out, err = run_cli(capsys, "reduce", src, "--hands", "right,foo")
+    assert code == 2 and err == "usdhands: error: --hands: unknown value(s) ['foo']; expected some of ['left', 'right']\n"

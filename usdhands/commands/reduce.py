@@ -62,9 +62,16 @@ def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | Non
     from usdhands.model.handmap import SIDES
 
     _check_order(order)
+    try:
+        chosen = parse_list(hands_arg, SIDES)
+    except UsdHandsError as e:
+        raise UsdHandsError(f"--hands: {e.message}") from None
     clip = read_clip(path, animation=animation)
+    if clip.num_frames < 2:
+        raise UsdHandsError(f"the animation has {clip.num_frames} frame(s); finger curves need at least 2",
+                            path=path)
     handmap = resolve_handmap(clip.skeleton, handmap_path)
-    wanted = parse_list(hands_arg, SIDES) or [h.side for h in handmap.sides if h.finger_joints]
+    wanted = chosen or [h.side for h in handmap.sides if h.finger_joints]
     if not wanted:
         raise UsdHandsError("no hand with finger joints", path=path)
     joints, sides = [], []
