@@ -400,3 +400,23 @@ def test_graft_hands_on_a_usd_skeleton_rebuilds_the_removed_fingers(sample_asset
         np.abs(back.rotations[:, kept] - body.rotations).max() < 1e-6
     new = [names.index(sk.short_names[j]) for j in sorted(fingers)]
     assert np.ptp(back.rotations[:, new], axis=0).max() > 0.05
+
+
+def test_graph_plot_of_a_large_k_draws_at_most_eight_candidates_per_row(tmp_path):
+    from types import SimpleNamespace
+
+    import matplotlib.image
+
+    from usdhands.commands._synthesis_plots import plot_graph
+
+    k = 400
+    res = SimpleNamespace(side="right", candidates=np.arange(3 * k).reshape(3, k),
+                          segment_costs=np.sort(np.random.default_rng(0).random((3, k)) * 100, axis=1),
+                          path=np.array([0, 250, 3]))
+    labels = [f"type{i % 7}" for i in range(3 * k)]
+    small = plot_graph(SimpleNamespace(**{**vars(res), "candidates": res.candidates[:, :8],
+                                          "segment_costs": res.segment_costs[:, :8], "path": np.array([0, 7, 3])}),
+                       labels, tmp_path / "k8.png")
+    big = plot_graph(res, labels, tmp_path / "k400.png")
+    assert matplotlib.image.imread(big).shape == matplotlib.image.imread(small).shape
+    assert big.stat().st_size < 150_000

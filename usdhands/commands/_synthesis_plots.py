@@ -35,29 +35,45 @@ def plot_segmentation(res, fps: float, threshold: float, path: Path, title: str 
     return path
 
 
-def plot_graph(res, labels: list, path: Path, max_rows: int = 14, title: str = "") -> Path:
-    """The layered graph: rows = input segments, nodes = k candidates with cS, chosen path in red (figure 3)."""
+def plot_graph(res, labels: list, path: Path, max_rows: int = 14, title: str = "", max_cols: int = 8) -> Path:
+    """The layered graph: rows = input segments, nodes = k candidates with cS, chosen path in red (figure 3).
+
+    At most ``max_rows`` rows and ``max_cols`` candidates per row are drawn (the
+    cheapest; a chosen node further down its row takes the last place, marked with
+    its rank), so a large ``k`` still gives a readable picture.
+    """
     plt = _plt()
     N, k = res.candidates.shape
     rows = min(N, max_rows)
-    fig, ax = plt.subplots(figsize=(1.6 * k + 1, 0.55 * rows + 0.8), dpi=90)
+    cols = min(k, max_cols)
+    shown = []
     for i in range(rows):
-        for j in range(k):
+        c = list(range(cols))
+        if res.path[i] not in c:
+            c[-1] = int(res.path[i])
+        shown.append(c)
+    fig, ax = plt.subplots(figsize=(1.6 * cols + 1, 0.55 * rows + 0.8), dpi=90)
+    for i in range(rows):
+        for x, j in enumerate(shown[i]):
             if res.candidates[i, j] < 0:
                 continue
             on = res.path[i] == j
-            ax.add_patch(plt.Rectangle((j - 0.42, -i - 0.3), 0.84, 0.6, fill=True,
+            ax.add_patch(plt.Rectangle((x - 0.42, -i - 0.3), 0.84, 0.6, fill=True,
                                        fc="mistyrose" if on else "white", ec="red" if on else "0.6", lw=1.5 if on else 0.6))
             lab = labels[res.candidates[i, j]] or ""
-            ax.text(j, -i, f"{lab[:10]}\n{res.segment_costs[i, j]:.0f}", ha="center", va="center", fontsize=6)
+            rank = f" (#{j + 1})" if j >= cols else ""
+            ax.text(x, -i, f"{lab[:10]}\n{res.segment_costs[i, j]:.0f}{rank}", ha="center", va="center", fontsize=6)
         if i + 1 < rows:
-            ax.annotate("", xy=(res.path[i + 1], -i - 1 + 0.3), xytext=(res.path[i], -i - 0.3),
+            ax.annotate("", xy=(shown[i + 1].index(int(res.path[i + 1])), -i - 1 + 0.3),
+                        xytext=(shown[i].index(int(res.path[i])), -i - 0.3),
                         arrowprops=dict(arrowstyle="->", color="red", lw=1.2))
-    ax.set_xlim(-0.6, k - 0.4)
+    ax.set_xlim(-0.6, cols - 0.4)
     ax.set_ylim(-rows + 0.4, 0.6)
     ax.axis("off")
     more = f" (first {rows} of {N})" if N > rows else ""
-    ax.set_title(title or f"{res.side} hand: k={k} candidates per segment{more}; label and segment cost", fontsize=8)
+    some = f", the {cols} cheapest drawn" if k > cols else ""
+    ax.set_title(title or f"{res.side} hand: k={k} candidates per segment{more}{some}; label and segment cost",
+                 fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
