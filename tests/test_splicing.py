@@ -619,3 +619,17 @@ def test_cli_markers_for_no_spliced_hand_is_an_error(bvh_case, capsys):
                            "--body-markers", str(only_right)], capsys)
     assert status == 2
     assert err == f"usdhands: error: {only_right}: no markers for the left hand spliced from BODY\n"
+
+
+def test_cli_notes_clips_of_very_different_durations(bvh_case, capsys):
+    from usdhands.formats.io import read_clip, write_clip
+
+    c, body, hands, d = bvh_case
+    short = d / "short_hands.bvh"
+    write_clip(hands, read_clip(hands).slice(0, 40), short)
+    status, _, err = _run(["splice", str(body), str(short), "-o", str(d / "short_out.bvh")], capsys)
+    assert status == 0, err
+    assert "usdhands: note: BODY lasts 7.97 s and HANDS 1.3 s: the path runs from the first to the last frames of " \
+           "both (fixed ends)" in err
+    status, _, err = _run(["splice", str(body), str(hands), "-o", str(d / "short_out.bvh")], capsys)
+    assert status == 0 and "lasts" not in err

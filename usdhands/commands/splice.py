@@ -18,6 +18,8 @@ from usdhands.commands._common import Progress, print_json, print_table
 from usdhands.commands._output import add_layer_argument, layer_options
 from usdhands.errors import UsdHandsError
 
+DURATION_RATIO_NOTE = 1.5
+"""A note when one clip lasts this many times longer than the other."""
 MATCH_RE = re.compile(r"^(\d+):(\d+)(?::(\d+))?$")
 
 
@@ -272,6 +274,11 @@ def run(args) -> int:
             raise UsdHandsError(f"--match after resampling HANDS to {body.fps:.4g} fps: {e}") from None
         constraints = conv
 
+    long_, short_ = max(body.duration, hands.duration), min(body.duration, hands.duration)
+    if short_ > 0 and long_ / short_ > DURATION_RATIO_NOTE:
+        print(f"usdhands: note: BODY lasts {body.duration:.3g} s and HANDS {hands.duration:.3g} s: the path runs from "
+              "the first to the last frames of both (fixed ends), so both clips should hold the same performance; "
+              "trim them first", file=sys.stderr)
     options = SpliceOptions(band1=band1, band2=band2, yaw=args.yaw, hand_trunk_yaw_deg=args.hand_yaw,
                             forearm_align=args.forearm_align, blend_window=args.blend, transfer=args.transfer)
     progress = Progress("splice")
