@@ -59,6 +59,7 @@ import numpy as np
 
 from usdhands.algorithms.reduction_model import Constant, ReductionModel, Relation
 from usdhands.errors import ConfigError
+from usdhands.model.finger_dofs import apply_finger_curves, finger_curves
 from usdhands.model.handmap import FINGERS, HandMap
 from usdhands.model.skeleton import short_joint_name
 
@@ -695,8 +696,6 @@ def model_curves(clip, joints, model: ReductionModel):
     FingerCurves
         Degrees, in ``model.order``; their names are :func:`curve_names`.
     """
-    from usdhands.model.finger_dofs import finger_curves
-
     curves = finger_curves(clip, list(joints), model.order)
     names = curve_names(clip.skeleton, joints, model.order)
     free = set(model.free_curves)
@@ -728,8 +727,6 @@ def expand_clip(clip, joints, model: ReductionModel):
     ValueError
         The joints' curve names (``<joint>.<axis>`` in ``model.order``) do not cover the model's curves.
     """
-    from usdhands.model.finger_dofs import apply_finger_curves
-
     curves = model_curves(clip, joints, model)
     names = curve_names(clip.skeleton, joints, model.order)
     return apply_finger_curves(clip, curves.with_values(model.apply(curves.values, names)))
