@@ -420,3 +420,12 @@ def test_graph_plot_of_a_large_k_draws_at_most_eight_candidates_per_row(tmp_path
     big = plot_graph(res, labels, tmp_path / "k400.png")
     assert matplotlib.image.imread(big).shape == matplotlib.image.imread(small).shape
     assert big.stat().st_size < 150_000
+
+
+def test_db_build_warns_about_a_body_only_clip_with_frozen_fingers(sample_assets, capsys, tmp_path):
+    frozen, real = sample_assets / "conversation_bodyonly.glb", sample_assets / "conversation.glb"
+    status, _, err = _run(capsys, "db", "build", frozen, real, "-o", tmp_path / "db")
+    assert status == 0
+    assert err == (f"usdhands: warning: {frozen}: the left and right hand's fingers never move (a body-only clip?); "
+                   f"its frozen fingers go into the database as they are\n")
+    assert load_database(tmp_path / "db").clips[0]["source"] == str(frozen)

@@ -10,6 +10,7 @@ database holds.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from usdhands.commands._common import Progress, print_json, print_table
@@ -65,6 +66,10 @@ def run_build(args) -> int:
             if not any(h.finger_joints for h in handmap.sides):
                 raise UsdHandsError("no finger joints found: a database needs clips with finger animation", path=p)
             items.append(DatabaseClip(clip, handmap, label, str(p)))
+            still = _still_hands(clip, handmap)
+            if still:
+                print(f"usdhands: warning: {p}: the {' and '.join(still)} hand's fingers never move (a body-only "
+                      f"clip?); its frozen fingers go into the database as they are", file=sys.stderr)
     if args.fps <= 0:
         raise UsdHandsError(f"--fps must be positive, got {args.fps}")
     db = build_database(items, fps=args.fps, mirror=args.mirror, segmentation=cfg.segmentation,
@@ -76,6 +81,18 @@ def run_build(args) -> int:
     else:
         _print_summary(db, path)
     return 0
+
+
+def _still_hands(clip, handmap, tolerance_deg: float = 0.5) -> list[str]:
+    """Sides whose finger joints turn by less than ``tolerance_deg`` over the whole clip."""
+    from usdhands.model.rotations import quat_angle_deg
+
+    still = []
+    for hand in handmap.sides:
+        joints = [clip.skeleton.index(j) for j in hand.finger_joints]
+        if joints and quat_angle_deg(clip.rotations[:, joints], clip.rotations[:1, joints]).max() < tolerance_deg:
+            still.append(hand.side)
+    return still
 
 
 def _print_summary(db, path) -> None:
