@@ -366,6 +366,7 @@ def test_cli_real_leap_recording_onto_a_body_resamples_and_transfers_relative_to
     assert "HANDS is at 37.04 fps and BODY at 30 fps: HANDS resampled to 30 fps (317 -> 256 frames); --match and " \
            "the reported alignment use HANDS's own frame numbers (constraints hold to within one resampled frame)" in err
     assert "HANDS finger joints without a counterpart" not in err
+    assert "usdhands: note: HANDS has no left hand: BODY's left hand keeps its own motion" in err
     rep = json.loads(stdout)
     assert list(rep["alignment"]) == ["right"]  # the recording has a right hand only
     a = np.array(rep["alignment"]["right"])

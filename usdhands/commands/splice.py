@@ -189,6 +189,9 @@ def _sides(args, body_map, hand_map) -> list[str]:
     if not common:
         raise UsdHandsError(f"no hand in common: BODY has {', '.join(have_b) or 'none'}, "
                             f"HANDS has {', '.join(have_h) or 'none'}")
+    for s in have_b:
+        if s not in common:
+            print(f"usdhands: note: HANDS has no {s} hand: BODY's {s} hand keeps its own motion", file=sys.stderr)
     return common
 
 
