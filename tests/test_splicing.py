@@ -455,7 +455,7 @@ def test_cli_usd_body_gets_an_override_layer_with_the_spliced_fingers(bvh_case, 
     assert quat_angle_deg(spliced.rotations[:, bj], c.body.rotations[:, oj]).mean() < 2.0
 
 
-def test_cli_sample_conversation_glb_with_a_bvh_hand_take(sample_assets, tmp_path, capsys):
+def test_cli_sample_conversation_glb_with_a_bvh_hand_take(sample_assets, tmp_path, capsys, gltf_validator):
     """A body clip with fingers from the samples, its hand take made with the known warp."""
     import json
 
@@ -478,6 +478,8 @@ def test_cli_sample_conversation_glb_with_a_bvh_hand_take(sample_assets, tmp_pat
     spliced = read_clip(out)
     fingers = [body.skeleton.index(j) for h in hm.sides for j in h.finger_joints]
     assert quat_angle_deg(spliced.rotations[:, fingers], body.rotations[:, fingers]).mean() < 2.0
+    report, = gltf_validator(out)
+    assert report["numErrors"] == 0, report["messages"][:3]
 
 
 def test_cli_constraints_are_in_the_hands_file_frames_when_resampled(bvh_case, shared_assets, capsys):
