@@ -809,6 +809,9 @@ def test_reduce_and_expand_write_usd_override_layers(sample_assets, tmp_path, ca
     code, _, err = run_cli(capsys, "expand", layer, "--model", model, "-o", again, "--layer")
     assert code == 0, err
     assert "@./layer.usda@" in again.read_text()[:600]
+    from usdhands.formats.usd_validate import usd_compliance_errors
+
+    assert usd_compliance_errors(layer) == [] and usd_compliance_errors(again) == []
     assert quat_angle_deg(read_clip(again).rotations, read_clip(full).rotations).max() < 2e-5
     for argv, message in ((["reduce", src, "-o", tmp_path / "x.glb", "--layer"],
                            f"{tmp_path / 'x.glb'}: --layer needs a USD output (.usd, .usda, .usdc)"),

@@ -446,6 +446,9 @@ def test_cli_usd_body_gets_an_override_layer_with_the_spliced_fingers(bvh_case, 
                           capsys)
     assert status == 0, err
     assert "subLayers" in out.read_text()[:400]
+    from usdhands.formats.usd_validate import usd_compliance_errors
+
+    assert usd_compliance_errors(out) == []
     spliced = read_clip(out)
     names = [n for n in spliced.skeleton.joint_names if n.rsplit("/", 1)[-1].startswith("LeftHand")
              and n[-1] in "123"]
