@@ -429,3 +429,23 @@ def test_db_build_warns_about_a_body_only_clip_with_frozen_fingers(sample_assets
     assert err == (f"usdhands: warning: {frozen}: the left and right hand's fingers never move (a body-only clip?); "
                    f"its frozen fingers go into the database as they are\n")
     assert load_database(tmp_path / "db").clips[0]["source"] == str(frozen)
+
+
+def test_db_info_of_the_bundled_database(capsys):
+    import jsonschema
+
+    from usdhands.algorithms.finger_database import database_schema
+    from usdhands.commands._synthesis_common import bundled_database_path
+
+    status, out, _ = _run(capsys, "db", "info")
+    assert status == 0
+    assert out.splitlines()[0] == (f"database {bundled_database_path()}: 64 clips, 128 hand tracks, 366 segments, "
+                                   f"10560 frames at 30 fps (5.9 min), 45 finger DOFs, reach 110.5 cm")
+    assert out.splitlines()[1].split() == ["label", "left", "segments", "right", "segments"]
+    assert [ln.split()[0] for ln in out.splitlines()[3:]] == ["attention", "big", "doubt_shrug", "ok",
+                                                              "palm_presentation", "small", "turn", "wipe"]
+    status, out, _ = _run(capsys, "db", "info", bundled_database_path(), "--json")
+    manifest = json.loads(out)
+    jsonschema.validate(manifest, database_schema())
+    assert manifest["format"] == "usdhands-finger-database" and manifest["version"] == 1
+    assert manifest["counts"] == {"clips": 64, "tracks": 128, "segments": 366, "frames": 10560}
