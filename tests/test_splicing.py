@@ -639,3 +639,53 @@ def test_cli_notes_clips_of_very_different_durations(bvh_case, capsys):
            "both (fixed ends)" in err
     status, _, err = _run(["splice", str(body), str(hands), "-o", str(d / "short_out.bvh")], capsys)
     assert status == 0 and "lasts" not in err
+
+
+def test_cli_usd_sample_body_full_copy_with_a_usd_hand_take(sample_assets, tmp_path, capsys):
+    """humanoid.usda as BODY, its hand take (known warp) as a USD file of its own: USD in, USD out."""
+    import json
+
+    from usdhands.formats.io import read_clip, write_asset
+    from usdhands.formats.usd_validate import usd_compliance_errors
+    from usdhands.model.asset import Asset
+    from usdhands.model.hand_detection import detect_hands
+
+    src = sample_assets / "humanoid.usda"
+    body = read_clip(src)
+    hm = detect_hands(body.skeleton)
+    hands, truth = hand_session(body, hm.sides, seed=4)
+    hands_path = tmp_path / "hands.usdc"
+    write_asset(Asset(path=None, skeletons=(hands.skeleton,), clips=(hands,)), hands_path)
+    out = tmp_path / "spliced.usda"
+    status, stdout, err = _run(["splice", str(src), str(hands_path), "-o", str(out), "--json"], capsys)
+    assert status == 0, err
+    rep = json.loads(stdout)
+    # the sample's left arm hangs still (its wrist moves 1.2 cm): it takes the right hand's timing
+    assert rep["timing_from"] == {"left": "right", "right": "right"}
+    assert "usdhands: note: left hand: its wrist barely moves (range 1.2 cm in BODY" in err
+    for s in SIDES:
+        assert np.abs(np.array(rep["alignment"][s]) - truth).mean() <= 1.5
+    assert "subLayers" not in out.read_text()[:400] and usd_compliance_errors(out) == []
+    spliced = read_clip(out)
+    fingers = [body.skeleton.index(j) for h in hm.sides for j in h.finger_joints]
+    assert quat_angle_deg(spliced.rotations[:, fingers], body.rotations[:, fingers]).mean() < 2.0
+    others = [j for j in range(body.skeleton.num_joints) if j not in fingers]
+    assert quat_angle_deg(spliced.rotations[:, others], body.rotations[:, others]).max() < 1e-4
+
+
+def test_a_still_hand_takes_the_other_hands_timing(sample_assets):
+    from usdhands.formats.io import read_clip
+    from usdhands.model.hand_detection import detect_hands
+
+    body = read_clip(sample_assets / "humanoid.usda")
+    hm = detect_hands(body.skeleton)
+    hands, truth = hand_session(body, hm.sides, seed=4)
+    sides = {s: hm[s] for s in SIDES}
+    shared = splice_clips(body, hands, sides, sides)
+    alone = splice_clips(body, hands, sides, sides, options=SpliceOptions(still_range_cm=0.0))
+    assert shared.timing_from == {"left": "right", "right": "right"} and alone.timing_from == {"left": "left",
+                                                                                                 "right": "right"}
+    assert shared.wrist_range_cm["left"][0] < 5.0 < shared.wrist_range_cm["right"][0]
+    err = lambda r, s: np.abs(r.sides[s].alignment - truth).mean()
+    assert err(shared, "left") == err(shared, "right") <= 1.5 < err(alone, "left")
+    assert np.array_equal(shared.sides["left"].alignment, alone.sides["right"].alignment)

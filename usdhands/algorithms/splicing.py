@@ -39,7 +39,7 @@ Subtracting the forearm instead would erase the arm motion the first pass relies
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
@@ -732,6 +732,11 @@ class SpliceOptions:
         ``"auto"`` asks :func:`choose_transfer`.
     auto_transfer_deg : float
         The threshold of ``"auto"``.
+    still_range_cm : float
+        A hand whose wrist moves less than this (range of the wrist markers relative to
+        the shoulder, centimetres, largest over the axes) in either clip carries no
+        timing: when the other hand moves, the still hand takes the other hand's
+        alignment (both hands of a take share one timing). 0 turns this off.
     """
 
     band1: float = 0.3
@@ -748,6 +753,7 @@ class SpliceOptions:
     refit: int = 1
     transfer: str = "auto"
     auto_transfer_deg: float = 10.0
+    still_range_cm: float = 5.0
 
     def __post_init__(self) -> None:
         if self.transfer not in ("local", "copy", "hand", "auto"):
@@ -1070,6 +1076,11 @@ class SpliceResult:
         Finger joints without a counterpart, per hand.
     transfer_modes : dict of str to str
         ``"local"``, ``"copy"`` or ``"hand"`` per hand (what ``"auto"`` chose).
+    timing_from : dict of str to str
+        Per hand, the hand whose alignment it uses: itself, or the other hand when its
+        own arm is still (``SpliceOptions.still_range_cm``).
+    wrist_range_cm : dict of str to (float, float)
+        Per hand, the wrist's range relative to the shoulder in BODY and in HANDS.
     """
 
     clip: Clip
@@ -1079,6 +1090,8 @@ class SpliceResult:
     body_unmatched: dict
     hand_unmatched: dict
     transfer_modes: dict
+    timing_from: dict = field(default_factory=dict)
+    wrist_range_cm: dict = field(default_factory=dict)
 
 
 def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
@@ -1121,7 +1134,7 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
     wb = partial_world_xforms(body, [j for s in body_sides.values() for j in _side_joints(body.skeleton, s)])
     wh = partial_world_xforms(hands, [j for s in hand_sides.values() for j in _side_joints(hands.skeleton, s)])
     out = body
-    sides, transfers, pairs_all, bun, hun, modes = {}, {}, {}, {}, {}, {}
+    sides, transfers, pairs_all, bun, hun, modes, ranges = {}, {}, {}, {}, {}, {}, {}
     order = [s for s in ("left", "right") if s in body_sides]
     for k, s in enumerate(order):
         bs, hs = body_sides[s], hand_sides[s]
@@ -1145,6 +1158,19 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
                          hand_hand_dirs=hand_directions(hands, hs, ho, wh),
                          frame_rotation=forearm_rest_basis(body.skeleton, bs, bo)
                          @ forearm_rest_basis(hands.skeleton, hs, ho).T, side=s)
+        sides[s] = al
+        ranges[s] = (_wrist_range_cm(bm, bref), _wrist_range_cm(hm, href))
+        if progress is not None:
+            progress(k + 1, len(order) + 1, s)
+    timing = {s: s for s in order}
+    if options.still_range_cm > 0 and len(order) == 2:
+        still = {s: min(ranges[s]) < options.still_range_cm for s in order}
+        for s, other in zip(order, order[::-1]):
+            if still[s] and not still[other]:
+                timing[s] = other
+    for s in order:
+        bs, hs = body_sides[s], hand_sides[s]
+        al = sides[timing[s]]
         pairs, bu, hu = pair_finger_joints(bs, hs)
         mode = options.transfer
         if mode == "auto":
@@ -1155,10 +1181,19 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
                               jump_frames=options.jump_frames, mode=mode, axes=axes)
         if tr.joints:
             out = out.with_joint_rotations(tr.joints, tr.rotations)
-        sides[s], transfers[s], pairs_all[s], bun[s], hun[s] = al, tr, pairs, bu, hu
-        if progress is not None:
-            progress(k + 1, len(order), s)
-    return SpliceResult(out, sides, transfers, pairs_all, bun, hun, modes)
+        transfers[s], pairs_all[s], bun[s], hun[s] = tr, pairs, bu, hu
+    sides = {s: sides[timing[s]] for s in order}
+    if progress is not None:
+        progress(len(order) + 1, len(order) + 1, "fingers")
+    return SpliceResult(out, sides, transfers, pairs_all, bun, hun, modes, timing, ranges)
+
+
+def _wrist_range_cm(markers: np.ndarray, ref: np.ndarray | None) -> float:
+    """Largest range over the axes of the wrist markers' midpoint, relative to ``ref`` (cm)."""
+    w = 0.5 * (markers[:, 0] + markers[:, 1])
+    if ref is not None:
+        w = w - ref
+    return float(np.ptp(w, axis=0).max())
 
 
 def _given_markers(markers: dict, side: str, frames: int, what: str) -> np.ndarray:

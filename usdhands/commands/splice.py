@@ -294,6 +294,11 @@ def run(args) -> int:
     write_clip(args.body, result.clip, args.output, **opts)
 
     for s in sides:
+        if result.timing_from.get(s, s) != s:
+            rb, rh = result.wrist_range_cm[s]
+            print(f"usdhands: note: {s} hand: its wrist barely moves (range {rb:.2g} cm in BODY, {rh:.2g} cm in "
+                  f"HANDS): it takes the {result.timing_from[s]} hand's alignment (both hands share one timing)",
+                  file=sys.stderr)
         if args.transfer == "auto" and result.transfer_modes.get(s) == "hand":
             print(f"usdhands: note: {s} hand: the finger joints of BODY and HANDS have other axis conventions; "
                   "rotations carried through the hands' rest axes (--transfer hand)", file=sys.stderr)
@@ -327,6 +332,7 @@ def run(args) -> int:
             "pairs": {s: [list(p) for p in result.pairs[s]] for s in sides},
             "body_unmatched": result.body_unmatched, "hands_unmatched": result.hand_unmatched,
             "transfer": result.transfer_modes,
+            "timing_from": result.timing_from,
             "markers": {"body": str(args.body_markers) if args.body_markers else "joints",
                         "hands": str(args.hands_markers) if args.hands_markers else "joints"},
             "constraints": [str(c) for c in (parse_match(t) for t in args.match)],
