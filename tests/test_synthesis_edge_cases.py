@@ -449,3 +449,21 @@ def test_db_info_of_the_bundled_database(capsys):
     jsonschema.validate(manifest, database_schema())
     assert manifest["format"] == "usdhands-finger-database" and manifest["version"] == 1
     assert manifest["counts"] == {"clips": 64, "tracks": 128, "segments": 366, "frames": 10560}
+
+
+def test_an_input_segment_with_no_candidate_within_the_length_factor_widens_it():
+    from usdhands.algorithms.synthesis import db_side_segments, synthesize_hand
+    from usdhands.commands._synthesis_common import bundled_database_path
+
+    db = load_database(bundled_database_path())
+    right = db_side_segments(db, "right")
+    lengths = db.segments[right, 1] - db.segments[right, 0]
+    s = int(right[np.nonzero(lengths == 11)[0][0]])
+    a = int(db.segments[s, 0])
+    # 6 frames: every database segment (>= 10 frames) is beyond the factor 1.5 (9 frames), but
+    # those up to 11 frames can still be warped (steps of 2): the 11-frame one taken every other frame
+    rows = a + np.arange(0, 11, 2)
+    res = synthesize_hand(np.asarray(db.features[rows], dtype=np.float64), db, "right")
+    assert res.search.candidates[0] == 0  # nothing within the factor
+    assert res.chosen.tolist() == [s] and res.segment_costs[0, 0] == pytest.approx(0.0, abs=1e-9)
+    assert np.allclose(res.curves[:, db.dof_index], np.asarray(db.fingers[rows], dtype=np.float64))
