@@ -467,3 +467,18 @@ def test_an_input_segment_with_no_candidate_within_the_length_factor_widens_it()
     assert res.search.candidates[0] == 0  # nothing within the factor
     assert res.chosen.tolist() == [s] and res.segment_costs[0, 0] == pytest.approx(0.0, abs=1e-9)
     assert np.allclose(res.curves[:, db.dof_index], np.asarray(db.fingers[rows], dtype=np.float64))
+
+
+def test_hands_right_leaves_the_left_fingers_as_they_were(sample_assets, capsys, tmp_path):
+    from usdhands.model.hand_detection import detect_hands
+
+    src = sample_assets / "conversation.glb"  # fingers animated: the left ones must survive
+    status, out, err = _run(capsys, "synthesize", src, "-o", tmp_path / "o.glb", "--hands", "right", "--json")
+    assert status == 0, err
+    assert list(json.loads(out)["hands"]) == ["right"]
+    a, b = read_clip(src), read_clip(tmp_path / "o.glb")
+    hm = detect_hands(a.skeleton)
+    left = [a.skeleton.index(j) for j in hm.left.finger_joints]
+    right = [a.skeleton.index(j) for j in hm.right.finger_joints]
+    assert np.array_equal(a.rotations[:, left], b.rotations[:, left])
+    assert not np.allclose(a.rotations[:, right], b.rotations[:, right], atol=1e-4)
