@@ -710,17 +710,8 @@ def model_curves(clip, joints, model: ReductionModel):
 def expand_clip(clip, joints, model: ReductionModel):
     """The clip with every constant and dependent finger curve of ``model`` rebuilt from its free curves.
 
-    Parameters
-    ----------
-    clip : Clip
-    joints : sequence of int
-        Skeleton indices of the model's joints, in the model's curve order.
-    model : ReductionModel
-
-    Returns
-    -------
-    Clip
-        Only the model's joints' rotations change.
+    The curves are read by :func:`model_curves` (same parameters). Returns a Clip in
+    which only the model's joints' rotations change.
 
     Raises
     ------
