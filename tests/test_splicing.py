@@ -689,3 +689,23 @@ def test_a_still_hand_takes_the_other_hands_timing(sample_assets):
     err = lambda r, s: np.abs(r.sides[s].alignment - truth).mean()
     assert err(shared, "left") == err(shared, "right") <= 1.5 < err(alone, "left")
     assert np.array_equal(shared.sides["left"].alignment, alone.sides["right"].alignment)
+
+
+def test_cli_still_hand_alone_gets_a_note(sample_assets, tmp_path, capsys):
+    from usdhands.formats.io import read_clip, write_asset
+    from usdhands.model.asset import Asset
+    from usdhands.model.hand_detection import detect_hands
+
+    src = sample_assets / "humanoid.usda"
+    body = read_clip(src)
+    hands, _ = hand_session(body, detect_hands(body.skeleton).sides, seed=4)
+    hands_path = tmp_path / "hands.usdc"
+    write_asset(Asset(path=None, skeletons=(hands.skeleton,), clips=(hands,)), hands_path)
+    status, _, err = _run(["splice", str(src), str(hands_path), "-o", str(tmp_path / "o.usda"), "--side", "left"],
+                          capsys)
+    assert status == 0, err
+    assert "usdhands: note: left hand: its wrist barely moves (range 1.2 cm in BODY, 21 cm in HANDS): the " \
+           "alignment has little to go on; splice both hands, or add --match constraints" in err
+    status, _, err = _run(["splice", str(src), str(hands_path), "-o", str(tmp_path / "o.usda"), "--side", "right"],
+                          capsys)
+    assert status == 0 and "barely moves" not in err

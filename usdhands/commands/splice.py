@@ -294,10 +294,14 @@ def run(args) -> int:
     write_clip(args.body, result.clip, args.output, **opts)
 
     for s in sides:
+        rb, rh = result.wrist_range_cm[s]
         if result.timing_from.get(s, s) != s:
-            rb, rh = result.wrist_range_cm[s]
             print(f"usdhands: note: {s} hand: its wrist barely moves (range {rb:.2g} cm in BODY, {rh:.2g} cm in "
                   f"HANDS): it takes the {result.timing_from[s]} hand's alignment (both hands share one timing)",
+                  file=sys.stderr)
+        elif min(rb, rh) < options.still_range_cm:
+            print(f"usdhands: note: {s} hand: its wrist barely moves (range {rb:.2g} cm in BODY, {rh:.2g} cm in "
+                  "HANDS): the alignment has little to go on; splice both hands, or add --match constraints",
                   file=sys.stderr)
         if args.transfer == "auto" and result.transfer_modes.get(s) == "hand":
             print(f"usdhands: note: {s} hand: the finger joints of BODY and HANDS have other axis conventions; "
