@@ -564,7 +564,7 @@ def test_cli_user_mistakes(shared_assets, tmp_path, capsys):
     assert code == 2 and err == f"usdhands: error: {tmp_path / 'x.bvh'}: the model JSON would overwrite this file\n"
     cesium = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
     code, _, err = run_cli(capsys, "reduce", cesium)
-    assert code == 2 and err.startswith("usdhands: error: no hand found in skeleton") and err.count("\n") == 1
+    assert code == 2 and err.startswith(f"usdhands: error: {cesium}: no hand found in skeleton") and err.count("\n") == 1
     code, _, err = run_cli(capsys, "reduce", src, "--step", "5")
     assert code == 2 and err == "usdhands: error: --step 5 is out of range: 4 step(s) given\n"
     model = ReductionModel(("LeftHandIndex1.x", "LeftHandIndex1.y", "LeftHandIndex1.z"),
@@ -903,3 +903,22 @@ def test_cli_one_frame_and_bad_hands_exit_2(shared_assets, tmp_path, capsys):
     assert code == 2 and err == f"usdhands: error: {one}: the animation has 1 frame(s); finger curves need at least 2\n"
     code, out, err = run_cli(capsys, "reduce", src, "--hands", "right,foo")
     assert code == 2 and err == "usdhands: error: --hands: unknown value(s) ['foo']; expected some of ['left', 'right']\n"
+
+
+def test_reduce_uses_the_hand_map_recorded_in_a_usd_file(sample_assets, tmp_path, capsys):
+    """A UsdHandsHandMapAPI map on the Skeleton wins over detection (one finger, right hand only)."""
+    from usdhands.formats.io import read_clip, write_clip
+    from usdhands.model.hand_detection import detect_hands
+    from usdhands.model.handmap import HandMap, HandSide
+
+    src = sample_assets / "humanoid.usda"
+    clip = read_clip(src)
+    right = detect_hands(clip.skeleton).right
+    only_index = HandMap(right=HandSide("right", right.wrist, right.forearm, right.shoulder, right.root,
+                                        {"index": right.fingers["index"]}))
+    marked = write_clip(src, clip, tmp_path / "marked.usda", hand_map=only_index)
+    code, out, err = run_cli(capsys, "reduce", marked, "--json")
+    assert code == 0, err
+    report = json.loads(out)
+    assert report["steps"][0]["dofs_left"] == 3 * len(right.fingers["index"])
+    assert report["steps"][0]["dofs_left_by_hand"] == {"right": 3 * len(right.fingers["index"])}

@@ -58,7 +58,7 @@ def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | Non
     from usdhands.algorithms.reduction import continuous_euler_curves
     from usdhands.formats.io import read_clip
     from usdhands.model.finger_dofs import finger_curves
-    from usdhands.model.hand_detection import resolve_handmap
+    from usdhands.formats.hands import hands_for
     from usdhands.model.handmap import SIDES
 
     _check_order(order)
@@ -70,7 +70,7 @@ def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | Non
     if clip.num_frames < 2:
         raise UsdHandsError(f"the animation has {clip.num_frames} frame(s); finger curves need at least 2",
                             path=path)
-    handmap = resolve_handmap(clip.skeleton, handmap_path)
+    handmap = hands_for(path, clip.skeleton, handmap_path)[0]
     wanted = chosen or [h.side for h in handmap.sides if h.finger_joints]
     if not wanted:
         raise UsdHandsError("no hand with finger joints", path=path)

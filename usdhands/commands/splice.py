@@ -195,14 +195,14 @@ def _sides(args, body_map, hand_map) -> list[str]:
     return common
 
 
-def _handmap(resolve, skeleton, override, path, role: str):
-    """Hand map of one input; errors name the input."""
+def _handmap(skeleton, override, path, role: str):
+    """Hand map of one input (override, map recorded in the file, or detection); errors name the input."""
+    from usdhands.formats.hands import hands_for
+
     try:
-        return resolve(skeleton, override)
+        return hands_for(path, skeleton, override)[0]
     except UsdHandsError as e:
-        if e.path is None:
-            raise type(e)(f"{role}: {e.message}", path=path, location=e.location) from None
-        raise
+        raise type(e)(f"{role}: {e.message}", path=e.path or path, location=e.location) from None
 
 
 def _check_side(side, path, role: str) -> None:
@@ -220,7 +220,6 @@ def run(args) -> int:
     from usdhands.algorithms.splicing import SpliceOptions, default_marker_offsets, splice_clips
     from usdhands.formats.io import read_clip, write_clip
     from usdhands.formats.registry import check_output_path
-    from usdhands.model.hand_detection import resolve_handmap
 
     constraints = [parse_match(t) for t in args.match]
     band1, band2 = parse_band(args.band)
@@ -239,8 +238,8 @@ def run(args) -> int:
     except ValueError as e:
         raise UsdHandsError(f"--match: {e} (BODY has {n} frames, HANDS {m0})") from None
 
-    body_map = _handmap(resolve_handmap, body.skeleton, args.body_handmap, args.body, "BODY")
-    hand_map = _handmap(resolve_handmap, hands.skeleton, args.hands_handmap, args.hands, "HANDS")
+    body_map = _handmap(body.skeleton, args.body_handmap, args.body, "BODY")
+    hand_map = _handmap(hands.skeleton, args.hands_handmap, args.hands, "HANDS")
     sides = _sides(args, body_map, hand_map)
     for s in sides:
         _check_side(body_map[s], args.body, "BODY")
