@@ -384,6 +384,10 @@ def test_graft_hands_on_a_usd_skeleton_rebuilds_the_removed_fingers(sample_asset
                         scales=full.scales[:, keep])
     src = tmp_path / "body_without_fingers.usda"
     write_asset(Asset("memory", [sub], [body], []), src)
+    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "layer.usda", "--graft-hands", "--layer")
+    assert status == 2 and err == (f"usdhands: error: {src}: --layer cannot add joints to the skeleton it overrides; "
+                                   f"with --graft-hands the output is a new file (drop --layer)\n")
+    assert not (tmp_path / "layer.usda").exists()
     status, out, err = _run(capsys, "synthesize", src, "-o", tmp_path / "grafted.usda", "--graft-hands", "--json")
     assert status == 0, err
     report = json.loads(out)

@@ -80,6 +80,9 @@ def run(args) -> int:
         clip, handmap, added = _graft(args, asset, clip, handmap, db, [s for s in wanted if s not in with_fingers],
                                       explicit=bool(args.hands))
         with_fingers = [s for s in wanted if handmap[s] is not None and handmap[s].finger_joints]
+        if added and args.layer:
+            raise UsdHandsError("--layer cannot add joints to the skeleton it overrides; with --graft-hands "
+                                "the output is a new file (drop --layer)", path=args.file)
     if not with_fingers:
         found = ", ".join(f"{h.side} (wrist {h.wrist})" for h in handmap.sides) or "none"
         raise UsdHandsError(f"the skeleton has no finger joints on the {' or '.join(wanted)} hand "
