@@ -117,6 +117,13 @@ def test_holdout_beats_the_baselines(gesture_files, capsys):
     lines = out.splitlines()
     assert lines[0].startswith(f"held-out synthesis over {len(paths)} clips") and "ground truth mean angular speed" in lines[0]
     assert [ln.split()[0] for ln in lines[3:7]] == ["synthesis", "mean_pose", "random_segments", "nearest_wrist"]
+    assert f"({r['frames']} hand-frames, k=5)" in lines[0] and r["k"] == 5
+    # --k reaches the synthesis of the held-out clips (it was ignored): one candidate per segment
+    status, out, err = _run(capsys, "evaluate", "--holdout", *paths, "--json", "--k", "1")
+    assert status == 0, err
+    r1 = json.loads(out)
+    assert r1["k"] == 1 and r1["methods"]["mean_pose"] == r["methods"]["mean_pose"]
+    assert r1["methods"]["synthesis"] != r["methods"]["synthesis"]
 
 
 def test_db_build_and_synthesize_files(gesture_files, capsys, tmp_path):

@@ -26,7 +26,8 @@ def register(sub) -> None:
     p.add_argument("--labels", default=None, metavar="REGEX",
                    help="label of a clip: the first group of REGEX searched in its file name")
     p.add_argument("--labels-file", type=Path, default=None, metavar="CSV", help="rows 'file,label'")
-    p.add_argument("--k", type=int, default=5, help="neighbours per segment (default 5)")
+    p.add_argument("--k", type=int, default=None,
+                   help="neighbours per segment (default 5; with --holdout, candidates per segment: the config's, 5)")
     p.add_argument("--predictors", default=None,
                    help="comma-separated predictors, e.g. wrist_rot,wrist_pos+0.5rot,elbow_pos "
                         f"(default: {','.join(DEFAULT_PREDICTORS)})")
@@ -62,7 +63,7 @@ def _items(args):
 def run(args) -> int:
     from usdhands.commands._synthesis_common import load_config
 
-    if args.k < 1:
+    if args.k is not None and args.k < 1:
         raise UsdHandsError(f"--k must be at least 1, got {args.k}")
     from usdhands.algorithms.gesture_evaluation import (
         DEFAULT_PREDICTORS, evaluate_predictors, parse_predictor, prepare_eval_set,
@@ -78,7 +79,10 @@ def run(args) -> int:
             raise UsdHandsError(str(e)) from None
     items = _items(args)
     if args.holdout:
+        if args.k is not None:
+            cfg = cfg.with_values(segment_cost={"k": args.k})
         return _run_holdout(args, items, cfg)
+    k = 5 if args.k is None else args.k
     unlabeled = [str(p) for p, lab, _, _ in items if lab is None]
     if unlabeled:
         raise UsdHandsError(f"clips without a label: {unlabeled[:3]}")
@@ -88,7 +92,7 @@ def run(args) -> int:
     try:
         es = prepare_eval_set([(lab, clip, hm) for _, lab, clip, hm in items], cfg, args.fps,
                               predictors=predictors)
-        result = evaluate_predictors(es, predictors, args.k, cfg)
+        result = evaluate_predictors(es, predictors, k, cfg)
     except ValueError as e:
         raise UsdHandsError(str(e)) from None
     result["idle_hands"] = [f"{c}:{s}" for c, s in es.idle]
@@ -149,11 +153,11 @@ def _run_holdout(args, items, cfg) -> int:
     if len(dbitems) < 2:
         raise UsdHandsError("--holdout needs at least two clips")
     db = build_database(dbitems, fps=args.fps or 30.0, segmentation=cfg.segmentation)
-    result = holdout_evaluation(db, cfg, seed=args.seed, progress=Progress("holdout"))
+    result = {"k": cfg.segment_cost.k, **holdout_evaluation(db, cfg, seed=args.seed, progress=Progress("holdout"))}
     if args.json:
         print_json(result)
         return 0
-    print(f"held-out synthesis over {result['clips']} clips ({result['frames']} hand-frames); "
+    print(f"held-out synthesis over {result['clips']} clips ({result['frames']} hand-frames, k={result['k']}); "
           f"ground truth mean angular speed {result['ground_truth_speed_deg_s']:.1f} deg/s")
     rows = [[m, f"{v['error_deg']:.2f}", f"{v['speed_deg_s']:.2f}"] for m, v in result["methods"].items()]
     print_table(rows, ["method", "finger error (deg)", "angular speed (deg/s)"])
