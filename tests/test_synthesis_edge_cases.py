@@ -486,3 +486,17 @@ def test_hands_right_leaves_the_left_fingers_as_they_were(sample_assets, capsys,
     right = [a.skeleton.index(j) for j in hm.right.finger_joints]
     assert np.array_equal(a.rotations[:, left], b.rotations[:, left])
     assert not np.allclose(a.rotations[:, right], b.rotations[:, right], atol=1e-4)
+
+
+def test_synthesize_warns_when_its_segmentation_differs_from_the_databases(sample_assets, capsys, tmp_path):
+    src = sample_assets / "conversation_bodyonly.glb"
+    cfg = tmp_path / "seg.json"
+    cfg.write_text('{"segmentation": {"speed_threshold_cm_s": 4}, "segment_cost": {"k": 3}}')
+    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "a.glb", "--config", cfg)
+    assert status == 0
+    assert err == ("usdhands: warning: the input is segmented with other values than the database was "
+                   "(speed_threshold_cm_s 4 here, 8 there); rebuild the database with the same --config for like "
+                   "segments\n")
+    cfg.write_text('{"segment_cost": {"k": 3}}')  # other values than segmentation: no warning
+    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "b.glb", "--config", cfg)
+    assert status == 0 and err == ""

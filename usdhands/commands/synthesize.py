@@ -96,6 +96,14 @@ def run(args) -> int:
     for s in with_fingers:
         if s not in db_sides:
             raise UsdHandsError(f"the database has no {s}-hand motion; rebuild it with --mirror", path=db.path)
+    differ = {key: (value, db.segmentation[key]) for key, value in vars(cfg.segmentation).items()
+              if key in db.segmentation and abs(float(value) - float(db.segmentation[key])) > 1e-9}
+    if differ:
+        import sys
+
+        print("usdhands: warning: the input is segmented with other values than the database was ("
+              + ", ".join(f"{key} {a:g} here, {b:g} there" for key, (a, b) in differ.items())
+              + "); rebuild the database with the same --config for like segments", file=sys.stderr)
     progress(1, 4, "synthesizing")
     result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers), finger_reference=args.finger_reference)
     progress(2, 4, "writing")
