@@ -4,6 +4,7 @@ damaged databases, other frame rates and up axes."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -500,3 +501,26 @@ def test_synthesize_warns_when_its_segmentation_differs_from_the_databases(sampl
     cfg.write_text('{"segment_cost": {"k": 3}}')  # other values than segmentation: no warning
     status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "b.glb", "--config", cfg)
     assert status == 0 and err == ""
+
+
+def test_db_build_from_every_animation_of_a_file(shared_assets, capsys, tmp_path):
+    from usdhands.formats.io import read_asset
+
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    status, out, err = _run(capsys, "db", "build", src, "-o", tmp_path / "db", "--animation", "all",
+                            "--labels", r"^(\w+)Expressive", "--json")
+    assert status == 0, err
+    asset = read_asset(src)
+    db = load_database(tmp_path / "db")
+    assert [c["name"] for c in db.clips] == [c.name for c in asset.clips] and len(db.clips) == 14
+    assert {c["label"] for c in db.clips} == {"Robot"} and {c["source"] for c in db.clips} == {str(src)}
+    assert len(db.tracks) == 28
+    # the hand-keyed clips that never bend the fingers are named in the warnings; ThumbsUp and
+    # Wave bend the right hand's (an idle left hand is normal in a one-handed gesture)
+    warned = re.findall(r"\(animation '(\w+)'\): the left and right hand's fingers never move", err)
+    assert sorted(warned) == sorted(c.name for c in asset.clips if c.name not in ("ThumbsUp", "Wave"))
+    assert err.count("\n") == 12
+    # a track holds its animation's frames at 30 fps
+    wave = [c.name for c in asset.clips].index("Wave")
+    t = db.tracks[db.tracks[:, 2] == wave][0]
+    assert t[1] - t[0] == int(np.floor(asset.clips[wave].duration * 30 + 1e-6)) + 1

@@ -32,7 +32,9 @@ def register(sub) -> None:
     b.add_argument("--fps", type=float, default=30.0, help="frame rate of the database (default 30)")
     b.add_argument("--config", type=Path, default=None, help="synthesis configuration JSON (segmentation values)")
     b.add_argument("--handmap", type=Path, default=None, help="hand map JSON overriding detection (all inputs)")
-    b.add_argument("--animation", default=None, help="animation name or index in each file (default the first)")
+    b.add_argument("--animation", default=None,
+                   help="animation name or index in each file (default the first), or 'all': every animation "
+                        "of every file, each a clip labelled like its file")
     b.add_argument("--samples", action="store_true",
                    help="build from the generated gesture set (usdhands.samples) instead of files")
     b.add_argument("--json", action="store_true", help="print the manifest's counts as JSON")
@@ -60,15 +62,19 @@ def run_build(args) -> int:
             raise UsdHandsError("no input files given (or use --samples)")
         paths = expand_inputs(args.inputs)
         label_of = labeller(args.labels, args.labels_file)
-        read = read_labelled(paths, label_of, None, args.handmap, args.animation, Progress("reading"))
+        if args.animation == "all":
+            read = _read_all_animations(paths, label_of, args.handmap, Progress("reading"))
+        else:
+            read = read_labelled(paths, label_of, None, args.handmap, args.animation, Progress("reading"))
         items = []
         for p, label, clip, handmap in read:
             if not any(h.finger_joints for h in handmap.sides):
                 raise UsdHandsError("no finger joints found: a database needs clips with finger animation", path=p)
             items.append(DatabaseClip(clip, handmap, label, str(p)))
             still = _still_hands(clip, handmap)
-            if still:
-                print(f"usdhands: warning: {p}: the {' and '.join(still)} hand's fingers never move (a body-only "
+            if still and len(still) == sum(1 for h in handmap.sides if h.finger_joints):  # one idle hand is normal
+                where = f"{p} (animation {clip.name!r})" if args.animation == "all" else str(p)
+                print(f"usdhands: warning: {where}: the {' and '.join(still)} hand's fingers never move (a body-only "
                       f"clip?); its frozen fingers go into the database as they are", file=sys.stderr)
     if args.fps <= 0:
         raise UsdHandsError(f"--fps must be positive, got {args.fps}")
@@ -81,6 +87,25 @@ def run_build(args) -> int:
     else:
         _print_summary(db, path)
     return 0
+
+
+def _read_all_animations(paths, label_of, handmap_path, progress):
+    """``(path, label, clip, handmap)`` for every animation of every file."""
+    from usdhands.commands._synthesis_common import handmap_for
+    from usdhands.formats.io import read_asset
+
+    out = []
+    for i, p in enumerate(paths):
+        label = label_of(p)
+        asset = read_asset(p)
+        if not asset.clips:
+            raise UsdHandsError("no animation in file", path=p)
+        handmap = handmap_for(asset.clips[0], p, handmap_path)
+        for clip in asset.clips:
+            out.append((p, label, clip, handmap if clip.skeleton is asset.clips[0].skeleton
+                        else handmap_for(clip, p, handmap_path)))
+        progress(i + 1, len(paths), p.name)
+    return out
 
 
 def _still_hands(clip, handmap, tolerance_deg: float = 0.5) -> list[str]:
