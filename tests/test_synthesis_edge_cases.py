@@ -313,8 +313,8 @@ def test_gltf_with_several_animations_gets_fingers_in_one_and_keeps_the_others(s
     out = tmp_path / "robot.glb"
     status, text, err = _run(capsys, "synthesize", src, "-o", out)
     assert status == 0, err
-    assert text.splitlines()[0] == ("animation 'Dance', the first of 14 in the file (--animation NAME for another; "
-                                    "the others are written unchanged)")
+    assert text.splitlines()[0] == ("animation 'Dance', the first of 14 in the file (--animation NAME for another, "
+                                    "or all; the others are written unchanged)")
     status, text, err = _run(capsys, "synthesize", src, "-o", tmp_path / "wave.glb", "--animation", "Wave", "--json")
     assert status == 0, err
     report = json.loads(text)
@@ -524,3 +524,33 @@ def test_db_build_from_every_animation_of_a_file(shared_assets, capsys, tmp_path
     wave = [c.name for c in asset.clips].index("Wave")
     t = db.tracks[db.tracks[:, 2] == wave][0]
     assert t[1] - t[0] == int(np.floor(asset.clips[wave].duration * 30 + 1e-6)) + 1
+
+
+def test_synthesize_every_animation_of_a_gltf(shared_assets, capsys, tmp_path, gltf_validator):
+    from usdhands.formats.io import read_asset
+    from usdhands.model.hand_detection import detect_hands
+
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    out = tmp_path / "all.glb"
+    status, text, err = _run(capsys, "synthesize", src, "-o", out, "--animation", "all", "--json")
+    assert status == 0, err
+    report = json.loads(text)
+    names = [r["animation"] for r in report["animations"]]
+    a, b = read_asset(src), read_asset(out)
+    assert names == [c.name for c in a.clips] == [c.name for c in b.clips] and len(names) == 14
+    assert report["output"] == str(out) and sorted(p.name for p in tmp_path.iterdir()) == ["all.glb"]
+    hm = detect_hands(a.skeletons[0])
+    fingers = sorted(a.clips[0].skeleton.index(j) for s in hm.sides for j in s.finger_joints)
+    body = [j for j in range(a.clips[0].num_joints) if j not in fingers]
+    for ca, cb in zip(a.clips, b.clips):
+        assert np.array_equal(ca.rotations[:, body], cb.rotations[:, body]), ca.name
+        assert np.array_equal(ca.translations, cb.translations), ca.name
+        assert not np.allclose(ca.rotations[:, fingers], cb.rotations[:, fingers], atol=1e-3), ca.name
+    # each animation as synthesizing it alone gives
+    assert _run(capsys, "synthesize", src, "-o", tmp_path / "wave.glb", "--animation", "Wave")[0] == 0
+    wave = [c.name for c in a.clips].index("Wave")
+    assert np.array_equal(read_asset(tmp_path / "wave.glb").clips[wave].rotations, b.clips[wave].rotations)
+    before, after = gltf_validator(src, out)
+    assert after["numErrors"] <= before["numErrors"]
+    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "x.glb", "--animation", "all", "--graft-hands")
+    assert status == 2 and err == f"usdhands: error: {src}: --animation all works without --graft-hands and --layer\n"

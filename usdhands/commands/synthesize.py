@@ -26,7 +26,8 @@ def register(sub) -> None:
     p.add_argument("--hands", default=None, help="left, right or left,right (default: every hand with fingers)")
     p.add_argument("--config", type=Path, default=None, help="synthesis configuration JSON (weights, thresholds)")
     p.add_argument("--handmap", type=Path, default=None, help="hand map JSON overriding detection")
-    p.add_argument("--animation", default=None, help="animation name or index in the file (default the first)")
+    p.add_argument("--animation", default=None,
+                   help="animation name or index in the file (default the first), or 'all': every animation")
     p.add_argument("--layer", action="store_true", help="USD: write a sparse override layer on top of the input")
     p.add_argument("--graft-hands", action="store_true",
                    help="add finger joints from the database's hand to a skeleton without them (skeleton-only "
@@ -42,16 +43,12 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    import numpy as np
 
     from usdhands.algorithms.finger_database import load_database
     from usdhands.algorithms.synthesis import synthesize_clip
-    from usdhands.commands._common import parse_list
-    from usdhands.commands._synthesis_common import bundled_database_path, handmap_for, load_config
-    from usdhands.errors import NoHandsError
+    from usdhands.commands._synthesis_common import bundled_database_path, load_config
     from usdhands.formats.io import read_asset, write_asset, write_clip
     from usdhands.model.asset import Asset
-    from usdhands.model.handmap import SIDES, HandMap
 
     _check_output(args)
     cfg = load_config(args.config)
@@ -63,10 +60,53 @@ def run(args) -> int:
     progress(0, 4, "reading")
     db = load_database(args.db or bundled_database_path())
     asset = read_asset(args.file)
+    if args.animation == "all" and not any(c.name == "all" for c in asset.clips):
+        return _run_all(args, asset, db, cfg, progress)
     try:
         clip = asset.clip(args.animation)
     except KeyError as e:
         raise UsdHandsError(str(e.args[0]).split(": ", 1)[-1], path=args.file) from None
+    clip, handmap, with_fingers, added = _prepare(args, asset, clip, db, cfg)
+    progress(1, 4, "synthesizing")
+    result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers), finger_reference=args.finger_reference)
+    progress(2, 4, "writing")
+    if added:
+        out = write_asset(Asset(str(args.file), (result.clip.skeleton,), (result.clip,), ()), args.output,
+                          inputs=(args.file,))
+    else:
+        out = write_clip(args.file, result.clip, args.output, **layer_options(args.layer, args.file, args.output))
+    report = _report(result, db, cfg)
+    report["grafted_joints"] = added
+    report["output"] = str(out)
+    report["animation"] = clip.name
+    report["animations_in_file"] = len(asset.clips)
+    if args.plot is not None:
+        report["plots"] = [str(p) for p in _plots(args.plot, clip, result, db, cfg)]
+    progress(4, 4, "done")
+    if args.json:
+        print_json(report)
+        return 0
+    if len(asset.clips) > 1 and args.animation is None:
+        print(f"animation {clip.name!r}, the first of {len(asset.clips)} in the file (--animation NAME for another, "
+              f"or all; the others are written unchanged)")
+    _print_report(report)
+    if added:
+        print(f"grafted {len(added)} finger joints from the database's hands")
+    for p in report.get("plots", []):
+        print(f"wrote {p}")
+    print(f"wrote {out}")
+    return 0
+
+
+def _prepare(args, asset, clip, db, cfg):
+    """Hand map, hands to synthesize and grafting for one clip: ``(clip, handmap, sides, grafted joints)``."""
+    import numpy as np
+
+    from usdhands.commands._common import parse_list
+    from usdhands.commands._synthesis_common import handmap_for
+    from usdhands.errors import NoHandsError
+    from usdhands.model.handmap import SIDES, HandMap
+
     wanted = parse_list(args.hands, SIDES) or list(SIDES)
     try:
         handmap = handmap_for(clip, args.file, args.handmap)
@@ -104,44 +144,85 @@ def run(args) -> int:
         print("usdhands: warning: the input is segmented with other values than the database was ("
               + ", ".join(f"{key} {a:g} here, {b:g} there" for key, (a, b) in differ.items())
               + "); rebuild the database with the same --config for like segments", file=sys.stderr)
-    progress(1, 4, "synthesizing")
-    result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers), finger_reference=args.finger_reference)
-    progress(2, 4, "writing")
-    if added:
-        out = write_asset(Asset(str(args.file), (result.clip.skeleton,), (result.clip,), ()), args.output,
-                          inputs=(args.file,))
-    else:
-        out = write_clip(args.file, result.clip, args.output, **layer_options(args.layer, args.file, args.output))
-    report = _report(result, db, cfg)
-    report["grafted_joints"] = added
-    report["output"] = str(out)
-    report["animation"] = clip.name
-    report["animations_in_file"] = len(asset.clips)
-    if args.plot is not None:
-        report["plots"] = [str(p) for p in _plots(args.plot, clip, result, db, cfg)]
-    progress(4, 4, "done")
-    if args.json:
-        print_json(report)
-        return 0
+    return clip, handmap, with_fingers, added
+
+
+def _print_report(report) -> None:
     rows = []
     for side, h in report["hands"].items():
         rows.append([side, h["segments"], h["top_labels"], f"{h['mean_segment_cost']:.1f}",
                      f"{h['seams_blended']}/{h['seams']}", f"{100 * h['pruned_share']:.0f}%"])
-    if len(asset.clips) > 1 and args.animation is None:
-        print(f"animation {clip.name!r}, the first of {len(asset.clips)} in the file (--animation NAME for another; "
-              f"the others are written unchanged)")
     print_table(rows, ["hand", "segments", "labels chosen", "mean cS", "seams blended", "pruned"])
     for side, m in report["mapping"].items():
         if m["no_source"]:
             print(f"{side}: no database counterpart, left as they were: {', '.join(m['no_source'])}")
         if m["dropped"]:
             print(f"{side}: database slots with no joint in this rig: {', '.join(m['dropped'])}")
-    if added:
-        print(f"grafted {len(added)} finger joints from the database's hands")
-    for p in report.get("plots", []):
-        print(f"wrote {p}")
+
+
+def _run_all(args, asset, db, cfg, progress) -> int:
+    """``--animation all``: every animation of the file gets fingers, written in one output."""
+    import contextlib
+    import os
+    import tempfile
+
+    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.formats.io import write_clip
+
+    if args.graft_hands or args.layer:
+        raise UsdHandsError("--animation all works without --graft-hands and --layer", path=args.file)
+    if not asset.clips:
+        raise UsdHandsError("no animation in file", path=args.file)
+    results = []
+    for i, clip in enumerate(asset.clips):
+        progress(i, len(asset.clips), clip.name)
+        clip, handmap, with_fingers, _ = _prepare(args, asset, clip, db, cfg)
+        results.append((clip, synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers),
+                                              finger_reference=args.finger_reference)))
+    # one animation per write: each write keeps the file's other animations, so chain them
+    temps = []
+    try:
+        current = args.file
+        for i, (_, res) in enumerate(results):
+            if i == len(results) - 1:
+                target = args.output
+            else:
+                fd, name = tempfile.mkstemp(suffix=args.output.suffix, prefix=f".{args.output.stem}.",
+                                            dir=args.output.parent)
+                os.close(fd)
+                os.unlink(name)
+                target = type(args.output)(name)
+                temps.append(target)
+            out = write_clip(current, res.clip, target)
+            current = target
+    finally:
+        for t in temps:
+            with contextlib.suppress(OSError):
+                t.unlink()
+    reports = []
+    for clip, res in results:
+        r = _report(res, db, cfg)
+        r["animation"] = clip.name
+        if args.plot is not None:
+            r["plots"] = [str(p) for p in _plots(args.plot / _safe_name(clip.name), clip, res, db, cfg)]
+        reports.append(r)
+    progress(len(asset.clips), len(asset.clips), "done")
+    if args.json:
+        print_json({"database": str(db.path), "k": cfg.segment_cost.k, "animations": reports, "output": str(out)})
+        return 0
+    for r in reports:
+        print(f"animation {r['animation']!r}:")
+        _print_report(r)
+        for p in r.get("plots", []):
+            print(f"wrote {p}")
     print(f"wrote {out}")
     return 0
+
+
+def _safe_name(name: str) -> str:
+    import re
+
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name.rsplit("/", 1)[-1]) or "animation"
 
 
 def _check_output(args) -> None:
