@@ -444,7 +444,7 @@ def test_db_info_of_the_bundled_database(capsys):
 
     status, out, _ = _run(capsys, "db", "info")
     assert status == 0
-    assert out.splitlines()[0] == (f"database {bundled_database_path()}: 64 clips, 128 hand tracks, 366 segments, "
+    assert out.splitlines()[0] == (f"database {bundled_database_path()}: 64 clips, 128 hand tracks, 347 segments, "
                                    f"10560 frames at 30 fps (5.9 min), 45 finger DOFs, reach 110.5 cm")
     assert out.splitlines()[1].split() == ["label", "left", "segments", "right", "segments"]
     assert [ln.split()[0] for ln in out.splitlines()[3:]] == ["attention", "big", "doubt_shrug", "ok",
@@ -453,7 +453,7 @@ def test_db_info_of_the_bundled_database(capsys):
     manifest = json.loads(out)
     jsonschema.validate(manifest, database_schema())
     assert manifest["format"] == "usdhands-finger-database" and manifest["version"] == 1
-    assert manifest["counts"] == {"clips": 64, "tracks": 128, "segments": 366, "frames": 10560}
+    assert manifest["counts"] == {"clips": 64, "tracks": 128, "segments": 347, "frames": 10560}
 
 
 def test_an_input_segment_with_no_candidate_within_the_length_factor_widens_it():
@@ -554,3 +554,40 @@ def test_synthesize_every_animation_of_a_gltf(shared_assets, capsys, tmp_path, g
     assert after["numErrors"] <= before["numErrors"]
     status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "x.glb", "--animation", "all", "--graft-hands")
     assert status == 2 and err == f"usdhands: error: {src}: --animation all works without --graft-hands and --layer\n"
+
+
+def test_a_long_hold_is_cut_in_its_middle_whatever_its_noise():
+    from usdhands.algorithms.segmentation import segment_by_speed
+
+    rng = np.random.default_rng(5)
+    base = np.r_[np.full(20, 40.0), np.zeros(100), np.full(20, 40.0)]  # a 3.3 s hold between motions
+    cuts = set()
+    for _ in range(20):
+        noisy = base + np.where(base == 0, rng.uniform(0, 1e-4, len(base)), 0.0)
+        cuts.add(tuple(segment_by_speed(noisy, 30, 8.0, 0.33, 2.0).tolist()))
+    assert cuts == {(0, 20, 70, 120, 140)}
+    # a real minimum still wins over the middle
+    dip = base.copy()
+    dip[20:120] = 3.0
+    dip[75] = 0.5  # the middle is frame 70
+    assert segment_by_speed(dip, 30, 8.0, 0.33, 2.0).tolist() == [0, 20, 75, 120, 140]
+
+
+def test_the_same_motion_from_gltf_bvh_and_usd_gets_the_same_fingers(sample_assets):
+    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.model.hand_detection import detect_hands
+
+    db = load_database(bundled_database_path())
+    results = []
+    for ext in ("glb", "bvh", "usdc"):  # float32, 6-decimal text, float32: holds differ by noise
+        clip = read_clip(sample_assets / f"conversation_bodyonly.{ext}")
+        results.append(synthesize_clip(clip, detect_hands(clip.skeleton), db))
+    for side in ("left", "right"):
+        first = results[0].hands[side]
+        for other in results[1:]:
+            assert np.array_equal(first.bounds, other.hands[side].bounds)
+            # rest segments of idle hands cost ~0 alike: which of them is taken may differ, not the fingers
+            same = first.chosen == other.hands[side].chosen
+            assert same.mean() > 0.9, side
+            assert np.abs(first.curves - other.hands[side].curves).mean() < 0.1, side

@@ -4,7 +4,11 @@ The motion is cut where the wrist speed crosses a threshold close to zero, which
 separates motion phases (fast) from holds (slow). Segments shorter than the minimum
 (0.33 s) are merged into a neighbour; segments longer than the maximum (2 s) are cut
 again at the lowest speed that leaves both parts at least the minimum long (a local
-minimum of the speed inside the allowed range), repeatedly.
+minimum of the speed inside the allowed range), repeatedly. Frames within
+``SPLIT_TOLERANCE`` × threshold of the lowest speed count as equally low and the one
+nearest the middle wins: inside a hold the speed is noise near zero, and the cut must not
+depend on it (the same motion read from a glTF and from a BVH with 6 decimals would
+otherwise be cut at different frames).
 
 Segments are given as **boundaries** ``b`` (int array, ``b[0] = 0``, ``b[-1] = T``):
 segment ``i`` covers frames ``b[i]`` to ``b[i+1]`` (exclusive).
@@ -14,7 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["wrist_speed", "segment_by_speed", "segment_lengths"]
+__all__ = ["wrist_speed", "segment_by_speed", "segment_lengths", "SPLIT_TOLERANCE"]
+
+#: Frames whose speed is within this fraction of the threshold of the lowest are equally good cuts.
+SPLIT_TOLERANCE = 0.05
 
 
 def wrist_speed(positions: np.ndarray, fps: float, smoothing_s: float = 0.0) -> np.ndarray:
@@ -80,8 +87,9 @@ def segment_by_speed(speed: np.ndarray, fps: float, threshold: float,
     bounds = [0, *cuts.tolist(), T]
     bounds = _merge_short(bounds, min_f, speed)
     out = [0]
+    tol = SPLIT_TOLERANCE * float(threshold)
     for a, b in zip(bounds[:-1], bounds[1:]):
-        out.extend(_split_long(a, b, speed, min_f, max_f))
+        out.extend(_split_long(a, b, speed, min_f, max_f, tol))
         out.append(b)
     return np.array(out, dtype=np.int64)
 
@@ -118,24 +126,23 @@ def _merge_short(bounds: list[int], min_f: int, speed: np.ndarray) -> list[int]:
     return bounds
 
 
-def _split_long(a: int, b: int, speed: np.ndarray, min_f: int, max_f: int) -> list[int]:
-    """Inner cut points of segment ``[a, b)`` so every part is at most ``max_f`` frames."""
+def _split_long(a: int, b: int, speed: np.ndarray, min_f: int, max_f: int, tol: float = 0.0) -> list[int]:
+    """Inner cut points of segment ``[a, b)`` so every part is at most ``max_f`` frames.
+
+    The cut leaves both parts at least ``min_f`` frames and is at the lowest speed
+    there (a local minimum); of the frames within ``tol`` of that speed, the one
+    nearest the middle (the earlier on a tie), so a flat hold is cut in its middle
+    whatever its noise.
+    """
     if b - a <= max_f:
         return []
     lo, hi = a + min_f, b - min_f  # a cut c must leave [a, c) and [c, b) >= min_f
-    window = speed[lo:hi + 1]
-    # prefer true local minima of the speed, the lowest first
     inner = np.arange(lo, hi + 1)
-    interior = (inner > 0) & (inner < len(speed) - 1)
-    is_min = np.zeros(len(inner), dtype=bool)
-    idx = inner[interior]
-    is_min[interior] = (speed[idx] <= speed[idx - 1]) & (speed[idx] <= speed[idx + 1])
-    if is_min.any():
-        cand = np.where(is_min, window, np.inf)
-        c = int(inner[int(np.argmin(cand))])
-    else:
-        c = int(inner[int(np.argmin(window))])
-    return _split_long(a, c, speed, min_f, max_f) + [c] + _split_long(c, b, speed, min_f, max_f)
+    window = speed[lo:hi + 1]
+    near = inner[window <= window.min() + tol]
+    c = int(near[int(np.argmin(np.abs(2 * near - (a + b))))])
+    return (_split_long(a, c, speed, min_f, max_f, tol) + [c]
+            + _split_long(c, b, speed, min_f, max_f, tol))
 
 
 def segment_lengths(bounds: np.ndarray) -> np.ndarray:
