@@ -591,3 +591,12 @@ def test_the_same_motion_from_gltf_bvh_and_usd_gets_the_same_fingers(sample_asse
             same = first.chosen == other.hands[side].chosen
             assert same.mean() > 0.9, side
             assert np.abs(first.curves - other.hands[side].curves).mean() < 0.1, side
+
+
+def test_unlabelled_database_says_no_label(shared_assets, capsys, tmp_path):
+    leap = shared_assets / "leap_hands"
+    status, out, _ = _run(capsys, "db", "build", leap, "-o", tmp_path / "db")
+    assert status == 0 and out.splitlines()[-1].split()[:2] == ["(no", "label)"]
+    status, out, _ = _run(capsys, "synthesize", leap / "fingers-ok.bvh", "-o", tmp_path / "o.bvh", "--db", tmp_path / "db")
+    assert status == 0 and out.splitlines()[2].split()[2:4] == ["(no", "label)"]
+    assert "None" not in out

@@ -132,8 +132,9 @@ def _print_summary(db, path) -> None:
     labels = db.segment_labels()
     side = db.segment_side()
     rows = []
-    for lab in sorted({str(x) for x in labels}):
-        sel = np.array([str(x) == lab for x in labels])
+    names = ["(no label)" if x is None else str(x) for x in labels]
+    for lab in sorted(set(names)):
+        sel = np.array([x == lab for x in names])
         rows.append([lab, int((sel & (side == 0)).sum()), int((sel & (side == 1)).sum())])
     print_table(rows, ["label", f"{SIDES[0]} segments", f"{SIDES[1]} segments"])
 

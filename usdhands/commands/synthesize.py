@@ -287,7 +287,7 @@ def _report(result, db, cfg) -> dict:
     hands = {}
     for side, h in result.hands.items():
         chosen = [labels[s] for s in h.chosen]
-        counts = Counter(str(c) for c in chosen)
+        counts = Counter("(no label)" if c is None else str(c) for c in chosen)
         hands[side] = {
             "segments": int(len(h.chosen)),
             "chosen_labels": [None if c is None else str(c) for c in chosen],
