@@ -600,3 +600,15 @@ def test_unlabelled_database_says_no_label(shared_assets, capsys, tmp_path):
     status, out, _ = _run(capsys, "synthesize", leap / "fingers-ok.bvh", "-o", tmp_path / "o.bvh", "--db", tmp_path / "db")
     assert status == 0 and out.splitlines()[2].split()[2:4] == ["(no", "label)"]
     assert "None" not in out
+
+
+def test_a_plot_folder_that_is_a_file_fails_before_any_work(sample_assets, capsys, tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    out = tmp_path / "o.glb"
+    status, _, err = _run(capsys, "synthesize", sample_assets / "conversation_bodyonly.glb", "-o", out, "--plot", afile)
+    assert status == 2 and err == f"usdhands: error: {afile}: --plot needs a folder; this is a file\n"
+    assert not out.exists()
+    status, _, err = _run(capsys, "evaluate", sample_assets / "gestures", "--labels", r"^([a-z_]+)_\d+",
+                          "--plot", afile / "sub")
+    assert status == 2 and err == f"usdhands: error: {afile / 'sub'}: --plot folder cannot be made: '{afile}' is a file\n"

@@ -18,6 +18,20 @@ def bundled_database_path() -> Path:
     return Path(str(resources.files("usdhands").joinpath("data", BUNDLED_NAME)))
 
 
+def check_plot_folder(folder: Path | None) -> None:
+    """Refuse a ``--plot DIR`` that cannot be a folder, before any work."""
+    if folder is None:
+        return
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise UsdHandsError("--plot needs a folder; this is a file", path=folder)
+    parent = folder.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise UsdHandsError(f"--plot folder cannot be made: {str(parent)!r} is a file", path=folder)
+
+
 def expand_inputs(inputs: list[Path]) -> list[Path]:
     """Files as given; folders replaced by their animation files (sorted)."""
     out = []

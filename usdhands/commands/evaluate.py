@@ -70,6 +70,9 @@ def run(args) -> int:
     )
     from usdhands.commands._common import parse_list
 
+    from usdhands.commands._synthesis_common import check_plot_folder
+
+    check_plot_folder(args.plot)
     cfg = load_config(args.config)
     predictors = parse_list(args.predictors) or list(DEFAULT_PREDICTORS)
     for name in predictors:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from usdhands.commands._common import Progress, print_json, print_table
 from usdhands.commands._output import layer_options
+from usdhands.commands._synthesis_common import check_plot_folder
 from usdhands.errors import UsdHandsError
 
 
@@ -233,6 +234,7 @@ def _check_output(args) -> None:
 
     check_output_path(args.output, args.file)
     layer_options(args.layer, args.file, args.output)
+    check_plot_folder(args.plot)
     if not args.graft_hands and args.file.exists():
         if handler_for(args.output, "write") is not handler_for(args.file, "read"):
             raise UsdHandsError(f"the output is the input file with fingers added, so it must have the input's "
