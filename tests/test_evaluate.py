@@ -263,3 +263,18 @@ def test_default_predictors_leave_out_joints_the_hand_maps_lack(gesture_files, c
     status, _, err = _run(capsys, "evaluate", *paths, "--labels", r"^([a-z]+)_", "--handmap", hm_file,
                           "--predictors", "shoulder_rot")
     assert status == 2 and "has no shoulder joint for the predictors asked for" in err
+
+
+def test_evaluate_refuses_sets_it_cannot_judge(gesture_files, capsys, sample_assets):
+    folder, paths = gesture_files
+    label = r"^([a-z]+)_\d+"
+    status, _, err = _run(capsys, "evaluate", paths[0], "--labels", label)
+    assert status == 2 and err == "usdhands: error: leave-one-out needs at least two clips\n"
+    same = [p for p in paths if p.name.startswith("ok_")]
+    status, _, err = _run(capsys, "evaluate", *same, "--labels", label)
+    assert status == 2 and err == "usdhands: error: leave-one-out needs at least two labels; every clip is 'ok'\n"
+    bodyonly = sample_assets / "gestures_bodyonly"
+    status, _, err = _run(capsys, "evaluate", "--holdout", bodyonly)
+    assert status == 2 and "the fingers never move in any of these clips: --holdout needs clips with finger" in err
+    status, _, err = _run(capsys, "evaluate", "--holdout", bodyonly, *paths[:2], "--json")
+    assert status == 0 and err.startswith("usdhands: warning: the fingers never move in 3 of 5 clips (")

@@ -89,6 +89,10 @@ def run(args) -> int:
     unlabeled = [str(p) for p, lab, _, _ in items if lab is None]
     if unlabeled:
         raise UsdHandsError(f"clips without a label: {unlabeled[:3]}")
+    if len(items) < 2:
+        raise UsdHandsError("leave-one-out needs at least two clips")
+    if len({lab for _, lab, _, _ in items}) < 2:
+        raise UsdHandsError(f"leave-one-out needs at least two labels; every clip is {items[0][1]!r}")
     left_out = []
     if args.predictors is None:  # the default list: leave out what these rigs cannot answer
         predictors, left_out = _answerable(predictors, items)
@@ -155,6 +159,19 @@ def _run_holdout(args, items, cfg) -> int:
         dbitems.append(DatabaseClip(clip, hm, lab, str(p)))
     if len(dbitems) < 2:
         raise UsdHandsError("--holdout needs at least two clips")
+    from usdhands.commands.db import _still_hands
+
+    still = [str(p) for p, _, clip, hm in items if len(_still_hands(clip, hm)) == len(
+        [h for h in hm.sides if h.finger_joints])]
+    if len(still) == len(items):
+        raise UsdHandsError("the fingers never move in any of these clips: --holdout needs clips with finger "
+                            "animation (body-only files have no ground truth)")
+    if still:
+        import sys
+
+        print(f"usdhands: warning: the fingers never move in {len(still)} of {len(items)} clips "
+              f"({', '.join(still[:3])}{', ...' if len(still) > 3 else ''}); they count as ground truth",
+              file=sys.stderr)
     db = build_database(dbitems, fps=args.fps or 30.0, segmentation=cfg.segmentation)
     result = {"k": cfg.segment_cost.k, **holdout_evaluation(db, cfg, seed=args.seed, progress=Progress("holdout"))}
     if args.json:
