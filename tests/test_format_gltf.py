@@ -450,7 +450,7 @@ def test_write_clip_rejects_foreign_joints(tmp_path):
                                                  r"'skin0': 'Hips', 'Spine', 'LeftHand', 'LeftHandIndex1', 'RightHand' \.\.\."):
         write_clip(src, random_clip(), tmp_path / "x.glb")
     assert not (tmp_path / "x.glb").exists()
-    with pytest.raises(OutputPathError, match=r"x.glb: an override layer \(--layer, as_layer\) needs a USD output"):
+    with pytest.raises(OutputPathError, match=r"x.glb: an override layer \(--as-layer, as_layer\) needs a USD output"):
         write_clip(src, read_clip(src), tmp_path / "x.glb", as_layer=True)
     assert not (tmp_path / "x.glb").exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
 

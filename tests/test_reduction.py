@@ -799,25 +799,25 @@ def test_reduce_and_expand_write_usd_override_layers(sample_assets, tmp_path, ca
     src = sample_assets / "humanoid.usda"
     full, layer, model = tmp_path / "full.usda", tmp_path / "layer.usda", tmp_path / "m.json"
     assert run_cli(capsys, "reduce", src, "-o", full, "--model", model)[0] == 0
-    code, _, err = run_cli(capsys, "reduce", src, "-o", layer, "--layer")
+    code, _, err = run_cli(capsys, "reduce", src, "-o", layer, "--as-layer")
     assert code == 0, err
     text = layer.read_text()
     assert "subLayers" in text[:600] and "humanoid.usda" in text[:600] and "def Mesh" not in text
     assert len(text) < full.stat().st_size
     assert quat_angle_deg(read_clip(layer).rotations, read_clip(full).rotations).max() < 1e-5
     again = tmp_path / "again.usda"
-    code, _, err = run_cli(capsys, "expand", layer, "--model", model, "-o", again, "--layer")
+    code, _, err = run_cli(capsys, "expand", layer, "--model", model, "-o", again, "--as-layer")
     assert code == 0, err
     assert "@./layer.usda@" in again.read_text()[:600]
     from usdhands.formats.usd_validate import usd_compliance_errors
 
     assert usd_compliance_errors(layer) == [] and usd_compliance_errors(again) == []
     assert quat_angle_deg(read_clip(again).rotations, read_clip(full).rotations).max() < 2e-5
-    for argv, message in ((["reduce", src, "-o", tmp_path / "x.glb", "--layer"],
-                           f"{tmp_path / 'x.glb'}: --layer needs a USD output (.usd, .usda, .usdc)"),
-                          (["reduce", src, "--layer"], "--layer needs -o OUT"),
-                          (["expand", shared_bvh(), "--model", model, "-o", tmp_path / "x.usda", "--layer"],
-                           f"{shared_bvh()}: --layer needs a USD input: the layer sublayers it")):
+    for argv, message in ((["reduce", src, "-o", tmp_path / "x.glb", "--as-layer"],
+                           f"{tmp_path / 'x.glb'}: --as-layer needs a USD output (.usd, .usda, .usdc)"),
+                          (["reduce", src, "--as-layer"], "--as-layer needs -o OUT"),
+                          (["expand", shared_bvh(), "--model", model, "-o", tmp_path / "x.usda", "--as-layer"],
+                           f"{shared_bvh()}: --as-layer needs a USD input: the layer sublayers it")):
         code, out, err = run_cli(capsys, *argv)
         assert code == 2 and err == f"usdhands: error: {message}\n", argv
 

@@ -396,7 +396,7 @@ def test_cli_real_leap_recording_onto_a_body_resamples_and_transfers_relative_to
     (["--match", "50-60"], "bad --match '50-60': expected BODY_FRAME:HAND_FRAME[:TOLERANCE] with 0-based"),
     (["--band", "0.3"], "bad --band '0.3': expected two positive fractions W1,W2 such as 0.3,0.1"),
     (["--side", "left", "--hands-handmap", "{right_only}"], "HANDS has no left hand (found: right)"),
-    (["--layer"], "bad.bvh: --layer needs a USD output (.usd, .usda, .usdc)"),
+    (["--as-layer"], "bad.bvh: --as-layer needs a USD output (.usd, .usda, .usdc)"),
 ])
 def test_cli_bad_input_exits_2_with_one_line(bvh_case, capsys, extra, message):
     import json

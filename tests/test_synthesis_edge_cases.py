@@ -238,7 +238,7 @@ def test_synthesize_usd_as_an_override_layer_and_bad_outputs_before_any_work(sam
     src = sample_assets / "conversation_bodyonly.usdc"
     full, layer = tmp_path / "full.usda", tmp_path / "layer.usda"
     assert _run(capsys, "synthesize", src, "-o", full)[0] == 0
-    status, _, err = _run(capsys, "synthesize", src, "-o", layer, "--layer")
+    status, _, err = _run(capsys, "synthesize", src, "-o", layer, "--as-layer")
     assert status == 0, err
     lay = Sdf.Layer.FindOrOpen(str(layer))
     assert [Sdf.ComputeAssetPathRelativeToLayer(lay, p) for p in lay.subLayerPaths] == [str(src)]
@@ -259,8 +259,8 @@ def test_synthesize_usd_as_an_override_layer_and_bad_outputs_before_any_work(sam
     monkeypatch.setattr(synthesis, "synthesize_clip", lambda *a, **k: pytest.fail("synthesized"))
     glb = sample_assets / "conversation_bodyonly.glb"
     for argv, message in (
-        ([glb, "-o", tmp_path / "x.usda", "--layer"], f"{glb}: --layer needs a USD input: the layer sublayers it"),
-        ([src, "-o", tmp_path / "x.glb", "--layer"], f"{tmp_path / 'x.glb'}: --layer needs a USD output"),
+        ([glb, "-o", tmp_path / "x.usda", "--as-layer"], f"{glb}: --as-layer needs a USD input: the layer sublayers it"),
+        ([src, "-o", tmp_path / "x.glb", "--as-layer"], f"{tmp_path / 'x.glb'}: --as-layer needs a USD output"),
         ([src, "-o", tmp_path / "x.glb"], f"{tmp_path / 'x.glb'}: the output is the input file with fingers added, "
                                           f"so it must have the input's format (.usdc)"),
         ([src, "-o", src], f"{src}: output path equals the input"),
@@ -385,9 +385,9 @@ def test_graft_hands_on_a_usd_skeleton_rebuilds_the_removed_fingers(sample_asset
                         scales=full.scales[:, keep])
     src = tmp_path / "body_without_fingers.usda"
     write_asset(Asset("memory", [sub], [body], []), src)
-    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "layer.usda", "--graft-hands", "--layer")
-    assert status == 2 and err == (f"usdhands: error: {src}: --layer cannot add joints to the skeleton it overrides; "
-                                   f"with --graft-hands the output is a new file (drop --layer)\n")
+    status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "layer.usda", "--graft-hands", "--as-layer")
+    assert status == 2 and err == (f"usdhands: error: {src}: --as-layer cannot add joints to the skeleton it overrides; "
+                                   f"with --graft-hands the output is a new file (drop --as-layer)\n")
     assert not (tmp_path / "layer.usda").exists()
     status, out, err = _run(capsys, "synthesize", src, "-o", tmp_path / "grafted.usda", "--graft-hands", "--json")
     assert status == 0, err
@@ -553,7 +553,7 @@ def test_synthesize_every_animation_of_a_gltf(shared_assets, capsys, tmp_path, g
     before, after = gltf_validator(src, out)
     assert after["numErrors"] <= before["numErrors"]
     status, _, err = _run(capsys, "synthesize", src, "-o", tmp_path / "x.glb", "--animation", "all", "--graft-hands")
-    assert status == 2 and err == f"usdhands: error: {src}: --animation all works without --graft-hands and --layer\n"
+    assert status == 2 and err == f"usdhands: error: {src}: --animation all works without --graft-hands and --as-layer\n"
 
 
 def test_a_long_hold_is_cut_in_its_middle_whatever_its_noise():

@@ -103,7 +103,7 @@ def run(args) -> int:
     steps = parse_steps(args.steps)
     write_opts = layer_options(args.layer, args.file, args.output) if args.output is not None else {}
     if args.layer and args.output is None:
-        raise UsdHandsError("--layer needs -o OUT")
+        raise UsdHandsError("--as-layer needs -o OUT")
     if args.model is not None:
         for other in (args.file, args.output):
             if other is not None and args.model.resolve() == Path(other).resolve():

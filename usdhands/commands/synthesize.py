@@ -29,7 +29,8 @@ def register(sub) -> None:
     p.add_argument("--handmap", type=Path, default=None, help="hand map JSON overriding detection")
     p.add_argument("--animation", default=None,
                    help="animation name or index in the file (default the first), or 'all': every animation")
-    p.add_argument("--layer", action="store_true", help="USD: write a sparse override layer on top of the input")
+    p.add_argument("--as-layer", "--layer", dest="layer", action="store_true",
+                   help="USD: write a sparse override layer on top of the input")
     p.add_argument("--graft-hands", action="store_true",
                    help="add finger joints from the database's hand to a skeleton without them (skeleton-only "
                         "files: BVH, USD without skinned meshes); the output is a new file with the new joints")
@@ -122,8 +123,8 @@ def _prepare(args, asset, clip, db, cfg):
                                       explicit=bool(args.hands))
         with_fingers = [s for s in wanted if handmap[s] is not None and handmap[s].finger_joints]
         if added and args.layer:
-            raise UsdHandsError("--layer cannot add joints to the skeleton it overrides; with --graft-hands "
-                                "the output is a new file (drop --layer)", path=args.file)
+            raise UsdHandsError("--as-layer cannot add joints to the skeleton it overrides; with --graft-hands "
+                                "the output is a new file (drop --as-layer)", path=args.file)
     if not with_fingers:
         found = ", ".join(f"{h.side} (wrist {h.wrist})" for h in handmap.sides) or "none"
         raise UsdHandsError(f"the skeleton has no finger joints on the {' or '.join(wanted)} hand "
@@ -171,7 +172,7 @@ def _run_all(args, asset, db, cfg, progress) -> int:
     from usdhands.formats.io import write_clip
 
     if args.graft_hands or args.layer:
-        raise UsdHandsError("--animation all works without --graft-hands and --layer", path=args.file)
+        raise UsdHandsError("--animation all works without --graft-hands and --as-layer", path=args.file)
     if not asset.clips:
         raise UsdHandsError("no animation in file", path=args.file)
     results = []
@@ -227,7 +228,7 @@ def _safe_name(name: str) -> str:
 
 
 def _check_output(args) -> None:
-    """Refuse a bad output before any work: the input itself, a missing folder, --layer
+    """Refuse a bad output before any work: the input itself, a missing folder, --as-layer
     without USD on both sides, or another format than the input's (without --graft-hands,
     which writes a new file in any format)."""
     from usdhands.formats.registry import check_output_path, handler_for

@@ -388,7 +388,7 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
         ``as_layer=True``.
     """
     if options.pop("as_layer", False):
-        raise OutputPathError("an override layer (--layer, as_layer) needs a USD output (.usd, .usda, .usdc); "
+        raise OutputPathError("an override layer (--as-layer, as_layer) needs a USD output (.usd, .usda, .usdc); "
                               "glTF files are written whole", path=final_path or path)
     if options:
         raise TypeError(f"unexpected options for glTF write_clip: {sorted(options)}")
