@@ -612,3 +612,23 @@ def test_a_plot_folder_that_is_a_file_fails_before_any_work(sample_assets, capsy
     status, _, err = _run(capsys, "evaluate", sample_assets / "gestures", "--labels", r"^([a-z_]+)_\d+",
                           "--plot", afile / "sub")
     assert status == 2 and err == f"usdhands: error: {afile / 'sub'}: --plot folder cannot be made: '{afile}' is a file\n"
+
+
+def test_synthesize_uses_the_hand_map_recorded_in_a_usd_file(sample_assets, tmp_path, capsys):
+    """A UsdHandsHandMapAPI map naming only the right hand: the left hand's fingers stay as they were."""
+    from usdhands.formats.io import write_clip
+    from usdhands.model.hand_detection import detect_hands
+    from usdhands.model.handmap import HandMap
+
+    src = sample_assets / "conversation_bodyonly.usdc"
+    clip = read_clip(src)
+    detected = detect_hands(clip.skeleton)
+    marked = write_clip(src, clip, tmp_path / "marked.usdc", hand_map=HandMap(right=detected.right))
+    out = tmp_path / "out.usdc"
+    status, _, err = _run(capsys, "synthesize", marked, "-o", out)
+    assert status == 0, err
+    result = read_clip(out)
+    left = [clip.skeleton.index(j) for j in detected.left.finger_joints]
+    right = [clip.skeleton.index(j) for j in detected.right.finger_joints]
+    np.testing.assert_array_equal(result.rotations[:, left], clip.rotations[:, left])
+    assert np.abs(result.rotations[:, right] - clip.rotations[:, right]).max() > 0.1

@@ -115,11 +115,14 @@ def read_labelled(paths: list[Path], label_of, fps, handmap_path, animation=None
 
 
 def handmap_for(clip, path, handmap_path):
-    """The clip's hand map; detection errors name the file they came from."""
-    from usdhands.model.hand_detection import resolve_handmap
+    """The clip's hand map: the JSON override, the map the file records, or detection.
+
+    Detection errors name the file they came from.
+    """
+    from usdhands.formats.hands import hands_for
 
     try:
-        return resolve_handmap(clip.skeleton, handmap_path)
+        return hands_for(path, clip.skeleton, handmap_path)[0]
     except UsdHandsError as e:
         if e.path is None:
             raise type(e)(e.message, path=path, location=e.location) from None
