@@ -43,6 +43,7 @@ from usdhands.algorithms.segmentation import segment_by_speed, wrist_speed
 from usdhands.algorithms.synthesis_config import SegmentationConfig
 from usdhands.algorithms.wrist_features import mirror_features, reach_cm, wrist_features
 from usdhands.errors import ConfigError
+from usdhands.json_schemas import first_schema_error, load_schema
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
 
@@ -257,9 +258,7 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
 
 def database_schema() -> dict:
     """The JSON schema of a manifest (shipped in ``usdhands/schemas``)."""
-    from importlib import resources
-
-    return json.loads(resources.files("usdhands").joinpath("schemas/database.schema.json").read_text())
+    return load_schema("database")
 
 
 def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
@@ -310,7 +309,6 @@ def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
         Missing folder or manifest, a manifest that fails the schema, an unknown
         version, or arrays whose shape or dtype differ from the manifest.
     """
-    import jsonschema
 
     path = Path(path)
     mf = path / "manifest.json"
@@ -327,12 +325,10 @@ def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
     if isinstance(manifest, dict) and manifest.get("format") == FORMAT and manifest.get("version") != VERSION:
         raise ConfigError(f"database version {manifest.get('version')!r} is not supported (this usdhands reads {VERSION})",
                           path=mf)
-    errors = sorted(jsonschema.Draft202012Validator(database_schema()).iter_errors(manifest),
-                    key=lambda e: list(e.absolute_path))
-    if errors:
-        e = errors[0]
-        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise ConfigError(f"invalid database manifest at {where}: {e.message}", path=mf)
+    error = first_schema_error(manifest, "database")
+    if error is not None:
+        where, message = error
+        raise ConfigError(f"invalid database manifest at {where}: {message}", path=mf)
     arrays = {}
     for name in ARRAYS:
         spec = manifest["arrays"][name]

@@ -25,12 +25,12 @@ import json
 import math
 import os
 from dataclasses import asdict, dataclass, field, replace
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from usdhands.errors import ConfigError
+from usdhands.json_schemas import first_schema_error, load_schema
 
 __all__ = ["Constant", "Relation", "ReductionModel", "MODEL_FORMAT", "MODEL_VERSION", "model_schema"]
 
@@ -312,7 +312,6 @@ class ReductionModel:
             Missing file, not JSON, not a valid model (the message names the first
             problem and where it is).
         """
-        import jsonschema
 
         path = Path(path)
         try:
@@ -325,12 +324,10 @@ class ReductionModel:
             d = json.loads(text)
         except json.JSONDecodeError as e:
             raise ConfigError(f"not JSON: {e.msg} at line {e.lineno} column {e.colno}", path=path) from None
-        validator = jsonschema.Draft202012Validator(model_schema())
-        errors = sorted(validator.iter_errors(d), key=lambda e: list(e.absolute_path))
-        if errors:
-            e = errors[0]
-            where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-            raise ConfigError(f"not a valid reduction model: {e.message}", path=path, location=where)
+        error = first_schema_error(d, "reduction_model")
+        if error is not None:
+            where, message = error
+            raise ConfigError(f"not a valid reduction model: {message}", path=path, location=where)
         try:
             model = cls.from_dict(d)
         except ValueError as e:
@@ -343,5 +340,4 @@ class ReductionModel:
 
 def model_schema() -> dict:
     """The JSON schema of a reduction model file (the copy shipped in the package)."""
-    text = resources.files("usdhands").joinpath("schemas/reduction_model.schema.json").read_text(encoding="utf-8")
-    return json.loads(text)
+    return load_schema("reduction_model")

@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, field, fields, replace
-from importlib import resources
 from pathlib import Path
 
 from usdhands.errors import ConfigError
+from usdhands.json_schemas import first_schema_error, load_schema
 
 __all__ = [
     "SegmentationConfig", "SegmentCostConfig", "TransitionConfig", "PathConfig",
@@ -138,8 +138,7 @@ class SynthesisConfig:
 
 def config_schema() -> dict:
     """The JSON schema of a configuration file (shipped in ``usdhands/schemas``)."""
-    text = resources.files("usdhands").joinpath("schemas/synthesis_config.schema.json").read_text()
-    return json.loads(text)
+    return load_schema("synthesis_config")
 
 
 def load_synthesis_config(path: str | Path) -> SynthesisConfig:
@@ -151,7 +150,6 @@ def load_synthesis_config(path: str | Path) -> SynthesisConfig:
         The file is missing, not JSON, or does not match the schema (the message
         names the offending key).
     """
-    import jsonschema
 
     path = Path(path)
     try:
@@ -160,12 +158,10 @@ def load_synthesis_config(path: str | Path) -> SynthesisConfig:
         raise ConfigError("no such configuration file", path=path) from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ConfigError(f"not valid JSON: {e}", path=path) from None
-    validator = jsonschema.Draft202012Validator(config_schema())
-    errors = sorted(validator.iter_errors(data), key=lambda e: list(e.absolute_path))
-    if errors:
-        e = errors[0]
-        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise ConfigError(f"invalid synthesis configuration at {where}: {e.message}", path=path)
+    error = first_schema_error(data, "synthesis_config")
+    if error is not None:
+        where, message = error
+        raise ConfigError(f"invalid synthesis configuration at {where}: {message}", path=path)
     try:
         return SynthesisConfig.from_dict(data)
     except ValueError as e:

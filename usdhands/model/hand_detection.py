@@ -58,10 +58,10 @@ import json
 import os
 import re
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
 from usdhands.errors import ConfigError, NoHandsError
+from usdhands.json_schemas import first_schema_error, load_schema
 from usdhands.model.handmap import FINGERS, SIDES, HandMap, HandSide
 from usdhands.model.skeleton import Skeleton
 
@@ -392,8 +392,7 @@ def _is_hips(jt: _Joint) -> bool:
 
 def handmap_schema() -> dict:
     """The JSON schema of hand map files (``usdhands/schemas/handmap.schema.json``)."""
-    text = resources.files("usdhands").joinpath("schemas/handmap.schema.json").read_text(encoding="utf-8")
-    return json.loads(text)
+    return load_schema("handmap")
 
 
 def load_handmap(path: str | os.PathLike, skeleton: Skeleton) -> HandMap:
@@ -416,7 +415,6 @@ def load_handmap(path: str | os.PathLike, skeleton: Skeleton) -> HandMap:
         Unreadable JSON, a schema violation (with its place in the file), or a joint
         the skeleton does not have.
     """
-    import jsonschema
 
     path = Path(path)
     try:
@@ -427,11 +425,10 @@ def load_handmap(path: str | os.PathLike, skeleton: Skeleton) -> HandMap:
         raise ConfigError(f"cannot read hand map: {e}", path=path) from None
     except json.JSONDecodeError as e:
         raise ConfigError(f"not valid JSON: {e.msg} (line {e.lineno}, column {e.colno})", path=path) from None
-    validator = jsonschema.Draft202012Validator(handmap_schema())
-    e = jsonschema.exceptions.best_match(validator.iter_errors(data))
-    if e is not None:
-        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise ConfigError(f"invalid hand map at {where}: {e.message}", path=path)
+    error = first_schema_error(data, "handmap")
+    if error is not None:
+        where, message = error
+        raise ConfigError(f"invalid hand map at {where}: {message}", path=path)
     sides = {}
     for s in SIDES:
         d = data.get(s)
