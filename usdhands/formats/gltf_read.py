@@ -87,6 +87,11 @@ def _node_trs(doc: GltfFile, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     n = doc.gltf.nodes[i]
     if n.matrix is not None and len(n.matrix) == 16:
         m = np.asarray(n.matrix, dtype=np.float64).reshape(4, 4).T  # column-major in the file
+        if not np.isfinite(m).all() or np.abs(m).max() > 1e30:
+            raise doc.error("node matrix is not finite (or absurdly large)", f"nodes[{i}]")
+        scale = np.linalg.norm(m[:3, :3], axis=0)
+        if (scale < 1e-12).any() or abs(np.linalg.det(m[:3, :3] / scale)) < 1e-6:
+            raise doc.error("node matrix is singular (a zero scale or collapsed axes)", f"nodes[{i}]")
         t, q, s = xform_to_trs(m)
         return t, q, s
     t = np.asarray(n.translation if n.translation is not None else (0.0, 0.0, 0.0), dtype=np.float64)

@@ -47,7 +47,10 @@ def quiet_diagnostics() -> Iterator[object]:
 
 def tf_error_reason(err: BaseException, path: str | os.PathLike | None = None) -> str:
     """The first commentary of a ``Tf.ErrorException``, on one line, without the file path."""
-    text = str(err)
+    try:
+        text = str(err)
+    except UnicodeDecodeError:  # USD quotes the offending bytes of a non-UTF-8 text file
+        return "not valid UTF-8 text (corrupt or not a USD file)"
     first = text.split("\n\tError in ")[1] if "\n\tError in " in text else text
     if " : '" in first:
         first = first.split(" : '", 1)[1]

@@ -203,15 +203,40 @@ def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_u
         if world is not None:
             local[parents < 0] = np.asarray(world, dtype=np.float64) @ local[parents < 0]
     elif bind_np is not None:
+        _check_xforms(bind_np, names, "bindTransforms", path, where)
         local = np.empty_like(bind_np)
         for j, p in enumerate(parents):
             local[j] = bind_np[j] if p < 0 else np.linalg.solve(bind_np[p], bind_np[j])
     else:
         raise JointMismatchError(f"neither restTransforms nor bindTransforms is authored for its {J} joints",
                                  path=path, location=where)
+    _check_xforms(local, names, "restTransforms" if rest is not None else "bindTransforms", path, where)
     t, q, s = xform_to_trs(local)
     sk = Skeleton(names, parents, t, q, s, bind_np, meters_per_unit=meters_per_unit, up_axis=up_axis, name=where)
     return sk, tokens
+
+
+def _check_xforms(m: np.ndarray, names: list[str], attr: str, path, where: str) -> None:
+    """Refuse non-finite or singular (zero-scale) joint transforms before they are decomposed.
+
+    Parameters
+    ----------
+    m : (J, 4, 4) float64
+        Joint transforms, column vectors.
+    """
+    m = np.where(np.isfinite(m), m, np.inf)
+    with np.errstate(all="ignore"):
+        scale = np.linalg.norm(m[:, :3, :3], axis=1)                  # (J, 3) column lengths
+        finite = np.isfinite(m).all(axis=(1, 2)) & np.isfinite(scale).all(axis=1)
+        ok_scale = finite & (scale > 1e-12).all(axis=1)
+        r = np.where(ok_scale[:, None, None], m[:, :3, :3] / np.where(ok_scale[:, None], scale, 1.0)[:, None, :],
+                     np.eye(3))
+        singular = ~ok_scale | (np.abs(np.linalg.det(r)) < 1e-6)
+    bad = np.flatnonzero(~finite | singular)
+    if len(bad):
+        j = int(bad[0])
+        what = "is not finite (or overflows)" if not finite[j] else "is singular (a zero scale or collapsed axes)"
+        raise AssetReadError(f"{attr} of joint '{names[j]}' {what}", path=path, location=where)
 
 
 def frame_times(samples: list[float], tcps: float, fps: float | None) -> tuple[np.ndarray, float]:
