@@ -298,7 +298,7 @@ def test_db_build_labels_file_mirror_fps_and_refusals(shared_assets, sample_asse
         ([sample_assets / "conversation_bodyonly.glb", leap[0], "-o", tmp_path / "x", "--labels-file", csv],
          "no label for 'conversation_bodyonly.glb'"),
         ([shared_assets / "usd_cesiumman" / "CesiumMan.usdz", "-o", tmp_path / "x"], "no hand found"),
-        ([leap[0], "-o", tmp_path / "x", "--fps", "0"], "--fps must be positive, got 0.0"),
+        ([leap[0], "-o", tmp_path / "x", "--fps", "0"], "--fps must be a frame rate above 0 and at most 1000, got 0"),
     ):
         status, _, err = _run(capsys, "db", "build", *argv)
         assert status == 2 and message in err and err.count("\n") == 1, err

@@ -57,6 +57,25 @@ def print_json(obj, stream=None) -> None:
     stream.write("\n")
 
 
+#: Highest frame rate a --fps option takes (motion capture runs at 120-480).
+MAX_FPS = 1000.0
+
+
+def check_fps(value: float | None, option: str = "--fps") -> float | None:
+    """``value`` if it is a usable frame rate (or None), else a one-line UsdHandsError.
+
+    0, negative, NaN and infinite rates were silently ignored, blamed on the input file
+    ("malformed glTF"), raised tracebacks or ran out of memory (1e9).
+    """
+    if value is None:
+        return None
+    from usdhands.errors import UsdHandsError
+
+    if not (value > 0 and value <= MAX_FPS):  # also refuses NaN
+        raise UsdHandsError(f"{option} must be a frame rate above 0 and at most {MAX_FPS:g}, got {value:g}")
+    return float(value)
+
+
 def parse_list(text: str | None, allowed: Iterable[str] | None = None) -> list[str]:
     """Split ``"a,b"`` into ``["a", "b"]``, checking against ``allowed``."""
     if not text:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from usdhands.commands._common import check_fps
 from usdhands.errors import AssetReadError, NoSkeletonError
 from usdhands.formats.bvh import UNITS, units_to_meters
 from usdhands.formats.io import read_asset, write_asset
@@ -84,6 +85,7 @@ def convert(src: Path, dst: Path, animation: str | None = None, fps: float | Non
 
 
 def run(args) -> int:
+    check_fps(args.fps)
     notes: list[str] = []
     asset = convert(args.input, args.output, args.animation, args.fps, args.bvh_units, notes)
     for note in notes:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.commands._common import Progress, check_fps, print_json, print_table
 from usdhands.errors import UsdHandsError
 
 
@@ -47,6 +47,7 @@ def register(sub) -> None:
 
 
 def run_build(args) -> int:
+    check_fps(args.fps)
     from usdhands.algorithms.finger_database import DatabaseClip, build_database, save_database
     from usdhands.commands._synthesis_common import (
         expand_inputs, labeller, load_config, read_labelled, sample_database_items,
@@ -76,8 +77,6 @@ def run_build(args) -> int:
                 where = f"{p} (animation {clip.name!r})" if args.animation == "all" else str(p)
                 print(f"usdhands: warning: {where}: the {' and '.join(still)} hand's fingers never move (a body-only "
                       f"clip?); its frozen fingers go into the database as they are", file=sys.stderr)
-    if args.fps <= 0:
-        raise UsdHandsError(f"--fps must be positive, got {args.fps}")
     db = build_database(items, fps=args.fps, mirror=args.mirror, segmentation=cfg.segmentation,
                         progress=Progress("building"))
     path = save_database(db, args.output)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -32,6 +33,8 @@ def read_asset(path: str | os.PathLike, *, fps: float | None = None, **options) 
     AssetReadError
         Missing file, unknown extension, corrupt content.
     """
+    if fps is not None and not (fps > 0 and math.isfinite(fps)):
+        raise ValueError(f"Expected fps > 0 and finite, got {fps}")
     path = Path(path)
     if not path.exists():
         raise AssetReadError("no such file", path=path)
