@@ -51,3 +51,67 @@ def test_low_fps_still_converts(ok_glb, tmp_path, capsys):
     src, out = read_clip(ok_glb), read_clip(tmp_path / "slow.usda")
     assert out.fps == 2.0
     assert out.num_frames == int(src.duration * 2 + 1e-6) + 1
+
+
+def test_output_is_a_folder(ok_glb, tmp_path, capsys, sample_assets):
+    """handmap -o FOLDER was an IsADirectoryError traceback from the atomic rename."""
+    folder = tmp_path / "outdir"
+    folder.mkdir()
+    body = tmp_path / "body.bvh"
+    shutil.copy(sample_assets / "gestures_bodyonly" / "turn_05_bodyonly.bvh", body)
+    for argv in (["handmap", ok_glb, "-o", folder], ["convert", ok_glb, folder],
+                 ["synthesize", body, "-o", folder]):
+        code, err = run(capsys, *argv)
+        assert code == 2, argv
+        assert err == [f"usdhands: error: {folder}: is a folder; give the output a file name"], argv
+    assert list(folder.iterdir()) == []
+
+
+def test_output_folder_not_writable(ok_glb, capsys, monkeypatch, tmp_path):
+    """A folder the user may not write into was a PermissionError traceback (mkstemp)."""
+    import tempfile
+
+    def refuse(*a, **k):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    out = tmp_path / "x.glb"
+    for argv in (["convert", ok_glb, out], ["handmap", ok_glb, "-o", tmp_path / "m.json"]):
+        code, err = run(capsys, *argv)
+        assert code == 2
+        assert len(err) == 1 and err[0].startswith("usdhands: error: ")
+        assert err[0].endswith(f"cannot write into folder {str(tmp_path)!r}: Permission denied"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.glb"]
+
+
+def test_plot_and_model_paths_refused_before_any_work(ok_glb, shared_assets, tmp_path, capsys):
+    """splice/reduce --plot FILE were FileExistsError tracebacks after the output was written;
+    reduce --model FOLDER an IsADirectoryError, --model in a missing folder a FileNotFoundError."""
+    leap = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    folder = tmp_path / "outdir"
+    folder.mkdir()
+    cases = [
+        (["splice", ok_glb, leap, "-o", tmp_path / "sp.glb", "--plot", ok_glb],
+         f"{ok_glb}: --plot needs a folder; this is a file"),
+        (["reduce", ok_glb, "-o", tmp_path / "r.glb", "--plot", ok_glb], f"{ok_glb}: --plot needs a folder; this is a file"),
+        (["reduce", ok_glb, "--model", folder], f"{folder}: is a folder; give the output a file name"),
+        (["reduce", ok_glb, "--model", tmp_path / "nope" / "m.json"],
+         f"{tmp_path / 'nope' / 'm.json'}: output folder '{tmp_path / 'nope'}' does not exist"),
+    ]
+    for argv, message in cases:
+        code, err = run(capsys, *argv)
+        assert (code, err) == (2, [f"usdhands: error: {message}"]), argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.glb", "outdir"]
+    assert list(folder.iterdir()) == []
+
+
+def test_samples_folder_that_cannot_be_made(tmp_path, capsys, monkeypatch):
+    """samples into a folder the user may not create was a PermissionError traceback."""
+    from pathlib import Path
+
+    def refuse(self, *a, **k):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(Path, "mkdir", refuse)
+    code, err = run(capsys, "samples", tmp_path / "s")
+    assert (code, err) == (2, [f"usdhands: error: {tmp_path / 's'}: cannot create the folder: Operation not permitted"])

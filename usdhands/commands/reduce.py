@@ -99,6 +99,8 @@ def _check_order(order: str) -> None:
 def run(args) -> int:
     from usdhands.algorithms.reduction import RangeRule, curve_names, paper_style_names, parse_steps, reduce_curves
     from usdhands.commands._common import Progress
+    from usdhands.commands._synthesis_common import check_plot_folder
+    from usdhands.formats.registry import check_output_path
 
     steps = parse_steps(args.steps)
     write_opts = layer_options(args.layer, args.file, args.output) if args.output is not None else {}
@@ -108,6 +110,8 @@ def run(args) -> int:
         for other in (args.file, args.output):
             if other is not None and args.model.resolve() == Path(other).resolve():
                 raise OutputPathError("the model JSON would overwrite this file", path=args.model)
+        check_output_path(args.model)  # a folder or a missing folder, refused before any work
+    check_plot_folder(args.plot)
     progress = Progress("reduce")
     progress(0, 3, "reading")
     clip, handmap, curves, sides = load_finger_curves(args.file, args.animation, args.handmap, args.hands, args.order)

@@ -35,6 +35,10 @@ def run(args) -> int:
         raise OutputPathError("exists and is not a folder", path=out)
     if not out.parent.resolve().is_dir():
         raise OutputPathError(f"parent folder {str(out.parent)!r} does not exist", path=out)
+    try:
+        out.mkdir(exist_ok=True)
+    except OSError as e:
+        raise OutputPathError(f"cannot create the folder: {e.strerror}", path=out) from None
     files = generate_samples(out, formats, args.layout, args.seed, progress=Progress("samples"))
     groups: dict[str, list[Path]] = {}
     for f in files:

@@ -219,6 +219,7 @@ def run(args) -> int:
     from usdhands.algorithms.dtw import Constraint, check_constraints
     from usdhands.algorithms.splicing import SpliceOptions, default_marker_offsets, splice_clips
     from usdhands.formats.io import read_clip, write_clip
+    from usdhands.commands._synthesis_common import check_plot_folder
     from usdhands.formats.registry import check_output_path
 
     constraints = [parse_match(t) for t in args.match]
@@ -226,6 +227,7 @@ def run(args) -> int:
     if args.blend < 0:
         raise UsdHandsError(f"bad --blend {args.blend}: expected a number of frames >= 0")
     check_output_path(args.output, args.body, args.hands)
+    check_plot_folder(args.plot)
     opts = layer_options(args.layer, args.body, args.output)
     body = read_clip(args.body, animation=args.animation)
     hands = read_clip(args.hands, animation=args.hands_animation)

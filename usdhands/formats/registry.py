@@ -132,6 +132,8 @@ def check_output_path(out: str | os.PathLike, *inputs: str | os.PathLike) -> Pat
             raise OutputPathError("output path equals the input; choose another file", path=out)
     if not out.parent.resolve().is_dir():
         raise OutputPathError(f"output folder {str(out.parent)!r} does not exist", path=out)
+    if out.is_dir():
+        raise OutputPathError("is a folder; give the output a file name", path=out)
     return out
 
 
@@ -154,7 +156,12 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     On any exception the temporary file is removed and ``path`` is left as it was.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    if path.is_dir():
+        raise OutputPathError("is a folder; give the output a file name", path=path)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    except OSError as e:  # read-only or missing folder
+        raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
     os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -162,7 +169,10 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         # mkstemp creates the file 0600; give the output the mode a plain open() would
         with contextlib.suppress(OSError):
             os.chmod(tmp_path, 0o666 & ~_current_umask())
-        os.replace(tmp_path, path)
+        try:
+            os.replace(tmp_path, path)
+        except OSError as e:
+            raise OutputPathError(f"cannot replace the output: {e.strerror}", path=path) from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
