@@ -115,3 +115,19 @@ def test_samples_folder_that_cannot_be_made(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(Path, "mkdir", refuse)
     code, err = run(capsys, "samples", tmp_path / "s")
     assert (code, err) == (2, [f"usdhands: error: {tmp_path / 's'}: cannot create the folder: Operation not permitted"])
+
+
+def test_k_above_segment_count_is_capped(sample_assets, tmp_path, capsys):
+    """--k 100000 asked numpy for a (100000, 100000, 45) transition array (3.27 TiB MemoryError);
+    more candidates than the database has segments give the same result as all of them."""
+    from usdhands.algorithms.finger_database import load_database
+    from usdhands.commands._synthesis_common import bundled_database_path
+
+    db = load_database(bundled_database_path())
+    most = int(max((db.segment_side() == s).sum() for s in (0, 1)))
+    body = tmp_path / "body.bvh"
+    shutil.copy(sample_assets / "gestures_bodyonly" / "turn_05_bodyonly.bvh", body)
+    for k in (most, 100000):
+        code, err = run(capsys, "synthesize", body, "-o", tmp_path / f"k{k}.bvh", "--k", k)
+        assert code == 0, err
+    assert (tmp_path / f"k{most}.bvh").read_bytes() == (tmp_path / "k100000.bvh").read_bytes()

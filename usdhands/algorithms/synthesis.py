@@ -178,26 +178,27 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     seg_idx = db_side_segments(db, side, exclude_clips)
     if not len(seg_idx):
         raise ValueError(f"The database has no {side}-hand segments to choose from")
+    k = min(sc.k, len(seg_idx))  # more candidates than segments: (k, k) transition arrays for nothing
     bounds = segment_track(feats, db.fps, cfg.segmentation)
     speed = wrist_speed(feats[:, :3], db.fps, cfg.segmentation.speed_smoothing_s)
     qb = np.stack([bounds[:-1], bounds[1:]], axis=1)
     dsegs = db.segments[seg_idx, :2]
-    res = knn_segments(qw, qb, dw, dsegs, k=sc.k, length_factor=sc.length_factor, band=sc.dtw_band,
+    res = knn_segments(qw, qb, dw, dsegs, k=k, length_factor=sc.length_factor, band=sc.dtw_band,
                        bound=sc.lower_bound)
     cand_local = res.index.copy()
     costs = res.cost.copy()
     missing = np.nonzero(cand_local[:, 0] < 0)[0]
     if len(missing):
         # no segment of a compatible length: widen the length factor for these only
-        wide = knn_segments(qw, qb[missing], dw, dsegs, k=sc.k, length_factor=1e6, band=1.0)
+        wide = knn_segments(qw, qb[missing], dw, dsegs, k=k, length_factor=1e6, band=1.0)
         cand_local[missing] = wide.index
         costs[missing] = wide.cost
     for i in np.nonzero(cand_local[:, 0] < 0)[0]:
         # shorter than half of every database segment (a clip of a few frames): no warp
         # with steps of at most 2 fits, so compare with each segment sampled uniformly
-        cand_local[i], costs[i] = _uniform_knn(qw[qb[i, 0]:qb[i, 1]], dw, dsegs, sc.k)
+        cand_local[i], costs[i] = _uniform_knn(qw[qb[i, 0]:qb[i, 1]], dw, dsegs, k)
     cand = np.where(cand_local >= 0, seg_idx[np.maximum(cand_local, 0)], -1)
-    N, k = cand.shape
+    N = len(cand)
     starts, ends, vstart, vend = _candidate_ends(db, cand)
     tc = cfg.transition
     transitions = [transition_costs(ends[i], vend[i], starts[i + 1], vstart[i + 1], tc.w_joint, tc.w_velocity)
