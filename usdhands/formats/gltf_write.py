@@ -422,16 +422,27 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
         kt, kv, interp = channel_keys(doc, ai, c)
         return sample_channel(kt, kv, interp, at, path_ == "rotation", snap_time(clip.fps))
 
+    def other_span(path_: str, k: int) -> bool:
+        """The file's channel is keyed over another time range than the clip (a trimmed or longer clip)."""
+        c = existing.get((nodes[k], path_))
+        if c is None:
+            return False
+        kt = np.asarray(channel_keys(doc, ai, c)[0], dtype=np.float64)
+        half = 0.5 / clip.fps
+        return len(kt) > 0 and (abs(kt[0] - at[0]) > half or abs(kt[-1] - at[-1]) > half)
+
     changed: dict[str, list[int]] = {"rotation": [], "translation": [], "scale": []}
     for k in range(len(cj)):
-        if np.any(quat_angle_deg(file_values("rotation", k), clip.rotations[:, k]) > ROTATION_TOLERANCE_DEG):
-            changed["rotation"].append(k)
-        ft = file_values("translation", k)
-        if np.any(np.abs(ft - clip.translations[:, k]) > TRANSLATION_TOLERANCE_M * np.maximum(1.0, np.abs(ft))):
-            changed["translation"].append(k)
-        fs = file_values("scale", k)
-        if np.any(np.abs(fs - clip.scales[:, k]) > SCALE_TOLERANCE * np.maximum(1.0, np.abs(fs))):
-            changed["scale"].append(k)
+        differs = {
+            "rotation": lambda: np.any(quat_angle_deg(file_values("rotation", k), clip.rotations[:, k])
+                                       > ROTATION_TOLERANCE_DEG),
+            "translation": lambda: _differs(file_values("translation", k), clip.translations[:, k],
+                                            TRANSLATION_TOLERANCE_M),
+            "scale": lambda: _differs(file_values("scale", k), clip.scales[:, k], SCALE_TOLERANCE),
+        }
+        for path_, test in differs.items():
+            if other_span(path_, k) or test():
+                changed[path_].append(k)
 
     out_glb = final.suffix.lower() == ".glb"
     buffers = list(doc.buffers)
@@ -458,6 +469,11 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
         _drop_unused_samplers(anim)
         app.finish(buffers)
     save_gltf(g, buffers, path, glb=out_glb)
+
+
+def _differs(file: np.ndarray, clip: np.ndarray, tolerance: float) -> bool:
+    """Whether (T, 3) values differ beyond ``tolerance`` (relative above magnitude 1)."""
+    return bool(np.any(np.abs(file - clip) > tolerance * np.maximum(1.0, np.abs(file))))
 
 
 def _data_buffer(g: pygltflib.GLTF2, buffers: list[bytes], glb: bool) -> int:
