@@ -286,3 +286,18 @@ def test_gltf_singular_node_matrix(originals, tmp_path, capsys):
         code, err = run(capsys, ["inspect", src])
         assert code == 2
         assert err == [f"usdhands: error: {src}: nodes[1]: {message}"]
+
+
+def test_usd_parse_error_is_short_and_relative_path_kept(originals, tmp_path, capsys, monkeypatch):
+    """The text parser quotes the whole offending line (a whole array: thousands of characters);
+    with a relative path, the absolute path in USD's message was half replaced ('/tmp/x/line 32:13')."""
+    lines = originals["usda"].decode().splitlines()
+    k = next(i for i, line in enumerate(lines) if "restTransforms" in line)
+    lines[k] = lines[k].replace("(0, 0, 20, 1) ), (", "(0, 0, 20, 1) ) (", 1)  # a missing comma
+    (tmp_path / "broken.usda").write_text("\n".join(lines) + "\n")
+    monkeypatch.chdir(tmp_path)
+    code, err = run(capsys, ["inspect", "broken.usda"])
+    assert code == 2 and len(err) == 1
+    assert err[0].startswith("usdhands: error: broken.usda: cannot read as USD: line "), err
+    assert str(tmp_path) not in err[0]
+    assert len(err[0]) < 300

@@ -45,6 +45,10 @@ def quiet_diagnostics() -> Iterator[object]:
         del delegate
 
 
+#: Longest USD error reason quoted in a one-line message.
+MAX_REASON_CHARS = 200
+
+
 def tf_error_reason(err: BaseException, path: str | os.PathLike | None = None) -> str:
     """The first commentary of a ``Tf.ErrorException``, on one line, without the file path."""
     try:
@@ -57,9 +61,12 @@ def tf_error_reason(err: BaseException, path: str | os.PathLike | None = None) -
         first = first.rsplit("'", 1)[0]
     first = " ".join(first.split())
     if path is not None:
-        for p in {str(path), str(Path(path).resolve())}:
+        for p in sorted({str(path), str(Path(path).resolve())}, key=len, reverse=True):  # the longer first
             first = first.replace(f"@{p}@", "the file").replace(f"{p}:", "line ").replace(p, "the file")
-    return first.strip() or "unknown error"
+    first = first.strip()
+    if len(first) > MAX_REASON_CHARS:  # the text parser quotes the whole offending line (a whole array)
+        first = first[:MAX_REASON_CHARS - 5].rstrip() + " ..."
+    return first or "unknown error"
 
 
 def open_stage(path: str | os.PathLike) -> Usd.Stage:
