@@ -66,3 +66,7 @@ class OutputPathError(UsdHandsError):
 
 class ConfigError(UsdHandsError):
     """A configuration, hand map, model or database file is invalid."""
+
+
+class UnsupportedRigError(UsdHandsError):
+    """A rig the algorithms cannot handle as it is (mirrored joint frames from a negative scale, ...)."""

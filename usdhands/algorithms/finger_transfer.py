@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from usdhands.errors import UnsupportedRigError
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
 from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_euler_deg, unwrap_deg
@@ -108,6 +109,31 @@ def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     return v / n if n > 1e-9 else fallback
 
 
+def check_hand_frames(skeleton: Skeleton, hand: HandSide, path=None) -> None:
+    """Refuse a hand whose rest joint frames are mirrored (left-handed).
+
+    A negative scale on the wrist, a finger joint or any of their ancestors makes the
+    frames reflections, which the anatomical frames of :func:`hand_rig` (rotations)
+    cannot express.
+
+    Raises
+    ------
+    UnsupportedRigError
+        Naming the side and the highest joint with a negative scale.
+    """
+    world = skeleton.rest_world_xforms()
+    joints = [skeleton.index(hand.wrist)] + [skeleton.index(j) for f in FINGERS for j in hand.fingers.get(f, ())]
+    bad = [j for j in joints if np.linalg.det(world[j, :3, :3]) < 0]
+    if not bad:
+        return
+    scales = np.asarray(skeleton.rest_scales, dtype=np.float64)
+    flipped = [a for a in reversed(skeleton.chain_to_root(bad[0])) if np.prod(scales[a]) < 0]
+    culprit = skeleton.joint_names[flipped[0] if flipped else bad[0]]
+    raise UnsupportedRigError(
+        f"the {hand.side} hand's joint frames are mirrored (a negative scale on '{culprit}'); finger motion "
+        f"needs right-handed joint frames: freeze the mirror into the rig's rest pose first", path=path)
+
+
 def hand_rig(skeleton: Skeleton, hand: HandSide, pose: Clip | None = None) -> HandRig:
     """Map a hand's finger chains onto the slots and compute their anatomical frames.
 
@@ -121,6 +147,7 @@ def hand_rig(skeleton: Skeleton, hand: HandSide, pose: Clip | None = None) -> Ha
         frozen fingers hold the rig's natural pose while its rest (a BVH zero pose)
         does not.
     """
+    check_hand_frames(skeleton, hand)
     if pose is None:
         rest = skeleton.rest_world_xforms()
     else:

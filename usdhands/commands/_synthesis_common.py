@@ -107,6 +107,8 @@ def read_labelled(paths: list[Path], label_of, fps, handmap_path, animation=None
         label = label_of(p)
         clip = read_clip(p, animation=animation, fps=fps)
         handmap = arms_only(clip, p) if fingerless and handmap_path is None else None
+        if handmap is not None:
+            check_frames(handmap, clip.skeleton, p)
         handmap = handmap or handmap_for(clip, p, handmap_path)
         out.append((p, label, clip, handmap))
         if progress:
@@ -122,11 +124,22 @@ def handmap_for(clip, path, handmap_path):
     from usdhands.formats.hands import hands_for
 
     try:
-        return hands_for(path, clip.skeleton, handmap_path)[0]
+        handmap = hands_for(path, clip.skeleton, handmap_path)[0]
     except UsdHandsError as e:
         if e.path is None:
             raise type(e)(e.message, path=path, location=e.location) from None
         raise
+    check_frames(handmap, clip.skeleton, path)
+    return handmap
+
+
+def check_frames(handmap, skeleton, path) -> None:
+    """Refuse, naming the file, hands with mirrored joint frames (finger transfer cannot use them)."""
+    from usdhands.algorithms.finger_transfer import check_hand_frames
+
+    for hand in handmap.sides:
+        if hand.finger_joints:
+            check_hand_frames(skeleton, hand, path=path)
 
 
 def arms_only(clip, path):
