@@ -131,3 +131,11 @@ def test_k_above_segment_count_is_capped(sample_assets, tmp_path, capsys):
         code, err = run(capsys, "synthesize", body, "-o", tmp_path / f"k{k}.bvh", "--k", k)
         assert code == 0, err
     assert (tmp_path / f"k{most}.bvh").read_bytes() == (tmp_path / "k100000.bvh").read_bytes()
+
+
+def test_config_that_is_a_folder(ok_glb, tmp_path, capsys):
+    """--config FOLDER was an IsADirectoryError traceback."""
+    folder = tmp_path / "cfg"
+    folder.mkdir()
+    code, err = run(capsys, "synthesize", ok_glb, "-o", tmp_path / "out.glb", "--config", folder)
+    assert (code, err) == (2, [f"usdhands: error: {folder}: cannot read the configuration: Is a directory"])

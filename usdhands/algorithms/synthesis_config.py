@@ -158,6 +158,8 @@ def load_synthesis_config(path: str | Path) -> SynthesisConfig:
         raise ConfigError("no such configuration file", path=path) from None
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ConfigError(f"not valid JSON: {e}", path=path) from None
+    except OSError as e:  # a folder, no permission
+        raise ConfigError(f"cannot read the configuration: {e.strerror}", path=path) from None
     error = first_schema_error(data, "synthesis_config")
     if error is not None:
         where, message = error
