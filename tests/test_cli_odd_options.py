@@ -133,6 +133,46 @@ def test_k_above_segment_count_is_capped(sample_assets, tmp_path, capsys):
     assert (tmp_path / f"k{most}.bvh").read_bytes() == (tmp_path / "k100000.bvh").read_bytes()
 
 
+def _hand_map(tmp_path, name, right, left=None):
+    import json
+
+    path = tmp_path / name
+    path.write_text(json.dumps({"left": left, "right": right}))
+    return path
+
+
+def test_hand_maps_whose_joints_exist_but_do_not_form_hands(ok_glb, tmp_path, capsys):
+    """Inverted or shared joints passed load_handmap: synthesize and db build died in wrist_features
+    ('Finger joint ... does not hang from the wrist' ValueError), reduce in reduce_curves
+    ('Duplicate curve names' ValueError)."""
+    thumb = ["RightHandThumb1", "RightHandThumb2", "RightHandThumb3"]
+    cases = [
+        (_hand_map(tmp_path, "inverted.json", {"wrist": "RightHandThumb1", "fingers": {"thumb": ["RightHand"]}}),
+         "right thumb finger: joint 'RightHand' does not hang below the wrist 'RightHandThumb1' "
+         "(joints go proximal to distal)"),
+        (_hand_map(tmp_path, "reversed.json", {"wrist": "RightHand", "fingers": {"thumb": thumb[::-1]}}),
+         "right thumb finger: joint 'RightHandThumb2' does not hang below the previous joint 'RightHandThumb3' "
+         "(joints go proximal to distal)"),
+        (_hand_map(tmp_path, "other_hand.json", {"wrist": "RightHand", "fingers": {"thumb": ["LeftHandThumb1"]}}),
+         "right thumb finger: joint 'LeftHandThumb1' does not hang below the wrist 'RightHand' "
+         "(joints go proximal to distal)"),
+        (_hand_map(tmp_path, "shared.json", {"wrist": "RightHand", "fingers": {"thumb": thumb}},
+                   left={"wrist": "RightHand", "fingers": {"thumb": thumb}}),
+         "right wrist: joint 'RightHand' is already the left wrist"),
+        (_hand_map(tmp_path, "two_fingers.json", {"wrist": "RightHand", "fingers": {"thumb": thumb,
+                                                                                    "index": thumb[1:]}}),
+         "right index finger: joint 'RightHandThumb2' is already the right thumb finger"),
+    ]
+    for path, message in cases:
+        for argv in (["inspect", ok_glb, "--handmap", path],
+                     ["synthesize", ok_glb, "-o", tmp_path / "out.glb", "--handmap", path],
+                     ["reduce", ok_glb, "--handmap", path],
+                     ["db", "build", "-o", tmp_path / "db", ok_glb, "--handmap", path]):
+            code, err = run(capsys, *argv)
+            assert (code, err) == (2, [f"usdhands: error: {path}: {message}"]), argv
+    assert not (tmp_path / "out.glb").exists() and not (tmp_path / "db").exists()
+
+
 def test_config_that_is_a_folder(ok_glb, tmp_path, capsys):
     """--config FOLDER was an IsADirectoryError traceback."""
     folder = tmp_path / "cfg"

@@ -447,7 +447,42 @@ def load_handmap(path: str | os.PathLike, skeleton: Skeleton) -> HandMap:
         sides[s] = HandSide(side=s, wrist=full(d["wrist"], "wrist"), forearm=full(d.get("forearm"), "forearm"),
                             shoulder=full(d.get("shoulder"), "shoulder"), root=full(d.get("root"), "root"),
                             fingers=fingers)
+    _check_structure(sides, skeleton, path)
     return HandMap(**sides)
+
+
+def _check_structure(sides: dict, skeleton: Skeleton, path: Path) -> None:
+    """Refuse a hand map whose joints exist but do not form hands.
+
+    In a joint hierarchy, finger chains must hang below their wrist, proximal to distal,
+    and the forearm must be above the wrist; no joint may be used twice (in two fingers
+    or by both hands).
+    """
+    used: dict[str, str] = {}
+
+    def claim(name: str, what: str) -> None:
+        if name in used:
+            raise ConfigError(f"{what}: joint {name!r} is already the {used[name]}", path=path)
+        used[name] = what
+
+    for s, hand in sides.items():
+        if hand is None:
+            continue
+        w = skeleton.index(hand.wrist)
+        claim(hand.wrist, f"{s} wrist")
+        if hand.forearm is not None and skeleton.index(hand.forearm) not in skeleton.chain_to_root(w)[1:]:
+            raise ConfigError(f"{s} forearm: joint {hand.forearm!r} is not above the wrist {hand.wrist!r}", path=path)
+        for f in FINGERS:
+            above = w
+            for name in hand.fingers.get(f, ()):
+                claim(name, f"{s} {f} finger")
+                chain = skeleton.chain_to_root(skeleton.index(name))
+                # flat rigs (WebXR: every joint a root) have no hierarchy to check
+                if chain[-1] == skeleton.chain_to_root(above)[-1] and above not in chain[1:]:
+                    what = "the wrist" if above == w else "the previous joint"
+                    raise ConfigError(f"{s} {f} finger: joint {name!r} does not hang below {what} "
+                                      f"{skeleton.joint_names[above]!r} (joints go proximal to distal)", path=path)
+                above = skeleton.index(name)
 
 
 def resolve_handmap(skeleton: Skeleton, override_path: str | os.PathLike | None = None,
