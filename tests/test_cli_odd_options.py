@@ -179,3 +179,11 @@ def test_config_that_is_a_folder(ok_glb, tmp_path, capsys):
     folder.mkdir()
     code, err = run(capsys, "synthesize", ok_glb, "-o", tmp_path / "out.glb", "--config", folder)
     assert (code, err) == (2, [f"usdhands: error: {folder}: cannot read the configuration: Is a directory"])
+
+
+def test_negative_seed(tmp_path, capsys):
+    """--seed -1 was numpy's 'expected non-negative integer' traceback (evaluate: after the whole holdout)."""
+    for argv in (["evaluate", "--holdout", "--samples", "--seed", "-1"], ["samples", tmp_path / "s", "--seed", "-1"]):
+        code, err = run(capsys, *argv)
+        assert (code, err) == (2, ["usdhands: error: --seed must be 0 or more, got -1"]), argv
+    assert list(tmp_path.iterdir()) == []

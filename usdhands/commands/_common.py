@@ -76,6 +76,15 @@ def check_fps(value: float | None, option: str = "--fps") -> float | None:
     return float(value)
 
 
+def check_seed(value: int) -> int:
+    """``value`` if it is a usable random seed (numpy takes integers >= 0), else a one-line UsdHandsError."""
+    if value < 0:
+        from usdhands.errors import UsdHandsError
+
+        raise UsdHandsError(f"--seed must be 0 or more, got {value}")
+    return value
+
+
 def parse_list(text: str | None, allowed: Iterable[str] | None = None) -> list[str]:
     """Split ``"a,b"`` into ``["a", "b"]``, checking against ``allowed``."""
     if not text:

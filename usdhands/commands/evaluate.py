@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from usdhands.commands._common import Progress, check_fps, print_json, print_table
+from usdhands.commands._common import Progress, check_fps, check_seed, print_json, print_table
 from usdhands.errors import UsdHandsError
 
 
@@ -64,6 +64,7 @@ def run(args) -> int:
     from usdhands.commands._synthesis_common import load_config
 
     check_fps(args.fps)
+    check_seed(args.seed)
 
     if args.k is not None and args.k < 1:
         raise UsdHandsError(f"--k must be at least 1, got {args.k}")

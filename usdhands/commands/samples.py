@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from usdhands.commands._common import Progress, parse_list, print_table
+from usdhands.commands._common import Progress, check_seed, parse_list, print_table
 from usdhands.errors import OutputPathError
 
 
@@ -27,6 +27,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from usdhands.samples.generate import FORMATS, generate_samples
 
+    check_seed(args.seed)
     formats = parse_list(args.formats, FORMATS)
     if not formats:
         raise OutputPathError("no format given; use --formats usd,gltf,bvh", path=args.outdir)
