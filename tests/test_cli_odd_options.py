@@ -187,3 +187,24 @@ def test_negative_seed(tmp_path, capsys):
         code, err = run(capsys, *argv)
         assert (code, err) == (2, ["usdhands: error: --seed must be 0 or more, got -1"]), argv
     assert list(tmp_path.iterdir()) == []
+
+
+def test_splice_bad_marker_file_is_the_only_line(ok_glb, shared_assets, tmp_path, capsys):
+    """The note 'HANDS has no left hand' was printed before a bad marker file's error: two lines."""
+    bad = tmp_path / "markers.csv"
+    bad.write_text("a,b\n1,2\n")
+    leap = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    code, err = run(capsys, "splice", ok_glb, leap, "-o", tmp_path / "out.glb", "--body-markers", bad)
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith(f"usdhands: error: {bad}: row 1: unknown column 'a'")
+    assert not (tmp_path / "out.glb").exists()
+
+
+@pytest.mark.parametrize("value", ["nan", "inf"])
+def test_splice_hand_yaw_must_be_finite(value, ok_glb, shared_assets, tmp_path, capsys):
+    """--hand-yaw nan was accepted and spliced with a NaN heading."""
+    leap = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    code, err = run(capsys, "splice", ok_glb, leap, "-o", tmp_path / "out.glb", "--yaw", "trunk",
+                    "--hand-yaw", value)
+    assert (code, err) == (2, [f"usdhands: error: bad --hand-yaw {value}: expected a finite angle in degrees"])
+    assert not (tmp_path / "out.glb").exists()

@@ -174,7 +174,7 @@ def _resample_markers(markers: dict, fps_from: float, fps_to: float, frames_to: 
     return out
 
 
-def _sides(args, body_map, hand_map) -> list[str]:
+def _sides(args, body_map, hand_map, notes: list[str]) -> list[str]:
     have_b = [h.side for h in body_map.sides]
     have_h = [h.side for h in hand_map.sides]
     if args.side != "both":
@@ -191,7 +191,7 @@ def _sides(args, body_map, hand_map) -> list[str]:
                             f"HANDS has {', '.join(have_h) or 'none'}")
     for s in have_b:
         if s not in common:
-            print(f"usdhands: note: HANDS has no {s} hand: BODY's {s} hand keeps its own motion", file=sys.stderr)
+            notes.append(f"HANDS has no {s} hand: BODY's {s} hand keeps its own motion")
     return common
 
 
@@ -226,6 +226,8 @@ def run(args) -> int:
     band1, band2 = parse_band(args.band)
     if args.blend < 0:
         raise UsdHandsError(f"bad --blend {args.blend}: expected a number of frames >= 0")
+    if not math.isfinite(args.hand_yaw):
+        raise UsdHandsError(f"bad --hand-yaw {args.hand_yaw}: expected a finite angle in degrees")
     check_output_path(args.output, args.body, args.hands)
     check_plot_folder(args.plot)
     opts = layer_options(args.layer, args.body, args.output)
@@ -242,7 +244,8 @@ def run(args) -> int:
 
     body_map = _handmap(body.skeleton, args.body_handmap, args.body, "BODY")
     hand_map = _handmap(hands.skeleton, args.hands_handmap, args.hands, "HANDS")
-    sides = _sides(args, body_map, hand_map)
+    notes: list[str] = []  # printed once every input has been checked: an error stays the only line
+    sides = _sides(args, body_map, hand_map, notes)
     for s in sides:
         _check_side(body_map[s], args.body, "BODY")
         _check_side(hand_map[s], args.hands, "HANDS")
@@ -258,6 +261,8 @@ def run(args) -> int:
     for markers, path, role in ((body_markers, args.body_markers, "BODY"), (hand_markers, args.hands_markers, "HANDS")):
         if markers is not None and not set(sides) & set(markers):
             raise UsdHandsError(f"no markers for the {' or '.join(sides)} hand spliced from {role}", path=path)
+    for note in notes:
+        print(f"usdhands: note: {note}", file=sys.stderr)
 
     ratio = 1.0
     resampled = abs(hand_fps - body.fps) > 1e-6 * body.fps
