@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import struct
 
+import numpy as np
 import pytest
 
 from usdhands.cli import main
@@ -90,6 +91,8 @@ def bvh_variants(data: bytes) -> list[tuple[str, bytes]]:
         ("extra_channel", ("\n".join(extra) + "\n").encode()),
         ("frame_time_zero", text.replace("Frame Time: 0.025", "Frame Time: 0").encode()),
         ("frames_more", text.replace("Frames: 6", "Frames: 60").encode()),
+        ("frame_time_tiny", text.replace("Frame Time: 0.025", "Frame Time: 1e-300").encode()),
+        ("frame_time_huge", text.replace("Frame Time: 0.025", "Frame Time: 1e308").encode()),
     ]
 
 
@@ -301,3 +304,23 @@ def test_usd_parse_error_is_short_and_relative_path_kept(originals, tmp_path, ca
     assert err[0].startswith("usdhands: error: broken.usda: cannot read as USD: line "), err
     assert str(tmp_path) not in err[0]
     assert len(err[0]) < 300
+
+
+def test_bvh_frame_time_bounds_and_tabs(originals, tmp_path, capsys):
+    """'Frame Time: 1e-300' read as 1e300 fps and convert died in the glTF writer ('frame times do
+    not increase in float32' ValueError); 'Frame<TAB>Time:' was refused as a missing header."""
+    text = originals["bvh"].decode()
+    tiny = tmp_path / "tiny.bvh"
+    tiny.write_text(text.replace("Frame Time: 0.025", "Frame Time: 1e-300"))
+    code, err = run(capsys, ["convert", tiny, tmp_path / "tiny.glb"])
+    assert (code, err) == (2, [f"usdhands: error: {tiny}: line 109: frame time 1e-300 s is outside 0.0001..1000 s "
+                               "(at most 10000 frames per second)"])
+    tabs = tmp_path / "tabs.bvh"
+    tabs.write_text(text.replace("Frame Time: 0.025", "Frame\tTime:\t0.025").replace("Frames: 6", "Frames:\t6"))
+    from usdhands.formats.io import read_clip
+
+    spaces = tmp_path / "spaces.bvh"
+    spaces.write_bytes(originals["bvh"])
+    a, b = read_clip(tabs), read_clip(spaces)
+    assert (a.num_frames, a.fps) == (b.num_frames, b.fps) == (6, 40.0)
+    np.testing.assert_array_equal(a.rotations, b.rotations)

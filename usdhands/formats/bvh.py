@@ -269,6 +269,11 @@ def _parse_joint(tok: _Tokens, joints: list, names: set, parent: int) -> None:
         tok.error(tline, f"expected 'JOINT', 'End Site' or '}}' in {name!r}, found {t!r}")
 
 
+#: Shortest and longest ``Frame Time`` read (seconds): 10000 fps down to one frame in 1000 s.
+MIN_FRAME_TIME_S = 1e-4
+MAX_FRAME_TIME_S = 1000.0
+
+
 def _parse_motion(lines: list[str], motion_line: int, C: int, path) -> tuple[np.ndarray, float]:
     i = motion_line + 1
     n = len(lines)
@@ -280,9 +285,10 @@ def _parse_motion(lines: list[str], motion_line: int, C: int, path) -> tuple[np.
         if i >= n:
             raise AssetReadError(f"expected '{label}', found the end of the file", path=path,
                                  location=f"line {n}")
-        s = lines[i].strip()
+        s = " ".join(lines[i].split())  # 'Frame\tTime:\t0.033' as 'Frame Time: 0.033'
         if not s.lower().startswith(label.lower()):
-            raise AssetReadError(f"expected '{label}', found {s[:40]!r}", path=path, location=f"line {i + 1}")
+            raise AssetReadError(f"expected '{label}', found {lines[i].strip()[:40]!r}", path=path,
+                                 location=f"line {i + 1}")
         i += 1
         return s[len(label):].strip(), i
 
@@ -302,6 +308,10 @@ def _parse_motion(lines: list[str], motion_line: int, C: int, path) -> tuple[np.
     except ValueError:
         raise AssetReadError(f"expected a positive frame time, found {ft_text!r}", path=path,
                              location=f"line {ft_line}") from None
+    if not MIN_FRAME_TIME_S <= frame_time <= MAX_FRAME_TIME_S:  # 1e-300 gave 1e300 fps: float32 key times collapse
+        raise AssetReadError(f"frame time {ft_text} s is outside {MIN_FRAME_TIME_S:g}..{MAX_FRAME_TIME_S:g} s "
+                             f"(at most {1 / MIN_FRAME_TIME_S:g} frames per second)", path=path,
+                             location=f"line {ft_line}")
     counts = _tokens_per_line(lines[i:])
     filled = np.nonzero(counts)[0]
     bad = filled[counts[filled] != C]
