@@ -324,3 +324,42 @@ def test_bvh_frame_time_bounds_and_tabs(originals, tmp_path, capsys):
     a, b = read_clip(tabs), read_clip(spaces)
     assert (a.num_frames, a.fps) == (b.num_frames, b.fps) == (6, 40.0)
     np.testing.assert_array_equal(a.rotations, b.rotations)
+
+
+@pytest.mark.parametrize("tcps", ["0", "-24", "nan", "1e300", "1e-300"])
+def test_usd_time_codes_per_second_out_of_range(tcps, originals, tmp_path, capsys):
+    """timeCodesPerSecond 0 was a ZeroDivisionError, -24 and NaN 'Expected fps > 0' ValueErrors,
+    1e300 and 1e-300 died in the glTF writer (float32 key times)."""
+    from pxr import Usd
+
+    src = tmp_path / "tcps.usda"
+    src.write_bytes(originals["usda"])
+    stage = Usd.Stage.Open(str(src))
+    stage.SetTimeCodesPerSecond(float(tcps))
+    stage.GetRootLayer().Save()
+    shown = f"{float(tcps):g}"
+    for argv in (["inspect", src], ["convert", src, tmp_path / "out.glb"]):
+        code, err = run(capsys, argv)
+        assert (code, err) == (2, [f"usdhands: error: {src}: timeCodesPerSecond {shown} is outside 0.001..10000"])
+    assert not (tmp_path / "out.glb").exists()
+
+
+def test_usd_time_samples_too_close(originals, tmp_path, capsys):
+    """Time samples a millionth of a time code apart made 4e7 fps."""
+    from pxr import Usd, UsdSkel
+
+    src = tmp_path / "close.usda"
+    src.write_bytes(originals["usda"])
+    stage = Usd.Stage.Open(str(src))
+    for prim in stage.Traverse():
+        if prim.IsA(UsdSkel.Animation):
+            for attr in prim.GetAttributes():
+                values = [attr.Get(t) for t in attr.GetTimeSamples()]
+                if values:
+                    attr.Clear()
+                    for k, v in enumerate(values):
+                        attr.Set(v, k * 1e-6)
+    stage.GetRootLayer().Save()
+    code, err = run(capsys, ["convert", src, tmp_path / "out.glb"])
+    assert (code, err) == (2, [f"usdhands: error: {src}: /Root/small_2: time samples give 4e+07 frames per second "
+                               "(outside 0.001..10000)"])

@@ -72,8 +72,15 @@ def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
         return _read_stage(stage, path, fps)
 
 
+#: Frame rates (and timeCodesPerSecond) read from USD: one frame in 1000 s up to 10000 per second.
+MIN_RATE = 1e-3
+MAX_RATE = 1e4
+
+
 def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
     tcps = float(stage.GetTimeCodesPerSecond())
+    if not (MIN_RATE <= tcps <= MAX_RATE):  # also NaN; 0 divided by zero, 1e300 collapsed float32 key times
+        raise AssetReadError(f"timeCodesPerSecond {tcps:g} is outside {MIN_RATE:g}..{MAX_RATE:g}", path=path)
     mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
     up = str(UsdGeom.GetStageUpAxis(stage)).upper()
     up = up if up in ("Y", "Z") else "Y"
@@ -319,6 +326,9 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
     K = len(joints)
     samples = list(anim_query.GetJointTransformTimeSamples())
     times, rate = frame_times(samples, tcps, fps)
+    if not (MIN_RATE <= rate <= MAX_RATE):  # time samples a millionth of a code apart
+        raise InvalidAnimationError(f"time samples give {rate:g} frames per second (outside {MIN_RATE:g}..{MAX_RATE:g})",
+                                    path=path, location=str(anim_query.GetPrim().GetPath()))
     if len(times) == 0:  # values without time samples: one frame
         codes = [Usd.TimeCode.Default()]
         start = 0.0
