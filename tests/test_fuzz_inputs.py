@@ -363,3 +363,39 @@ def test_usd_time_samples_too_close(originals, tmp_path, capsys):
     code, err = run(capsys, ["convert", src, tmp_path / "out.glb"])
     assert (code, err) == (2, [f"usdhands: error: {src}: /Root/small_2: time samples give 4e+07 frames per second "
                                "(outside 0.001..10000)"])
+
+
+def _gltf_with_key_times(data: bytes, times) -> str:
+    """The .gltf ``data`` with the key times of its (shared) animation input accessor replaced."""
+    import base64
+
+    doc = json.loads(data)
+    inputs = {s["input"] for s in doc["animations"][0]["samplers"]}
+    assert len(inputs) == 1
+    acc = doc["accessors"][inputs.pop()]
+    view = doc["bufferViews"][acc["bufferView"]]
+    head, b64 = doc["buffers"][0]["uri"].split(",", 1)
+    buf = bytearray(base64.b64decode(b64))
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    values = np.asarray(times, dtype=np.float32)
+    assert values.size == acc["count"]
+    buf[start:start + 4 * values.size] = values.tobytes()
+    acc["min"], acc["max"] = [float(np.nanmin(values))], [float(np.nanmax(values))]
+    doc["buffers"][0]["uri"] = head + "," + base64.b64encode(bytes(buf)).decode()
+    return json.dumps(doc)
+
+
+@pytest.mark.parametrize("name, times, message", [
+    ("nan", [0, np.nan, np.nan, np.nan, np.nan, np.nan], "animations[0].channels[0]: sampler input times are not finite"),
+    ("tiny", np.arange(6) * 1e-9, "animations[0]: key times 1e-09 s apart give 1e+09 frames per second (at most 10000)"),
+    ("huge", np.arange(6) * 1e30, "animations[0]: key times span 5e+30 s: over 1e+07 frames at 30 fps"),
+])
+def test_gltf_key_times_out_of_range(name, times, message, originals, tmp_path, capsys):
+    """NaN key times were 'malformed glTF (ValueError: cannot convert float NaN to integer)', times 1e30 s
+    apart 'malformed glTF (ValueError: Maximum allowed size exceeded)', 1e-9 s apart read at 1e9 fps."""
+    src = tmp_path / f"{name}.gltf"
+    src.write_text(_gltf_with_key_times(originals["gltf"], times))
+    for argv in (["inspect", src], ["convert", src, tmp_path / "out.usda"]):
+        code, err = run(capsys, argv)
+        assert (code, err) == (2, [f"usdhands: error: {src}: {message}"]), argv
+    assert not (tmp_path / "out.usda").exists()

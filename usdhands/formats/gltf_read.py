@@ -432,9 +432,16 @@ def channel_keys(doc: GltfFile, anim_index: int, channel_index: int) -> tuple[np
     width = {"rotation": 4, "translation": 3, "scale": 3}[ch.target.path]
     if values.shape[1] != width:
         raise doc.error(f"{ch.target.path} output has {values.shape[1]} components, expected {width}", where)
+    if not np.isfinite(times).all():
+        raise doc.error("sampler input times are not finite", where)
     if times.size and np.any(np.diff(times) < 0):
         raise doc.error("sampler input times decrease", where)
     return times, values, interp
+
+
+#: Highest frame rate key times may give, and most frames an animation is sampled at.
+MAX_FPS = 1e4
+MAX_FRAMES = 1e7
 
 
 def animation_channels(doc: GltfFile, anim_index: int, binding: SkeletonBinding) -> list[tuple[int, int, str]]:
@@ -461,7 +468,13 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     if all_times.size == 0:
         raise doc.error("animation has no key times", f"animations[{anim_index}]")
     rate = float(fps) if fps else detect_fps(all_times)
+    if not rate <= MAX_FPS:
+        raise doc.error(f"key times {float(np.diff(np.unique(all_times)).min()):g} s apart give {rate:g} frames per "
+                        f"second (at most {MAX_FPS:g})", f"animations[{anim_index}]")
     t0, t1 = float(all_times.min()), float(all_times.max())
+    if (t1 - t0) * rate >= MAX_FRAMES:  # 1e30 s: numpy's 'Maximum allowed size exceeded'
+        raise doc.error(f"key times span {t1 - t0:g} s: over {MAX_FRAMES:g} frames at {rate:g} fps",
+                        f"animations[{anim_index}]")
     n = int(np.floor((t1 - t0) * rate + 1e-3)) + 1
     at = t0 + np.arange(n) / rate
     sk = binding.skeleton
