@@ -208,3 +208,28 @@ def test_splice_hand_yaw_must_be_finite(value, ok_glb, shared_assets, tmp_path, 
                     "--hand-yaw", value)
     assert (code, err) == (2, [f"usdhands: error: bad --hand-yaw {value}: expected a finite angle in degrees"])
     assert not (tmp_path / "out.glb").exists()
+
+
+def test_reduction_model_with_non_finite_numbers(ok_glb, tmp_path, capsys):
+    """A NaN constant passed the model checks and expand silently kept the input's curve."""
+    import json
+
+    model = tmp_path / "model.json"
+    assert run(capsys, "reduce", ok_glb, "--model", model)[0] == 0
+    d = json.loads(model.read_text())
+    curve = d["constants"][0]["curve"]
+    cases = []
+    for name, edit, message in (
+            ("nan_constant", lambda m: m["constants"][0].update(value=float("nan")),
+             f"constant {curve!r} has a non-finite value nan"),
+            ("inf_mean", lambda m: m["means"].update({next(iter(m["means"])): float("inf")}),
+             f"mean of {next(iter(d['means']))!r} is not finite (inf)")):
+        m = json.loads(model.read_text())
+        edit(m)
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps(m))
+        cases.append((path, message))
+    for path, message in cases:
+        code, err = run(capsys, "expand", ok_glb, "--model", path, "-o", tmp_path / "out.glb")
+        assert (code, err) == (2, [f"usdhands: error: {path}: {message}"])
+    assert not (tmp_path / "out.glb").exists()

@@ -339,6 +339,12 @@ class ReductionModel:
         for r in model.relations:
             if not (math.isfinite(r.scale) and math.isfinite(r.offset)):
                 raise ConfigError(f"relation of {r.dependent!r} has a non-finite scale or offset", path=path)
+        for c in model.constants:  # NaN passed and expand silently kept the input's curve
+            if not math.isfinite(c.value):
+                raise ConfigError(f"constant {c.curve!r} has a non-finite value {c.value}", path=path)
+        for curve, mean in model.means.items():
+            if not math.isfinite(float(mean)):
+                raise ConfigError(f"mean of {curve!r} is not finite ({mean})", path=path)
         return model
 
 
