@@ -88,3 +88,24 @@ def test_mirrored_hand_refused_naming_file_and_joint(ok_glb, tmp_path, capsys):
         code, err = run(capsys, *argv)
         assert (code, err) == (2, [f"usdhands: error: {src}: {message}"]), argv
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mirror.usda", "ok.glb"]
+
+
+@pytest.mark.parametrize("ext", ["glb", "usda", "bvh"])
+def test_write_clip_refuses_nan(ext, ok_glb, tmp_path):
+    """A NaN rotation given to write_clip compared as 'unchanged' in the glTF writer, which
+    silently kept the source's keys; every writer now refuses it before writing."""
+    from usdhands.errors import InvalidAnimationError
+
+    src = ok_glb
+    if ext != "glb":
+        src = tmp_path / f"ok.{ext}"
+        assert main(["convert", str(ok_glb), str(src)]) == 0
+    clip = read_clip(src)
+    rot = np.array(clip.rotations, copy=True)
+    j = clip.skeleton.index("LeftHandThumb1")
+    rot[3, j] = np.nan
+    bad = clip.replace(rotations=rot)
+    out = tmp_path / f"out.{ext}"
+    with pytest.raises(InvalidAnimationError, match=r"has NaN or infinite rotations \(joint '.*LeftHandThumb1', frame 3\)"):
+        write_clip(src, bad, out)
+    assert not out.exists()

@@ -72,6 +72,8 @@ def write_asset(asset: Asset, path: str | os.PathLike, *, inputs: tuple = (), **
     """Write ``asset`` as a standalone file (atomically; never onto one of ``inputs``)."""
     path = check_output_path(path, asset.path, *inputs)
     handler = handler_for(path, "write")
+    for clip in asset.clips:
+        clip.validate(str(path))
     with atomic_output(path) as tmp:
         handler.write(asset, tmp, **options)
     return path
@@ -90,6 +92,7 @@ def write_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLike, *
     if handler is not handler_for(source, "read"):
         raise AssetReadError(f"cannot write {source.suffix} content as {path.suffix}; use 'usdhands convert' first",
                              path=path)
+    clip.validate(str(path))  # a NaN compared as 'unchanged' and the source's keys were kept silently
     with atomic_output(path) as tmp:
         handler.write_clip(source, clip, tmp, final_path=path, **options)
     return path
