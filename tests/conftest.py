@@ -31,6 +31,14 @@ def sample_assets() -> Path:
     return SAMPLE_ASSETS
 
 
+@pytest.fixture()
+def ok_glb(sample_assets, tmp_path) -> Path:
+    """A copy of the sample gesture take ``ok_00.glb`` in a temporary folder."""
+    dst = tmp_path / "ok.glb"
+    shutil.copy(sample_assets / "gestures" / "ok_00.glb", dst)
+    return dst
+
+
 def validate_gltf(*paths: Path) -> list[dict]:
     """Run the Khronos glTF validator; returns one report per file.
 

@@ -6,19 +6,7 @@ import shutil
 
 import pytest
 
-from usdhands.cli import main
-
-
-def run(capsys, *argv) -> tuple[int, list[str]]:
-    code = main([str(a) for a in argv])
-    return code, capsys.readouterr().err.strip().splitlines()
-
-
-@pytest.fixture()
-def ok_glb(sample_assets, tmp_path):
-    dst = tmp_path / "ok.glb"
-    shutil.copy(sample_assets / "gestures" / "ok_00.glb", dst)
-    return dst
+from cli_helpers import run  # noqa: E402  (tests/ is on sys.path, like splice_synth)
 
 
 @pytest.mark.parametrize("fps, shown", [("0", "0"), ("-5", "-5"), ("nan", "nan"), ("inf", "inf"),

@@ -3,26 +3,14 @@ mirrored skeletons, USD animations without rotations."""
 
 from __future__ import annotations
 
-import shutil
 
 import numpy as np
 import pytest
 
 from usdhands.cli import main
+from cli_helpers import run  # noqa: E402  (tests/ is on sys.path, like splice_synth)
 from usdhands.formats.io import read_clip, write_clip
 from usdhands.model.rotations import quat_angle_deg
-
-
-def run(capsys, *argv) -> tuple[int, list[str]]:
-    code = main([str(a) for a in argv])
-    return code, capsys.readouterr().err.strip().splitlines()
-
-
-@pytest.fixture()
-def ok_glb(sample_assets, tmp_path):
-    dst = tmp_path / "ok.glb"
-    shutil.copy(sample_assets / "gestures" / "ok_00.glb", dst)
-    return dst
 
 
 @pytest.mark.parametrize("ext", ["glb", "gltf"])
