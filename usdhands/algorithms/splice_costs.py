@@ -1,0 +1,424 @@
+"""The distances of splicing's two DTW passes (Majkowska et al. 2006, eq. 6-9).
+
+First pass: how many signs of the first and second derivatives of the markers differ,
+after subtracting the shoulder and turning the hand clip about the vertical axis
+(eq. 6, 7). Second pass: the angle between the hand vectors once the forearms are
+aligned (eq. 8, 9), in degrees. Compiled kernels with plain NumPy twins for tests.
+Used by :mod:`usdhands.algorithms.splicing`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.signal import savgol_filter
+
+from usdhands.model.clip import Clip
+from usdhands.model.handmap import HandSide
+from usdhands.algorithms.splice_markers import MarkerOffsets, _rot_only, default_marker_offsets
+
+# -- first pass: signs of derivatives (eq. 6, 7) ----------------------------------------
+def _smooth_window(T: int, window: int) -> int:
+    w = min(window, T if T % 2 else T - 1)
+    return w
+
+
+def sign_features(markers: np.ndarray, fps: float, *, window: int = 7,
+                  dead_zone: float = 0.05) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Smoothed first and second derivatives of markers and their dead zones.
+
+    Parameters
+    ----------
+    markers : (T, K, 3) float
+        Positions, centimetres.
+    fps : float
+        Frames per second.
+    window : int
+        Savitzky–Golay window in frames (odd; cubic fit), against noise.
+    dead_zone : float
+        A derivative component smaller than this fraction of the clip's RMS derivative
+        counts as zero (sign 0), so holds (``v = 0``) are seen as holds.
+
+    Returns
+    -------
+    vel : (T, K, 3) float
+        cm/s.
+    acc : (T, K, 3) float
+        cm/s².
+    eps_v, eps_a : float
+        The dead zones in cm/s and cm/s².
+    """
+    x = np.asarray(markers, dtype=np.float64)
+    T = x.shape[0]
+    if T < 3:
+        raise ValueError(f"Expected at least 3 frames, got {T}")
+    w = _smooth_window(T, window)
+    if w >= 5:
+        vel = savgol_filter(x, w, 3, deriv=1, delta=1.0 / fps, axis=0, mode="interp")
+        acc = savgol_filter(x, w, 3, deriv=2, delta=1.0 / fps, axis=0, mode="interp")
+    else:
+        vel = np.gradient(x, 1.0 / fps, axis=0)
+        acc = np.gradient(vel, 1.0 / fps, axis=0)
+    eps_v = dead_zone * float(np.sqrt(np.mean(vel ** 2)))
+    eps_a = dead_zone * float(np.sqrt(np.mean(acc ** 2)))
+    return vel, acc, eps_v, eps_a
+
+
+@njit(cache=True)
+def _sgn(x, eps):  # pragma: no cover - compiled
+    if x > eps:
+        return 1.0
+    if x < -eps:
+        return -1.0
+    return 0.0
+
+
+@njit(cache=True)
+def _window_cos_sin(X, Z, Xh, Zh, SX, SZ, SXh, SZh, i, j, half):  # pragma: no cover - compiled
+    """cos and sin of eq. 7's angle (num and den normalised, no atan2).
+
+    ``X, Z`` ``(n, K)`` are the body markers' horizontal coordinates, ``SX, SZ`` ``(n,)``
+    their sums over the markers; ``Xh, Zh, SXh, SZh`` the same for the hand.
+    """
+    n = X.shape[0]
+    m = Xh.shape[0]
+    K = X.shape[1]
+    sxz = 0.0
+    sxx = 0.0
+    bx = 0.0
+    bz = 0.0
+    hx = 0.0
+    hz = 0.0
+    cnt = 0
+    for k in range(-half, half + 1):
+        a = i + k
+        b = j + k
+        if a < 0 or b < 0 or a >= n or b >= m:
+            continue
+        for mk in range(K):
+            sxz += X[a, mk] * Zh[b, mk] - Xh[b, mk] * Z[a, mk]
+            sxx += X[a, mk] * Xh[b, mk] + Z[a, mk] * Zh[b, mk]
+        bx += SX[a]
+        bz += SZ[a]
+        hx += SXh[b]
+        hz += SZh[b]
+        cnt += K
+    num = sxz - (bx * hz - hx * bz) / cnt
+    den = sxx - (bx * hx + bz * hz) / cnt
+    r = np.sqrt(num * num + den * den)
+    if r == 0.0:
+        return 1.0, 0.0  # atan2(0, 0) = 0
+    return den / r, num / r
+
+
+@njit(cache=True)
+def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh, eps_ah,
+                       half, use_trunk, yaw_b, yaw_h):  # pragma: no cover - compiled
+    N = rows.shape[0]
+    K = P.shape[1]
+    out = np.empty(N)
+    X = np.ascontiguousarray(P[:, :, 0])
+    Z = np.ascontiguousarray(P[:, :, 2])
+    Xh = np.ascontiguousarray(Q[:, :, 0])
+    Zh = np.ascontiguousarray(Q[:, :, 2])
+    SX = X.sum(axis=1)
+    SZ = Z.sum(axis=1)
+    SXh = Xh.sum(axis=1)
+    SZh = Zh.sum(axis=1)
+    n = vb.shape[0]
+    m = vh.shape[0]
+    SB = np.empty((n, K, 6))  # body signs: v then a, x y z
+    for i in range(n):
+        for mk in range(K):
+            for ax in range(3):
+                SB[i, mk, ax] = _sgn(vb[i, mk, ax], eps_vb)
+                SB[i, mk, 3 + ax] = _sgn(ab[i, mk, ax], eps_ab)
+    SH = np.empty((m, K, 2))  # hand signs of the vertical components
+    for j in range(m):
+        for mk in range(K):
+            SH[j, mk, 0] = _sgn(vh[j, mk, 1], eps_vh)
+            SH[j, mk, 1] = _sgn(ah[j, mk, 1], eps_ah)
+    for c in range(N):
+        i = rows[c]
+        j = cols[c]
+        if use_trunk:
+            th = yaw_b[i] - yaw_h[j]
+            co = np.cos(th)
+            si = np.sin(th)
+        else:
+            co, si = _window_cos_sin(X, Z, Xh, Zh, SX, SZ, SXh, SZh, i, j, half)
+        d = 0.0
+        for mk in range(K):
+            # R_y(θ) applied to the hand's derivatives: x' = c x + s z, z' = -s x + c z
+            x = vh[j, mk, 0]
+            z = vh[j, mk, 2]
+            e = SB[i, mk, 0] - _sgn(co * x + si * z, eps_vh)
+            d += e * e
+            e = SB[i, mk, 2] - _sgn(-si * x + co * z, eps_vh)
+            d += e * e
+            x = ah[j, mk, 0]
+            z = ah[j, mk, 2]
+            e = SB[i, mk, 3] - _sgn(co * x + si * z, eps_ah)
+            d += e * e
+            e = SB[i, mk, 5] - _sgn(-si * x + co * z, eps_ah)
+            d += e * e
+            e = SB[i, mk, 1] - SH[j, mk, 0]  # vertical components do not turn
+            d += e * e
+            e = SB[i, mk, 4] - SH[j, mk, 1]
+            d += e * e
+        out[c] = d
+    return out
+
+
+@dataclass(frozen=True)
+class FirstPassInput:
+    """What eq. 6 and 7 need of both clips (built by :func:`align_hands`).
+
+    Parameters
+    ----------
+    P, Q : (n, K, 3), (m, K, 3) float
+        Body and hand markers, shoulder subtracted, cm, Y up.
+    vb, ab, vh, ah : (n, K, 3), (n, K, 3), (m, K, 3), (m, K, 3) float
+        Their first (cm/s) and second (cm/s²) derivatives.
+    eps : (4,) float
+        Dead zones of vb, ab, vh, ah.
+    half : int
+        Half-width of eq. 7's window in frames (2 for 5 frames).
+    yaw_b, yaw_h : (n,), (m,) float or None
+        Trunk headings in degrees; None to use eq. 7.
+    """
+
+    P: np.ndarray
+    Q: np.ndarray
+    vb: np.ndarray
+    ab: np.ndarray
+    vh: np.ndarray
+    ah: np.ndarray
+    eps: tuple
+    half: int
+    yaw_b: np.ndarray | None
+    yaw_h: np.ndarray | None
+
+
+def first_pass_cost(inp: FirstPassInput, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Eq. 6 on the given cells (numba); see :func:`first_pass_cost_naive` for the definition."""
+    use_trunk = inp.yaw_b is not None
+    yb = np.radians(inp.yaw_b) if use_trunk else np.zeros(1)
+    yh = np.radians(inp.yaw_h) if use_trunk else np.zeros(1)
+    return _first_pass_kernel(np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(cols, np.int64),
+                              inp.P, inp.Q, inp.vb, inp.ab, inp.vh, inp.ah, *inp.eps, inp.half,
+                              use_trunk, yb, yh)
+
+
+def window_yaw_naive(P: np.ndarray, Q: np.ndarray, i: int, j: int, half: int = 2) -> float:
+    """Eq. 7 for one pair of frames in NumPy: the rotation about Y (radians) taking Q's window onto P's.
+
+    Parameters
+    ----------
+    P : (n, K, 3) float
+        Body markers, Y up.
+    Q : (m, K, 3) float
+        Hand markers, Y up.
+    i, j : int
+        Frames; the window holds frames ``i + k, j + k`` for ``|k| <= half`` inside both clips.
+    """
+    ks = [k for k in range(-half, half + 1) if 0 <= i + k < len(P) and 0 <= j + k < len(Q)]
+    a = P[[i + k for k in ks]].reshape(-1, 3)
+    b = Q[[j + k for k in ks]].reshape(-1, 3)
+    n = len(a)
+    x, z, xp, zp = a[:, 0], a[:, 2], b[:, 0], b[:, 2]
+    num = np.sum(x * zp - xp * z) - (x.sum() * zp.sum() - xp.sum() * z.sum()) / n
+    den = np.sum(x * xp + z * zp) - (x.sum() * xp.sum() + z.sum() * zp.sum()) / n
+    return float(np.arctan2(num, den))
+
+
+def first_pass_cost_naive(inp: FirstPassInput) -> np.ndarray:
+    """Eq. 6 on every cell, ``(n, m)``, in plain NumPy (the reference twin).
+
+    ``D(i, j) = Σ_markers |sgn(v_i) − sgn(R v'_j)|² + |sgn(a_i) − sgn(R a'_j)|²`` with
+    ``R = R_y(θ(i, j))`` from eq. 7 (or the trunk angles).
+    """
+    n, m = inp.P.shape[0], inp.Q.shape[0]
+    eps_vb, eps_ab, eps_vh, eps_ah = inp.eps
+    sg = lambda x, e: np.where(x > e, 1.0, np.where(x < -e, -1.0, 0.0))
+    out = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            if inp.yaw_b is not None:
+                th = np.radians(inp.yaw_b[i] - inp.yaw_h[j])
+            else:
+                th = window_yaw_naive(inp.P, inp.Q, i, j, inp.half)
+            R = np.array([[np.cos(th), 0, np.sin(th)], [0, 1, 0], [-np.sin(th), 0, np.cos(th)]])
+            rv = inp.vh[j] @ R.T
+            ra = inp.ah[j] @ R.T
+            out[i, j] = (np.sum((sg(inp.vb[i], eps_vb) - sg(rv, eps_vh)) ** 2)
+                         + np.sum((sg(inp.ab[i], eps_ab) - sg(ra, eps_ah)) ** 2))
+    return out
+
+
+# -- second pass: forearm-aligned hand angle (eq. 8, 9) ---------------------------------
+def forearm_hand_vectors(markers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit forearm and hand vectors of eq. 8, two ``(T, 3)`` from markers ``(T, 4, 3)``."""
+    mid = 0.5 * (markers[:, 0] + markers[:, 1])
+    f = markers[:, 2] - mid
+    h = markers[:, 3] - mid
+    unit = lambda v: v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
+    return unit(f), unit(h)
+
+
+
+
+def hand_directions(clip: Clip, side: HandSide, offsets: MarkerOffsets | None = None,
+                    world: np.ndarray | None = None) -> np.ndarray:
+    """The hand vector of eq. 8 in the forearm joint's frame, ``(T, 3)`` unit vectors.
+
+    ``u(t) = R_f(t)ᵀ h(t)``, with ``R_f`` the forearm joint's world rotation: the forearm
+    is aligned as a whole frame rather than by the minimal rotation between forearm
+    vectors, so the twist about the forearm stays fixed. Two rigs' forearm frames may
+    differ by a constant rotation (other joint axes); :func:`align_hands` removes it
+    with a least-squares fit over the first pass's matches.
+    """
+    sk = clip.skeleton
+    offsets = default_marker_offsets(sk, side) if offsets is None else offsets
+    world = clip.world_xforms() if world is None else world
+    w = sk.index(side.wrist)
+    fa = sk.index(side.forearm)
+    o = offsets.as_array()
+    hv = o[3] - 0.5 * (o[0] + o[1])  # in the wrist frame
+    Rw = _rot_only(world[:, w, :3, :3])
+    Rf = _rot_only(world[:, fa, :3, :3])
+    u = np.einsum("tji,tjk,k->ti", Rf, Rw, hv)
+    return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
+
+
+def forearm_rest_basis(skeleton, side: HandSide, offsets: MarkerOffsets | None = None) -> np.ndarray:
+    """Rest-pose axes of the hand in the forearm joint's frame, ``(3, 3)`` (columns).
+
+    Columns: the hand vector of eq. 8, the wrist markers' across direction (made
+    perpendicular), their cross product, all at rest and in forearm-local coordinates.
+    ``B_body · B_handᵀ`` maps :func:`hand_directions` of the hand rig onto the body rig's
+    when both rest poses hold the hand alike.
+    """
+    offsets = default_marker_offsets(skeleton, side) if offsets is None else offsets
+    rest = skeleton.rest_world_xforms()
+    rw = _rot_only(rest[skeleton.index(side.wrist), :3, :3])
+    rf = _rot_only(rest[skeleton.index(side.forearm), :3, :3])
+    o = offsets.as_array()
+    e1 = rf.T @ rw @ (o[3] - 0.5 * (o[0] + o[1]))
+    e1 = e1 / np.linalg.norm(e1)
+    e2 = rf.T @ rw @ (o[0] - o[1])
+    e2 = e2 - e1 * np.dot(e1, e2)
+    if np.linalg.norm(e2) < 1e-9:
+        helper = np.array([0.0, 1.0, 0.0]) if abs(e1[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        e2 = np.cross(e1, helper)
+    e2 = e2 / np.linalg.norm(e2)
+    return np.stack([e1, e2, np.cross(e1, e2)], axis=1)
+
+
+def fit_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation ``(3, 3)`` minimising ``Σ |a_k − R b_k|²`` over rows of ``(N, 3)`` arrays (Kabsch)."""
+    H = np.asarray(b, dtype=np.float64).T @ np.asarray(a, dtype=np.float64)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+
+
+@njit(cache=True)
+def _angle_kernel(rows, cols, ub, uh):  # pragma: no cover - compiled
+    N = rows.shape[0]
+    out = np.empty(N)
+    for c in range(N):
+        i = rows[c]
+        j = cols[c]
+        d = ub[i, 0] * uh[j, 0] + ub[i, 1] * uh[j, 1] + ub[i, 2] * uh[j, 2]
+        if d > 1.0:
+            d = 1.0
+        elif d < -1.0:
+            d = -1.0
+        out[c] = np.degrees(np.arccos(d))
+    return out
+
+
+def direction_angle_cost(ub: np.ndarray, uh: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Angle in degrees between unit vectors ``ub[rows]`` ``(n, 3)`` and ``uh[cols]`` ``(m, 3)`` (numba)."""
+    return _angle_kernel(np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(cols, np.int64),
+                         np.ascontiguousarray(ub, np.float64), np.ascontiguousarray(uh, np.float64))
+
+
+@njit(cache=True)
+def _hand_angle_kernel(rows, cols, fb, hb, fh, hh):  # pragma: no cover - compiled
+    N = rows.shape[0]
+    out = np.empty(N)
+    for c in range(N):
+        i = rows[c]
+        j = cols[c]
+        a0, a1, a2 = fh[j, 0], fh[j, 1], fh[j, 2]  # f' (rotate onto f)
+        b0, b1, b2 = fb[i, 0], fb[i, 1], fb[i, 2]
+        v0, v1, v2 = hh[j, 0], hh[j, 1], hh[j, 2]
+        cth = a0 * b0 + a1 * b1 + a2 * b2
+        if cth > -1.0 + 1e-9:
+            # Rodrigues with k = a x b: R v = c v + k x v + k (k.v) / (1 + c)
+            k0 = a1 * b2 - a2 * b1
+            k1 = a2 * b0 - a0 * b2
+            k2 = a0 * b1 - a1 * b0
+            kv = (k0 * v0 + k1 * v1 + k2 * v2) / (1.0 + cth)
+            r0 = cth * v0 + (k1 * v2 - k2 * v1) + k0 * kv
+            r1 = cth * v1 + (k2 * v0 - k0 * v2) + k1 * kv
+            r2 = cth * v2 + (k0 * v1 - k1 * v0) + k2 * kv
+        else:
+            # opposite vectors: half turn about an axis perpendicular to a
+            if abs(a0) < 0.9:
+                p0, p1, p2 = 0.0, -a2, a1
+            else:
+                p0, p1, p2 = a2, 0.0, -a0
+            nn = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+            p0 /= nn
+            p1 /= nn
+            p2 /= nn
+            pv = p0 * v0 + p1 * v1 + p2 * v2
+            r0 = 2.0 * pv * p0 - v0
+            r1 = 2.0 * pv * p1 - v1
+            r2 = 2.0 * pv * p2 - v2
+        d = hb[i, 0] * r0 + hb[i, 1] * r1 + hb[i, 2] * r2
+        nr = np.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+        d = d / max(nr, 1e-12)
+        if d > 1.0:
+            d = 1.0
+        elif d < -1.0:
+            d = -1.0
+        out[c] = np.degrees(np.arccos(d))
+    return out
+
+
+def hand_angle_cost(fb: np.ndarray, hb: np.ndarray, fh: np.ndarray, hh: np.ndarray,
+                    rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """Eq. 9 in degrees on the given cells (numba).
+
+    Parameters
+    ----------
+    fb, hb : (n, 3) float
+        Unit forearm and hand vectors of the body clip.
+    fh, hh : (m, 3) float
+        The same for the hand clip.
+    rows, cols : (N,) int
+        Cells.
+    """
+    return _hand_angle_kernel(np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(cols, np.int64),
+                              np.ascontiguousarray(fb), np.ascontiguousarray(hb),
+                              np.ascontiguousarray(fh), np.ascontiguousarray(hh))
+
+
+def hand_angle_cost_naive(fb: np.ndarray, hb: np.ndarray, fh: np.ndarray, hh: np.ndarray) -> np.ndarray:
+    """Eq. 9 on every cell, ``(n, m)`` degrees, with scipy's rotation alignment (the twin)."""
+    from scipy.spatial.transform import Rotation
+
+    out = np.empty((len(fb), len(fh)))
+    for i in range(len(fb)):
+        for j in range(len(fh)):
+            R, _ = Rotation.align_vectors(fb[i][None], fh[j][None])
+            v = R.apply(hh[j])
+            c = np.dot(hb[i], v) / (np.linalg.norm(hb[i]) * np.linalg.norm(v))
+            out[i, j] = np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+    return out
