@@ -133,3 +133,12 @@ def test_skeleton_short_name_lookup():
 def test_euler_round_trip():
     e = np.array([[10.0, -20.0, 30.0]])
     assert np.allclose(quat_to_euler_deg(euler_deg_to_quat(e)), e)
+
+
+def test_ambiguous_short_name_needs_the_full_path():
+    sk = Skeleton(["root", "root/L/Index1", "root/R", "root/R/Index1"], [-1, 0, 0, 2], np.zeros((4, 3)),
+                  np.tile([0, 0, 0, 1.0], (4, 1)))
+    assert sk.index("root/R/Index1") == 3 and sk.index("R") == 2
+    assert not sk.has_joint("Index1")
+    with pytest.raises(KeyError, match="No joint named 'Index1'"):
+        sk.index("Index1")

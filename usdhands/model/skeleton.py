@@ -109,7 +109,8 @@ class Skeleton:
             index[n] = i
         shorts: dict[str, int] = {}
         for i, n in enumerate(names):
-            shorts.setdefault(short_joint_name(n), i if short_joint_name(n) not in shorts else -1)
+            sn = short_joint_name(n)
+            shorts[sn] = -1 if sn in shorts else i  # -1: ambiguous, reachable by full name only
         for sn, i in shorts.items():
             if i >= 0 and sn not in index:
                 index[sn] = i
