@@ -133,3 +133,74 @@ def test_mesh_with_six_influences_survives_usd_and_gltf(tmp_path, capsys, gltf_v
         ref = np.zeros((4, J))
         np.add.at(ref, (np.arange(4)[:, None], idx), w)
         np.testing.assert_allclose(dense, ref, atol=1e-6)
+
+
+def test_bvh_units_option_reads_and_writes_other_units(shared_assets, tmp_path, capsys):
+    src = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    in_cm = read_asset(src).clips[0]
+    glb = tmp_path / "ok_mm.glb"
+    convert(capsys, src, glb, "--bvh-units", "mm")  # the numbers taken as millimetres
+    b = read_asset(glb).clips[0]
+    idx = [b.skeleton.index(n) for n in in_cm.skeleton.joint_names]
+    np.testing.assert_allclose(b.world_positions()[:, idx], in_cm.world_positions() * 0.001, atol=1e-7)
+    # written back in metres: the root rForeArm's OFFSET "0 0 20" (mm) becomes 0.02
+    bvh = tmp_path / "ok_m.bvh"
+    convert(capsys, glb, bvh, "--bvh-units", "m")
+    lines = bvh.read_text().splitlines()
+    assert lines[1] == "ROOT rForeArm"
+    assert lines[3].split() == ["OFFSET", "0.000000", "0.000000", "0.020000"]
+    c = read_asset(bvh, units="m").clips[0]
+    assert c.skeleton.meters_per_unit == 1.0
+    np.testing.assert_allclose(c.world_positions()[:, idx], b.world_positions()[:, idx], atol=2e-6)
+
+
+def test_read_clip_passes_units_to_bvh_only(shared_assets):
+    from usdhands.formats.io import read_clip
+
+    clip = read_clip(shared_assets / "leap_hands" / "fingers-ok.bvh", units="in")
+    assert clip.skeleton.meters_per_unit == 0.0254
+    with pytest.raises(TypeError, match="units"):
+        read_clip(shared_assets / "robot_expressive" / "RobotExpressive.glb", units="in")
+
+
+def two_skeleton_usd(tmp_path):
+    def rig(prefix, n):
+        names = [f"{prefix}Hips"] + [f"{prefix}Hips/{prefix}J{i}" for i in range(1, n)]
+        return Skeleton(names, [-1] + [0] * (n - 1), np.arange(n * 3, dtype=float).reshape(n, 3),
+                        np.tile([0, 0, 0, 1.0], (n, 1)), name=prefix)
+
+    a, b = rig("A", 3), rig("B", 4)
+    rng = np.random.default_rng(0)
+
+    def take(sk, name):
+        q = rng.normal(size=(6, sk.num_joints, 4))
+        return Clip(sk, 30, q / np.linalg.norm(q, axis=-1, keepdims=True), name=name)
+
+    return write_asset(Asset("mem", (a, b), (take(a, "WalkA"), take(b, "WaveB"))), tmp_path / "two.usda")
+
+
+def test_several_skeletons_to_bvh_says_which_was_taken(tmp_path, capsys):
+    src = two_skeleton_usd(tmp_path)
+    err = convert(capsys, src, tmp_path / "first.bvh")
+    note = err.splitlines()[0]
+    assert note.startswith("usdhands: BVH holds one skeleton and one animation: took animation '/Root/ARoot/WalkA'"
+                           " of skeleton '/Root/ARoot/A'; left out 1 other animation(s), 1 other skeleton(s)")
+    assert "--animation" in note
+    first = read_asset(tmp_path / "first.bvh")
+    assert first.skeletons[0].num_joints == 3
+    err = convert(capsys, src, tmp_path / "second.bvh", "--animation", "/Root/BRoot/WaveB")
+    assert "took animation '/Root/BRoot/WaveB' of skeleton '/Root/BRoot/B'" in err
+    second = read_asset(tmp_path / "second.bvh").clips[0]
+    want = read_asset(src).clip("/Root/BRoot/WaveB")
+    assert second.skeleton.num_joints == 4
+    assert quat_angle_deg(second.rotations, want.rotations).max() < 1e-3
+
+
+def test_fps_option_resamples(shared_assets, tmp_path, capsys):
+    src = shared_assets / "leap_hands" / "fingers-ok.bvh"  # 245 frames at 40 fps
+    out = tmp_path / "ok20.usda"
+    convert(capsys, src, out, "--fps", "20")
+    a, b = read_asset(src).clips[0], read_asset(out).clips[0]
+    assert b.fps == 20.0 and b.num_frames == 123
+    idx = [b.skeleton.index(n) for n in a.skeleton.joint_names]
+    np.testing.assert_allclose(b.world_positions()[:, idx] * 0.01, a.world_positions()[::2] * 0.01, atol=1e-6)
