@@ -31,7 +31,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from usdhands.algorithms.reduction import DEFAULT_STEPS, pair_rmsd, reduce_curves, standardise  # noqa: E402
+from usdhands.algorithms.reduction.reduce import DEFAULT_STEPS, pair_rmsd, reduce_curves, standardise  # noqa: E402
 
 
 def make_hands(frames: int, curves: int, seed: int = 0):

@@ -30,9 +30,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 from splice_synth import body_handside, make_case  # noqa: E402
 
 from usdhands.algorithms.dtw import dtw, dtw_naive  # noqa: E402
-from usdhands.algorithms.splicing import (  # noqa: E402
-    SpliceOptions, align_hands, hand_directions, markers_from_joints, median_alignment, partial_world_xforms,
-    sign_features, splice_clips, yup_cm_positions,
+from usdhands.algorithms.splicing.markers import markers_from_joints, yup_cm_positions  # noqa: E402
+from usdhands.algorithms.splicing.costs import hand_directions, sign_features  # noqa: E402
+from usdhands.algorithms.splicing.splice import (  # noqa: E402
+    SpliceOptions, align_hands, median_alignment, partial_world_xforms, splice_clips,
 )
 
 

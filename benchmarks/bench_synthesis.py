@@ -1,6 +1,6 @@
 """Benchmark: finger synthesis of a 3-minute input against a 10-minute database, both hands.
 
-Prints the end-to-end time of :func:`usdhands.algorithms.synthesis.synthesize_clip`
+Prints the end-to-end time of :func:`usdhands.algorithms.synthesis.synthesize.synthesize_clip`
 (features, segmentation, the k-nearest search, graph, stitching, applying the curves;
 numba compiled beforehand), the time of the search alone, and beside it, measured in
 the same run on a random sample of the same candidate pairs and scaled to all of
@@ -52,7 +52,7 @@ def file_to_file(inp, db, repeat: int) -> dict:
     import tempfile
     from pathlib import Path
 
-    from usdhands.algorithms.finger_database import save_database
+    from usdhands.algorithms.synthesis.database import save_database
     from usdhands.cli import main as cli
     from usdhands.formats.io import write_asset
     from usdhands.model.asset import Asset
@@ -90,11 +90,11 @@ def main() -> None:
 
     from dtaidistance import dtw_ndim
 
-    from usdhands.algorithms.finger_database import DatabaseClip, build_database, segment_track
-    from usdhands.algorithms.segment_cost import dtw_align, knn_segments, weight_features
-    from usdhands.algorithms.synthesis import db_side_segments, synthesize_clip
-    from usdhands.algorithms.synthesis_config import SynthesisConfig
-    from usdhands.algorithms.wrist_features import wrist_features
+    from usdhands.algorithms.synthesis.database import DatabaseClip, build_database, segment_track
+    from usdhands.algorithms.synthesis.segment_cost import dtw_align, knn_segments, weight_features
+    from usdhands.algorithms.synthesis.synthesize import db_side_segments, synthesize_clip
+    from usdhands.algorithms.synthesis.config import SynthesisConfig
+    from usdhands.algorithms.synthesis.wrist_features import wrist_features
     from usdhands.model.hand_detection import detect_hands
     from usdhands.samples.gestures import body_only
 

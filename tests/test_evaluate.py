@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from synthesis_data import gesture_set, tiny_handmap
 
-from usdhands.algorithms.finger_database import load_database
-from usdhands.algorithms.gesture_evaluation import (
+from usdhands.algorithms.synthesis.database import load_database
+from usdhands.algorithms.synthesis.evaluation import (
     DEFAULT_PREDICTORS, evaluate_predictors, parse_predictor, prepare_eval_set,
 )
 from usdhands.cli import main

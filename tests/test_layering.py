@@ -25,10 +25,11 @@ def imported_modules(path: Path) -> set[str]:
 
 
 @pytest.mark.parametrize("layer,forbidden", [
-    ("model", ("pxr", "pygltflib", "usdhands.algorithms", "usdhands.formats", "usdhands.commands",
+    ("model", ("pxr", "pygltflib", "usdhands.algorithms", "usdhands.formats", "usdhands.jobs", "usdhands.commands",
                "usdhands.pipeline", "matplotlib", "trimesh")),
-    ("algorithms", ("pxr", "pygltflib", "usdhands.formats", "usdhands.commands", "usdhands.pipeline")),
-    ("formats", ("usdhands.commands", "usdhands.algorithms")),
+    ("algorithms", ("pxr", "pygltflib", "usdhands.formats", "usdhands.jobs", "usdhands.commands", "usdhands.cli",
+                    "usdhands.pipeline")),
+    ("formats", ("usdhands.commands", "usdhands.cli", "usdhands.jobs", "usdhands.algorithms")),
 ])
 def test_layer_imports_only_layers_below(layer, forbidden):
     bad = []
@@ -37,6 +38,15 @@ def test_layer_imports_only_layers_below(layer, forbidden):
             if any(mod == f or mod.startswith(f + ".") for f in forbidden):
                 bad.append(f"{path.relative_to(PKG.parent)} imports {mod}")
     assert bad == []
+
+
+def test_algorithms_are_rooms_by_method():
+    """algorithms/ holds one room per paper and the shared DTW beside them, no flat modules."""
+    algorithms = PKG / "algorithms"
+    flat = sorted(p.name for p in algorithms.glob("*.py") if p.name not in ("__init__.py", "dtw.py"))
+    assert flat == []
+    rooms = {p.name for p in algorithms.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    assert {"synthesis", "splicing", "reduction"} <= rooms
 
 
 def test_pxr_and_pygltflib_only_where_allowed():

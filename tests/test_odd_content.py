@@ -58,7 +58,7 @@ def mirrored_rig(ok_glb, out):
 def test_mirrored_hand_refused_naming_file_and_joint(ok_glb, tmp_path, capsys):
     """A negative scale above a hand made hand_rig hand scipy a left-handed matrix: a
     'Non-positive determinant' ValueError traceback from synthesize, db build and evaluate."""
-    from usdhands.algorithms.finger_transfer import hand_rig
+    from usdhands.algorithms.synthesis.finger_transfer import hand_rig
     from usdhands.errors import UnsupportedRigError
     from usdhands.model.hand_detection import detect_hands
 

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from usdhands.algorithms.reduction import (
+from usdhands.algorithms.reduction.reduce import (
     RangeRule, RmsdRule, align_euler_branches, continuous_euler_curves, pair_rmsd, paper_style_names, parse_steps, reduce_curves, standardise,
 )
-from usdhands.algorithms.reduction_model import Constant, ReductionModel, Relation
+from usdhands.algorithms.reduction.model import Constant, ReductionModel, Relation
 from usdhands.errors import ConfigError
 from usdhands.model import HandMap, HandSide
 
@@ -486,7 +486,7 @@ def test_reduce_json_report_layout(shared_assets, capsys):
 
 
 def test_reduce_then_expand_reproduces_the_reduced_clip(shared_assets, tmp_path, capsys):
-    from usdhands.algorithms.reduction_model import ReductionModel
+    from usdhands.algorithms.reduction.model import ReductionModel
     from usdhands.commands.reduce import load_finger_curves
     from usdhands.formats.io import read_clip
     from usdhands.model.rotations import quat_angle_deg
@@ -516,7 +516,7 @@ def test_reduce_then_expand_reproduces_the_reduced_clip(shared_assets, tmp_path,
 
     # the reduced clip really is the model's rebuild of the original: dependents follow their controllers
     # (read as expand reads curves for a model: continuity and Euler branch judged on the free curves)
-    from usdhands.algorithms.reduction import model_curves
+    from usdhands.algorithms.reduction.reduce import model_curves
 
     red_clip = read_clip(reduced)
     curves = model_curves(red_clip, [red_clip.skeleton.index(c.rsplit(".", 1)[0]) for c in m.curves[::3]], m)
@@ -714,7 +714,7 @@ def _renamed(path, out, renames: dict):
 
 def test_expand_onto_another_clip_of_the_same_rig(shared_assets, tmp_path, capsys):
     """A model made on one recording rebuilds another of the same rig from that recording's free curves."""
-    from usdhands.algorithms.reduction import model_curves
+    from usdhands.algorithms.reduction.reduce import model_curves
     from usdhands.formats.io import read_clip
     from usdhands.model.finger_dofs import apply_finger_curves
     from usdhands.model.rotations import quat_angle_deg

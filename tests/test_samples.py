@@ -253,7 +253,7 @@ def test_one_or_two_hands(database):
 
 def test_wrist_motion_predicts_the_type(database):
     """Issue 3's leave-one-out (seed 000 §4) on the database: P + 0.5·R ≥ 80% and best of the single joints."""
-    from usdhands.algorithms.gesture_evaluation import (
+    from usdhands.algorithms.synthesis.evaluation import (
         PAPER_PREDICTOR, SINGLE_JOINT_PREDICTORS, evaluate_predictors, prepare_eval_set,
     )
 

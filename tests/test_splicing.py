@@ -12,11 +12,12 @@ import pytest
 from splice_synth import body_handside, hand_session, leap_handside, make_case, reaxis
 
 from usdhands.algorithms.dtw import Constraint
-from usdhands.algorithms.splicing import (
-    MarkerOffsets, SpliceOptions, FirstPassInput, align_hands, default_marker_offsets, direction_angle_cost,
-    first_pass_cost, first_pass_cost_naive, hand_angle_cost, hand_angle_cost_naive, hand_directions,
-    fit_rotation, markers_from_joints, median_alignment, pair_finger_joints, phase_boundaries, sign_features, splice_clips,
-    transfer_fingers, window_yaw_naive,
+from usdhands.algorithms.splicing.markers import MarkerOffsets, default_marker_offsets, markers_from_joints
+from usdhands.algorithms.splicing.costs import (
+    FirstPassInput, direction_angle_cost, first_pass_cost, first_pass_cost_naive, fit_rotation, hand_angle_cost, hand_angle_cost_naive, hand_directions, sign_features, window_yaw_naive,
+)
+from usdhands.algorithms.splicing.splice import (
+    SpliceOptions, align_hands, median_alignment, pair_finger_joints, phase_boundaries, splice_clips, transfer_fingers,
 )
 from usdhands.model import Clip, HandSide
 from usdhands.model.rotations import quat_angle_deg

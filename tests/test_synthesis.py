@@ -10,18 +10,18 @@ import numpy as np
 import pytest
 from synthesis_data import gesture_clip, gesture_set, tiny_handmap, tiny_skeleton
 
-from usdhands.algorithms.finger_database import DatabaseClip, build_database, load_database, save_database
-from usdhands.algorithms.finger_transfer import (
+from usdhands.algorithms.synthesis.database import DatabaseClip, build_database, load_database, save_database
+from usdhands.algorithms.synthesis.finger_transfer import (
     NUM_DOFS, apply_canonical_curves, canonical_curves, hand_rig, mirror_curves,
 )
-from usdhands.algorithms.motion_graph import least_cost_path, transition_costs
-from usdhands.algorithms.segment_cost import (
+from usdhands.algorithms.synthesis.motion_graph import least_cost_path, transition_costs
+from usdhands.algorithms.synthesis.segment_cost import (
     band_window, dtw_align, dtw_align_fast, knn_segments, lb_keogh, weight_features,
 )
-from usdhands.algorithms.segmentation import segment_by_speed, wrist_speed
-from usdhands.algorithms.stitching import stitch_fragments
-from usdhands.algorithms.synthesis_config import SynthesisConfig, load_synthesis_config
-from usdhands.algorithms.wrist_features import arm_features, mirror_features, reach_cm, wrist_features
+from usdhands.algorithms.synthesis.segmentation import segment_by_speed, wrist_speed
+from usdhands.algorithms.synthesis.stitching import stitch_fragments
+from usdhands.algorithms.synthesis.config import SynthesisConfig, load_synthesis_config
+from usdhands.algorithms.synthesis.wrist_features import arm_features, mirror_features, reach_cm, wrist_features
 from usdhands.errors import ConfigError
 from usdhands.model import Clip, HandMap, HandSide, Skeleton
 from usdhands.model.rotations import euler_deg_to_quat, quat_angle_deg, quat_multiply
@@ -104,7 +104,7 @@ def test_wrist_speed_of_known_motion():
 # -- eq. 1 and the search ------------------------------------------------------------
 
 def test_band_window_numpy_equals_kernel():
-    from usdhands.algorithms import _dtw_kernel as kern
+    from usdhands.algorithms.synthesis import _dtw_kernel as kern
 
     for n, m, band in itertools.product(range(1, 25), range(1, 40), (0.1, 0.3, 1.0)):
         lo, hi = band_window(n, m, band)
@@ -441,7 +441,7 @@ def _fingerless(sk):
 
 
 def test_grafted_hand_rebuilds_the_database_hand_on_the_same_rig():
-    from usdhands.algorithms.hand_graft import find_wrists, graft_hands, hand_template, mirror_template
+    from usdhands.algorithms.synthesis.hand_graft import find_wrists, graft_hands, hand_template, mirror_template
 
     sk, hm = tiny_skeleton(), tiny_handmap()
     bare = _fingerless(sk)
@@ -498,14 +498,14 @@ def test_z_up_character_has_the_same_features_as_its_y_up_twin():
 
 
 def test_frame_rates_equal_up_to_file_rounding():
-    from usdhands.algorithms.finger_database import same_rate
+    from usdhands.algorithms.synthesis.database import same_rate
 
     assert same_rate(1 / 0.033333, 30.0)  # a BVH frame time of 0.033333 s
     assert not same_rate(29.97, 30.0) and not same_rate(24.0, 30.0)
 
 
 def test_metacarpals_without_database_counterpart_are_reported_and_left_alone(small_db):
-    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.algorithms.synthesis.synthesize import synthesize_clip
 
     sk, hm = tiny_skeleton(metacarpals=True), tiny_handmap(metacarpals=True)
     clip = gesture_clip(sk, "ok", np.random.default_rng(2), with_fingers=False)

@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from usdhands.algorithms.finger_database import load_database
+from usdhands.algorithms.synthesis.database import load_database
 from usdhands.cli import main
 from usdhands.formats.io import read_clip
 
@@ -46,8 +46,8 @@ def test_db_build_on_leap_bvhs_whose_wrist_sits_on_the_root(shared_assets, capsy
 
 
 def test_a_clip_shorter_than_half_of_every_database_segment_gets_the_closest_uniform_sample():
-    from usdhands.algorithms.finger_transfer import NUM_DOFS
-    from usdhands.algorithms.synthesis import db_side_segments, synthesize_hand
+    from usdhands.algorithms.synthesis.finger_transfer import NUM_DOFS
+    from usdhands.algorithms.synthesis.synthesize import db_side_segments, synthesize_hand
     from usdhands.commands._synthesis_common import bundled_database_path
 
     db = load_database(bundled_database_path())
@@ -141,7 +141,7 @@ def test_damaged_databases_are_refused_with_the_reason(capsys, tmp_path, sample_
 def tiny_db():
     from synthesis_data import gesture_set, tiny_handmap
 
-    from usdhands.algorithms.finger_database import DatabaseClip, build_database
+    from usdhands.algorithms.synthesis.database import DatabaseClip, build_database
 
     hm = tiny_handmap()
     return build_database([DatabaseClip(c, hm, lab, c.name) for lab, c in gesture_set(2)], fps=30, mirror=True)
@@ -150,7 +150,7 @@ def tiny_db():
 def test_a_120_fps_input_gets_the_30_fps_result_at_every_fourth_frame(tiny_db):
     from synthesis_data import gesture_clip, tiny_handmap, tiny_skeleton
 
-    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.algorithms.synthesis.synthesize import synthesize_clip
     from usdhands.model.rotations import quat_angle_deg
 
     hm = tiny_handmap()
@@ -171,8 +171,8 @@ def test_a_120_fps_input_gets_the_30_fps_result_at_every_fourth_frame(tiny_db):
 def test_database_at_another_rate_serves_a_30_fps_clip(tiny_db):
     from synthesis_data import gesture_clip, gesture_set, tiny_handmap, tiny_skeleton
 
-    from usdhands.algorithms.finger_database import DatabaseClip, build_database
-    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.algorithms.synthesis.database import DatabaseClip, build_database
+    from usdhands.algorithms.synthesis.synthesize import synthesize_clip
 
     hm = tiny_handmap()
     db24 = build_database([DatabaseClip(c, hm, lab, c.name) for lab, c in gesture_set(2)], fps=24)
@@ -193,7 +193,7 @@ def test_database_at_another_rate_serves_a_30_fps_clip(tiny_db):
 def test_z_up_usd_through_the_cli_gets_the_fingers_of_its_y_up_twin(tiny_db, capsys, tmp_path):
     from synthesis_data import gesture_clip, tiny_skeleton
 
-    from usdhands.algorithms.finger_database import save_database
+    from usdhands.algorithms.synthesis.database import save_database
     from usdhands.formats.io import read_asset, write_asset
     from usdhands.model import Clip, Skeleton
     from usdhands.model.asset import Asset
@@ -231,7 +231,7 @@ def test_synthesize_usd_as_an_override_layer_and_bad_outputs_before_any_work(sam
                                                                               monkeypatch):
     from pxr import Sdf
 
-    from usdhands.algorithms import synthesis
+    from usdhands.algorithms.synthesis import synthesize as synthesis
     from usdhands.model.hand_detection import detect_hands
     from usdhands.model.rotations import quat_angle_deg
 
@@ -335,7 +335,7 @@ def test_gltf_with_several_animations_gets_fingers_in_one_and_keeps_the_others(s
 def test_bundled_database_is_what_the_current_code_builds():
     # a change to features, segmentation or finger transfer must come with
     # `usdhands db build --samples -o usdhands/data/gesture_db`
-    from usdhands.algorithms.finger_database import build_database
+    from usdhands.algorithms.synthesis.database import build_database
     from usdhands.commands._synthesis_common import bundled_database_path, sample_database_items
 
     shipped = load_database(bundled_database_path())
@@ -439,7 +439,7 @@ def test_db_build_warns_about_a_body_only_clip_with_frozen_fingers(sample_assets
 def test_db_info_of_the_bundled_database(capsys):
     import jsonschema
 
-    from usdhands.algorithms.finger_database import database_schema
+    from usdhands.algorithms.synthesis.database import database_schema
     from usdhands.commands._synthesis_common import bundled_database_path
 
     status, out, _ = _run(capsys, "db", "info")
@@ -457,7 +457,7 @@ def test_db_info_of_the_bundled_database(capsys):
 
 
 def test_an_input_segment_with_no_candidate_within_the_length_factor_widens_it():
-    from usdhands.algorithms.synthesis import db_side_segments, synthesize_hand
+    from usdhands.algorithms.synthesis.synthesize import db_side_segments, synthesize_hand
     from usdhands.commands._synthesis_common import bundled_database_path
 
     db = load_database(bundled_database_path())
@@ -557,7 +557,7 @@ def test_synthesize_every_animation_of_a_gltf(shared_assets, capsys, tmp_path, g
 
 
 def test_a_long_hold_is_cut_in_its_middle_whatever_its_noise():
-    from usdhands.algorithms.segmentation import segment_by_speed
+    from usdhands.algorithms.synthesis.segmentation import segment_by_speed
 
     rng = np.random.default_rng(5)
     base = np.r_[np.full(20, 40.0), np.zeros(100), np.full(20, 40.0)]  # a 3.3 s hold between motions
@@ -574,7 +574,7 @@ def test_a_long_hold_is_cut_in_its_middle_whatever_its_noise():
 
 
 def test_the_same_motion_from_gltf_bvh_and_usd_gets_the_same_fingers(sample_assets):
-    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.algorithms.synthesis.synthesize import synthesize_clip
     from usdhands.commands._synthesis_common import bundled_database_path
     from usdhands.model.hand_detection import detect_hands
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from usdhands.algorithms.finger_database import DatabaseClip, build_database, load_database
-from usdhands.algorithms.finger_transfer import hand_rig, canonical_curves
-from usdhands.algorithms.gesture_evaluation import (
+from usdhands.algorithms.synthesis.database import DatabaseClip, build_database, load_database
+from usdhands.algorithms.synthesis.finger_transfer import hand_rig, canonical_curves
+from usdhands.algorithms.synthesis.evaluation import (
     PAPER_PREDICTOR, SINGLE_JOINT_PREDICTORS, evaluate_predictors, prepare_eval_set,
 )
-from usdhands.algorithms.synthesis import synthesize_clip
-from usdhands.algorithms.synthesis_config import SynthesisConfig
+from usdhands.algorithms.synthesis.synthesize import synthesize_clip
+from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.cli import main
 from usdhands.commands._synthesis_common import bundled_database_path
 from usdhands.model.hand_detection import detect_hands

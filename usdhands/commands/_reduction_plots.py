@@ -49,7 +49,7 @@ def plot_reduction(result, values: np.ndarray, out_dir: str | Path, *, step: int
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from usdhands.algorithms.reduction import RangeRule, RmsdRule
+    from usdhands.algorithms.reduction.reduce import RangeRule, RmsdRule
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

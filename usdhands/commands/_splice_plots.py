@@ -19,7 +19,7 @@ def plot_alignment(alignment, path: str | Path, *, title: str = "", constraints:
 
     Parameters
     ----------
-    alignment : usdhands.algorithms.splicing.SideAlignment
+    alignment : usdhands.algorithms.splicing.splice.SideAlignment
     path : path-like
         The PNG to write.
     constraints : sequence of Constraint

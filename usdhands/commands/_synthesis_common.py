@@ -98,7 +98,7 @@ def read_labelled(paths: list[Path], label_of, fps, handmap_path, animation=None
     """Read clips with their hand maps and labels: list of ``(path, label, clip, handmap)``.
 
     With ``fingerless``, a skeleton without finger joints gets a hand map of its arms
-    (wrists found by name, see :func:`usdhands.algorithms.hand_graft.find_wrists`).
+    (wrists found by name, see :func:`usdhands.algorithms.synthesis.hand_graft.find_wrists`).
     """
     from usdhands.formats.io import read_clip
 
@@ -135,7 +135,7 @@ def handmap_for(clip, path, handmap_path):
 
 def check_frames(handmap, skeleton, path) -> None:
     """Refuse, naming the file, hands with mirrored joint frames (finger transfer cannot use them)."""
-    from usdhands.algorithms.finger_transfer import check_hand_frames
+    from usdhands.algorithms.synthesis.finger_transfer import check_hand_frames
 
     for hand in handmap.sides:
         if hand.finger_joints:
@@ -144,7 +144,7 @@ def check_frames(handmap, skeleton, path) -> None:
 
 def arms_only(clip, path):
     """The hand map of a skeleton, or of its arms when it has no finger joints (None if neither)."""
-    from usdhands.algorithms.hand_graft import find_wrists
+    from usdhands.algorithms.synthesis.hand_graft import find_wrists
     from usdhands.errors import NoHandsError
     from usdhands.model.hand_detection import detect_hands
     from usdhands.model.handmap import HandMap, HandSide
@@ -162,14 +162,14 @@ def arms_only(clip, path):
 
 
 def load_config(path):
-    from usdhands.algorithms.synthesis_config import SynthesisConfig, load_synthesis_config
+    from usdhands.algorithms.synthesis.config import SynthesisConfig, load_synthesis_config
 
     return SynthesisConfig() if path is None else load_synthesis_config(path)
 
 
 def sample_database_items(seed: int = 0):
     """The generated gesture database as ``DatabaseClip`` items (source ``samples:gestures/<name>``)."""
-    from usdhands.algorithms.finger_database import DatabaseClip
+    from usdhands.algorithms.synthesis.database import DatabaseClip
     from usdhands.model.hand_detection import detect_hands
     from usdhands.samples.gestures import gesture_database
 

@@ -48,7 +48,7 @@ def register(sub) -> None:
 
 def run_build(args) -> int:
     check_fps(args.fps)
-    from usdhands.algorithms.finger_database import DatabaseClip, build_database, save_database
+    from usdhands.algorithms.synthesis.database import DatabaseClip, build_database, save_database
     from usdhands.commands._synthesis_common import (
         expand_inputs, labeller, load_config, read_labelled, sample_database_items,
     )
@@ -139,7 +139,7 @@ def _print_summary(db, path) -> None:
 
 
 def run_info(args) -> int:
-    from usdhands.algorithms.finger_database import load_database
+    from usdhands.algorithms.synthesis.database import load_database
     from usdhands.commands._synthesis_common import bundled_database_path
 
     path = args.database or bundled_database_path()

@@ -17,7 +17,7 @@ from usdhands.errors import UsdHandsError
 
 
 def register(sub) -> None:
-    from usdhands.algorithms.gesture_evaluation import DEFAULT_PREDICTORS
+    from usdhands.algorithms.synthesis.evaluation import DEFAULT_PREDICTORS
 
     p = sub.add_parser("evaluate", help="leave-one-out: which body features predict finger motion (seed 000, sec. 4)",
                        description="Leave-one-out analysis of Jorg, Hodgins, Safonova 2012, section 4, on labelled "
@@ -68,7 +68,7 @@ def run(args) -> int:
 
     if args.k is not None and args.k < 1:
         raise UsdHandsError(f"--k must be at least 1, got {args.k}")
-    from usdhands.algorithms.gesture_evaluation import (
+    from usdhands.algorithms.synthesis.evaluation import (
         DEFAULT_PREDICTORS, evaluate_predictors, parse_predictor, prepare_eval_set,
     )
     from usdhands.commands._common import parse_list
@@ -141,7 +141,7 @@ def run(args) -> int:
 
 def _answerable(predictors, items):
     """Split predictors into those every hand map has the joints for and the others."""
-    from usdhands.algorithms.gesture_evaluation import parse_predictor
+    from usdhands.algorithms.synthesis.evaluation import parse_predictor
 
     have = {"wrist", "elbow", "shoulder"}
     for _, _, _, handmap in items:
@@ -152,8 +152,8 @@ def _answerable(predictors, items):
 
 
 def _run_holdout(args, items, cfg) -> int:
-    from usdhands.algorithms.finger_database import DatabaseClip, build_database
-    from usdhands.algorithms.gesture_evaluation import holdout_evaluation
+    from usdhands.algorithms.synthesis.database import DatabaseClip, build_database
+    from usdhands.algorithms.synthesis.evaluation import holdout_evaluation
 
     dbitems = []
     for p, lab, clip, hm in items:

@@ -62,8 +62,8 @@ def _without_joints(model, absent: list[str], args):
 
 
 def run(args) -> int:
-    from usdhands.algorithms.reduction import curve_names, expand_clip
-    from usdhands.algorithms.reduction_model import ReductionModel
+    from usdhands.algorithms.reduction.reduce import curve_names, expand_clip
+    from usdhands.algorithms.reduction.model import ReductionModel
     from usdhands.formats.io import read_clip, write_clip
 
     write_opts = layer_options(args.layer, args.file, args.output)

@@ -18,7 +18,7 @@ from usdhands.errors import OutputPathError, UsdHandsError
 
 
 def register(sub) -> None:
-    from usdhands.algorithms.reduction import DEFAULT_STEPS
+    from usdhands.algorithms.reduction.reduce import DEFAULT_STEPS
 
     p = sub.add_parser(
         "reduce", help="find irrelevant and redundant finger DOFs; rebuild a hand from a few curves",
@@ -51,11 +51,11 @@ def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | Non
 
     Returns ``(clip, handmap, curves, sides)``: ``curves`` a FingerCurves over the chosen
     hands' finger joints (left first), kept continuous through gimbal regions
-    (:func:`~usdhands.algorithms.reduction.continuous_euler_curves`); ``sides`` the side
-    of each curve. Curve names: :func:`~usdhands.algorithms.reduction.curve_names` (not
+    (:func:`~usdhands.algorithms.reduction.reduce.continuous_euler_curves`); ``sides`` the side
+    of each curve. Curve names: :func:`~usdhands.algorithms.reduction.reduce.curve_names` (not
     ``curves.names``, which repeat when two joints share a short name).
     """
-    from usdhands.algorithms.reduction import continuous_euler_curves
+    from usdhands.algorithms.reduction.reduce import continuous_euler_curves
     from usdhands.formats.io import read_clip
     from usdhands.model.finger_dofs import finger_curves
     from usdhands.formats.hands import hands_for
@@ -97,7 +97,7 @@ def _check_order(order: str) -> None:
 
 
 def run(args) -> int:
-    from usdhands.algorithms.reduction import RangeRule, curve_names, paper_style_names, parse_steps, reduce_curves
+    from usdhands.algorithms.reduction.reduce import RangeRule, curve_names, paper_style_names, parse_steps, reduce_curves
     from usdhands.commands._common import Progress
     from usdhands.commands._synthesis_common import check_plot_folder
     from usdhands.formats.registry import check_output_path
@@ -130,7 +130,7 @@ def run(args) -> int:
         progress(2, 3, "writing")
     written = []
     if args.output is not None:
-        from usdhands.algorithms.reduction import expand_clip
+        from usdhands.algorithms.reduction.reduce import expand_clip
         from usdhands.formats.io import write_clip
 
         # what 'usdhands expand' gives for this clip and model (the curves read for the model: the

@@ -217,7 +217,8 @@ def run(args) -> int:
     import numpy as np
 
     from usdhands.algorithms.dtw import Constraint, check_constraints
-    from usdhands.algorithms.splicing import SpliceOptions, default_marker_offsets, splice_clips
+    from usdhands.algorithms.splicing.markers import default_marker_offsets
+    from usdhands.algorithms.splicing.splice import SpliceOptions, splice_clips
     from usdhands.formats.io import read_clip, write_clip
     from usdhands.commands._synthesis_common import check_plot_folder
     from usdhands.formats.registry import check_output_path

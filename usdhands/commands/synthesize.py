@@ -46,8 +46,8 @@ def register(sub) -> None:
 
 def run(args) -> int:
 
-    from usdhands.algorithms.finger_database import load_database
-    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.algorithms.synthesis.database import load_database
+    from usdhands.algorithms.synthesis.synthesize import synthesize_clip
     from usdhands.commands._synthesis_common import bundled_database_path, load_config
     from usdhands.formats.io import read_asset, write_asset, write_clip
     from usdhands.model.asset import Asset
@@ -168,7 +168,7 @@ def _run_all(args, asset, db, cfg, progress) -> int:
     import os
     import tempfile
 
-    from usdhands.algorithms.synthesis import synthesize_clip
+    from usdhands.algorithms.synthesis.synthesize import synthesize_clip
     from usdhands.formats.io import write_clip
 
     if args.graft_hands or args.layer:
@@ -244,7 +244,7 @@ def _check_output(args) -> None:
 
 def _graft(args, asset, clip, handmap, db, sides, explicit):
     """Add finger joints for ``sides`` (those with a wrist) from the database's hand templates."""
-    from usdhands.algorithms.hand_graft import find_wrists, graft_hands
+    from usdhands.algorithms.synthesis.hand_graft import find_wrists, graft_hands
     from usdhands.model.handmap import HandMap, HandSide
 
     if asset.meshes:

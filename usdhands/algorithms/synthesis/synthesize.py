@@ -2,15 +2,15 @@
 
 For each hand independently:
 
-1. segment the input by wrist speed (:mod:`~usdhands.algorithms.segmentation`);
+1. segment the input by wrist speed (:mod:`~usdhands.algorithms.synthesis.segmentation`);
 2. find the ``k`` database segments of least DTW-aligned segment cost (eq. 1,
-   :mod:`~usdhands.algorithms.segment_cost`);
+   :mod:`~usdhands.algorithms.synthesis.segment_cost`);
 3. compute transition costs between the candidates of consecutive segments (eq. 2)
    and take the least-cost path through the layered graph (eq. 3,
-   :mod:`~usdhands.algorithms.motion_graph`);
+   :mod:`~usdhands.algorithms.synthesis.motion_graph`);
 4. time-warp each chosen segment's finger curves onto its input segment along the
    DTW alignment, and stitch them with offsets and blends
-   (:mod:`~usdhands.algorithms.stitching`).
+   (:mod:`~usdhands.algorithms.synthesis.stitching`).
 
 :func:`synthesize_hand` runs this on arrays (wrist features in, canonical finger
 curves out); :func:`synthesize_clip` does it on a :class:`~usdhands.model.Clip`,
@@ -23,14 +23,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from usdhands.algorithms.finger_database import FingerDatabase, same_rate, segment_track
-from usdhands.algorithms.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
-from usdhands.algorithms.motion_graph import least_cost_path, transition_costs
-from usdhands.algorithms.segmentation import wrist_speed
-from usdhands.algorithms.segment_cost import SearchResult, dtw_align_fast, knn_segments, weight_features
-from usdhands.algorithms.stitching import SeamReport, stitch_fragments
-from usdhands.algorithms.synthesis_config import SynthesisConfig
-from usdhands.algorithms.wrist_features import reach_cm, world_xforms_for, wrist_features
+from usdhands.algorithms.synthesis.database import FingerDatabase, same_rate, segment_track
+from usdhands.algorithms.synthesis.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
+from usdhands.algorithms.synthesis.motion_graph import least_cost_path, transition_costs
+from usdhands.algorithms.synthesis.segmentation import wrist_speed
+from usdhands.algorithms.synthesis.segment_cost import SearchResult, dtw_align_fast, knn_segments, weight_features
+from usdhands.algorithms.synthesis.stitching import SeamReport, stitch_fragments
+from usdhands.algorithms.synthesis.config import SynthesisConfig
+from usdhands.algorithms.synthesis.wrist_features import reach_cm, world_xforms_for, wrist_features
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
 

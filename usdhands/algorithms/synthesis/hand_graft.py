@@ -21,8 +21,8 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from usdhands.algorithms.finger_transfer import SLOTS_PER_FINGER
-from usdhands.algorithms.wrist_features import guess_hand_frame, reach_cm, world_rotations
+from usdhands.algorithms.synthesis.finger_transfer import SLOTS_PER_FINGER
+from usdhands.algorithms.synthesis.wrist_features import guess_hand_frame, reach_cm, world_rotations
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandMap, HandSide
 from usdhands.model.skeleton import Skeleton, short_joint_name

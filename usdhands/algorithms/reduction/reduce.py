@@ -2,7 +2,7 @@
 
 Input: finger DOF curves ``(T, D)`` in degrees (Euler angles relative to rest, see
 :mod:`usdhands.model.finger_dofs`) and their names. Output: for each simplification
-step, a :class:`~usdhands.algorithms.reduction_model.ReductionModel` that rebuilds all
+step, a :class:`~usdhands.algorithms.reduction.model.ReductionModel` that rebuilds all
 ``D`` curves from the few that are left, with the number of DOFs left and the
 reconstruction error.
 
@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from usdhands.algorithms.reduction_model import Constant, ReductionModel, Relation
+from usdhands.algorithms.reduction.model import Constant, ReductionModel, Relation
 from usdhands.errors import ConfigError
 from usdhands.model.finger_dofs import apply_finger_curves, finger_curves
 from usdhands.model.handmap import FINGERS, HandMap

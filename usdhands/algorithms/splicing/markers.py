@@ -3,7 +3,7 @@
 Wrist, hand and forearm markers from joints at fixed offsets (:class:`MarkerOffsets`),
 positions in centimetres with Y up, the trunk's heading for the eq. 7 alternative, and
 the hands' rest axes that finger transfer between rigs goes through. Used by
-:mod:`usdhands.algorithms.splicing`.
+:mod:`usdhands.algorithms.splicing.splice`.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
-"""numba kernels behind :func:`usdhands.algorithms.segment_cost.knn_segments`.
+"""numba kernels behind :func:`usdhands.algorithms.synthesis.segment_cost.knn_segments`.
 
 Kept apart so importing the algorithms does not compile anything; the first call
-compiles (and caches on disk). See :mod:`usdhands.algorithms.segment_cost` for the
-method; :func:`usdhands.algorithms.segment_cost.dtw_align` is the NumPy twin.
+compiles (and caches on disk). See :mod:`usdhands.algorithms.synthesis.segment_cost` for the
+method; :func:`usdhands.algorithms.synthesis.segment_cost.dtw_align` is the NumPy twin.
 """
 
 from __future__ import annotations

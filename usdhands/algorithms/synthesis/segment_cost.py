@@ -147,7 +147,7 @@ def dtw_align(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> tuple[f
 
 def dtw_align_fast(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> tuple[float, np.ndarray]:
     """:func:`dtw_align` compiled with numba: same arguments, same result."""
-    from usdhands.algorithms import _dtw_kernel as kern
+    from usdhands.algorithms.synthesis import _dtw_kernel as kern
 
     q = np.ascontiguousarray(query, dtype=np.float64)
     c = np.ascontiguousarray(cand, dtype=np.float64)
@@ -257,7 +257,7 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
         Ties in cost go to the lower database index; the result does not depend on
         ``bound`` or on the number of threads.
     """
-    from usdhands.algorithms import _dtw_kernel as kern
+    from usdhands.algorithms.synthesis import _dtw_kernel as kern
 
     qf = np.ascontiguousarray(query_features, dtype=np.float64)
     df = np.ascontiguousarray(db_features, dtype=np.float64)

@@ -4,7 +4,7 @@ First pass: how many signs of the first and second derivatives of the markers di
 after subtracting the shoulder and turning the hand clip about the vertical axis
 (eq. 6, 7). Second pass: the angle between the hand vectors once the forearms are
 aligned (eq. 8, 9), in degrees. Compiled kernels with plain NumPy twins for tests.
-Used by :mod:`usdhands.algorithms.splicing`.
+Used by :mod:`usdhands.algorithms.splicing.splice`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from scipy.signal import savgol_filter
 
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import HandSide
-from usdhands.algorithms.splice_markers import MarkerOffsets, _rot_only, default_marker_offsets
+from usdhands.algorithms.splicing.markers import MarkerOffsets, _rot_only, default_marker_offsets
 
 # -- first pass: signs of derivatives (eq. 6, 7) ----------------------------------------
 def _smooth_window(T: int, window: int) -> int:

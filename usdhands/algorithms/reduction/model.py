@@ -133,7 +133,7 @@ class ReductionModel:
     means : dict of str to float
         Mean (degrees) of each curve the model was made from, for the curves it knows;
         they pick the Euler branch when curves are read back from rotations
-        (:func:`~usdhands.algorithms.reduction.align_euler_branches`).
+        (:func:`~usdhands.algorithms.reduction.reduce.align_euler_branches`).
     """
 
     curves: tuple[str, ...]

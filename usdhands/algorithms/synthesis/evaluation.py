@@ -33,13 +33,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from usdhands.algorithms.finger_database import FingerDatabase, same_rate, segment_track
-from usdhands.algorithms.finger_transfer import NUM_SLOTS, ORDER
-from usdhands.algorithms.segment_cost import knn_segments, weight_features
-from usdhands.algorithms.stitching import stitch_fragments
-from usdhands.algorithms.synthesis import db_side_segments, synthesize_hand
-from usdhands.algorithms.synthesis_config import SynthesisConfig
-from usdhands.algorithms.wrist_features import FEATURE_JOINTS, arm_features
+from usdhands.algorithms.synthesis.database import FingerDatabase, same_rate, segment_track
+from usdhands.algorithms.synthesis.finger_transfer import NUM_SLOTS, ORDER
+from usdhands.algorithms.synthesis.segment_cost import knn_segments, weight_features
+from usdhands.algorithms.synthesis.stitching import stitch_fragments
+from usdhands.algorithms.synthesis.synthesize import db_side_segments, synthesize_hand
+from usdhands.algorithms.synthesis.config import SynthesisConfig
+from usdhands.algorithms.synthesis.wrist_features import FEATURE_JOINTS, arm_features
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
 from usdhands.model.rotations import euler_deg_to_quat, quat_angle_deg

@@ -3,8 +3,8 @@
 Content. Each clip contributes one **track** per hand that has fingers: per frame, the
 wrist features of eq. 1 (position relative to the root in cm, scaled to the
 database's reference body size, and rotation vector in degrees; see
-:mod:`usdhands.algorithms.wrist_features`) and the canonical finger DOF curves
-(degrees; see :mod:`usdhands.algorithms.finger_transfer`), all resampled to one
+:mod:`usdhands.algorithms.synthesis.wrist_features`) and the canonical finger DOF curves
+(degrees; see :mod:`usdhands.algorithms.synthesis.finger_transfer`), all resampled to one
 frame rate. Tracks are cut into segments by wrist speed (§3.1). With mirroring,
 every track gets a left↔right mirrored twin on the other side.
 
@@ -36,12 +36,12 @@ from pathlib import Path
 import numpy as np
 
 from usdhands import __version__
-from usdhands.algorithms.finger_transfer import (
+from usdhands.algorithms.synthesis.finger_transfer import (
     NUM_DOFS, dof_names, hand_rig, canonical_curves, mirror_curves,
 )
-from usdhands.algorithms.segmentation import segment_by_speed, wrist_speed
-from usdhands.algorithms.synthesis_config import SegmentationConfig
-from usdhands.algorithms.wrist_features import mirror_features, reach_cm, wrist_features
+from usdhands.algorithms.synthesis.segmentation import segment_by_speed, wrist_speed
+from usdhands.algorithms.synthesis.config import SegmentationConfig
+from usdhands.algorithms.synthesis.wrist_features import mirror_features, reach_cm, wrist_features
 from usdhands.errors import ConfigError
 from usdhands.json_schemas import first_schema_error, load_schema
 from usdhands.model.clip import Clip
@@ -86,7 +86,7 @@ class FingerDatabase:
         The segmentation parameters used.
     hands : dict
         Per side, the rest geometry of a hand of the database
-        (:func:`usdhands.algorithms.hand_graft.hand_template`), for grafting.
+        (:func:`usdhands.algorithms.synthesis.hand_graft.hand_template`), for grafting.
     path : Path or None
     """
 
@@ -194,7 +194,7 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
         No clip has a hand with fingers.
     """
     seg_cfg = segmentation or SegmentationConfig()
-    from usdhands.algorithms.hand_graft import hand_template, mirror_template
+    from usdhands.algorithms.synthesis.hand_graft import hand_template, mirror_template
 
     prepared = []  # (clip index, side, features unscaled (T,6) pos in cm, curves, reach, rig mask)
     clips_meta = []

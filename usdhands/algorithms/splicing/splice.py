@@ -48,23 +48,17 @@ from usdhands.algorithms.dtw import Band, Constraint, WarpResult, check_constrai
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
 from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_slerp, trs_to_xform
-from usdhands.algorithms.splice_markers import (
-    MarkerOffsets, hand_rest_basis, transfer_axes, choose_transfer, default_marker_offsets, yup_cm_positions,
+from usdhands.algorithms.splicing.markers import (
+    transfer_axes, choose_transfer, default_marker_offsets, yup_cm_positions,
     markers_from_joints, trunk_yaw_deg,
 )
-from usdhands.algorithms.splice_costs import (
-    sign_features, FirstPassInput, first_pass_cost, window_yaw_naive, first_pass_cost_naive, forearm_hand_vectors,
-    hand_directions, forearm_rest_basis, fit_rotation, direction_angle_cost, hand_angle_cost, hand_angle_cost_naive,
+from usdhands.algorithms.splicing.costs import (
+    sign_features, FirstPassInput, first_pass_cost, forearm_hand_vectors,
+    hand_directions, forearm_rest_basis, fit_rotation, direction_angle_cost, hand_angle_cost,
 )
 
 __all__ = [
-    "MarkerOffsets", "SpliceOptions", "SideAlignment", "FingerTransfer",
-    "FirstPassInput", "default_marker_offsets", "markers_from_joints", "yup_cm_positions", "trunk_yaw_deg",
-    "sign_features", "first_pass_cost", "first_pass_cost_naive", "hand_angle_cost",
-    "hand_angle_cost_naive", "window_yaw_naive", "align_hands", "median_alignment",
-    "phase_boundaries", "pair_finger_joints", "transfer_fingers", "forearm_hand_vectors",
-    "SpliceResult", "splice_clips", "partial_world_xforms", "hand_rest_basis", "transfer_axes", "choose_transfer",
-    "hand_directions", "direction_angle_cost", "fit_rotation", "forearm_rest_basis",
+    "SpliceOptions", "SideAlignment", "median_alignment", "phase_boundaries", "align_hands", "pair_finger_joints", "FingerTransfer", "transfer_fingers", "SpliceResult", "splice_clips", "partial_world_xforms",
 ]
 
 
