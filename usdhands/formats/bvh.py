@@ -61,6 +61,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.formats.fixed_point_text import format_rows_6f
 from usdhands.model.asset import Asset
 from usdhands.model.clip import Clip
 from usdhands.model.rotations import quat_identity, unwrap_deg
@@ -312,6 +313,13 @@ def _parse_motion(lines: list[str], motion_line: int, C: int, path) -> tuple[np.
         raise AssetReadError(f"frame time {ft_text} s is outside {MIN_FRAME_TIME_S:g}..{MAX_FRAME_TIME_S:g} s "
                              f"(at most {1 / MIN_FRAME_TIME_S:g} frames per second)", path=path,
                              location=f"line {ft_line}")
+    values = _motion_values(lines[i:], C)
+    if values is not None and frames <= len(values) <= frames + 1:
+        if len(values) == frames + 1 and not values[0].any():
+            values = values[1:]  # the Leap Motion rest line (see below)
+        if len(values) == frames:
+            return values, frame_time
+    # something is wrong with the motion lines (or the file has none): find and name the line
     counts = _tokens_per_line(lines[i:])
     filled = np.nonzero(counts)[0]
     bad = filled[counts[filled] != C]
@@ -349,6 +357,27 @@ def _parse_motion(lines: list[str], motion_line: int, C: int, path) -> tuple[np.
     return values, frame_time
 
 
+def _motion_values(lines: list[str], C: int) -> np.ndarray | None:
+    """The motion lines as a ``(T, C)`` float64 array, or None when they are not ``C`` finite numbers each.
+
+    The fast path of :func:`_parse_motion`: ``np.loadtxt``'s C parser, which skips
+    blank lines and refuses a row with another number of values or a token that is
+    not a number (including ``#`` comments). None sends the caller to the slow path
+    that names the offending line.
+    """
+    if C == 0 or not lines:
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+            values = np.loadtxt(lines, dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:
+        return None
+    if values.ndim != 2 or values.shape[1] != C or not np.isfinite(values).all():
+        return None
+    return values
+
+
 def _tokens_per_line(lines: list[str]) -> np.ndarray:
     """Number of whitespace-separated tokens on each line, ``(len(lines),)`` int.
 
@@ -377,23 +406,29 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     trans = np.tile(offsets, (T, 1, 1))
     col = 0
     groups: dict[tuple, list] = {}  # rotation axes -> [(joint, columns)]
+    moved = ([], [], [])  # position channels: joint, axis, column
     for k, j in enumerate(bvh.joints):
         raxes, rcols = [], []
         for c in j.channels:
             kind, axis = _CHANNELS[c.lower()]
             if kind == "p":
-                trans[:, k, axis] = bvh.values[:, col]
+                for lst, v in zip(moved, (k, axis, col)):
+                    lst.append(v)
             else:
                 raxes.append(axis)
                 rcols.append(col)
             col += 1
         if raxes:
             groups.setdefault(tuple(raxes), []).append((k, rcols))
+    if moved[0]:  # one fancy assignment; a channel given twice: the last one wins, as in the file order
+        trans[:, moved[0], moved[1]] = bvh.values[:, moved[2]]
     if T:
         for axes, members in groups.items():
             ks = [k for k, _ in members]
             cols = np.array([c for _, c in members])  # (Jg, n)
-            rot[:, ks] = euler_channels_to_quat(bvh.values[:, cols], axes)
+            step = max(1, _ROTATIONS_PER_CHUNK // len(ks))  # frames at a time: the gathered angles stay in cache
+            for t in range(0, T, step):
+                rot[t:t + step, ks] = euler_channels_to_quat(bvh.values[t:t + step][:, cols], axes)
     clip = Clip(sk, _fps(bvh.frame_time), rot, trans, name=path.stem)
     if fps is not None and T:
         clip = clip.resample(fps)
@@ -417,14 +452,40 @@ def euler_channels_to_quat(angles_deg: np.ndarray, axes: tuple[int, ...]) -> np.
     (..., 4) float
         Quaternions xyzw.
     """
-    half = np.radians(np.asarray(angles_deg, dtype=np.float64)) * 0.5
+    angles = np.asarray(angles_deg, dtype=np.float64)
+    if angles.shape[-1:] != (len(axes),):
+        raise ValueError(f"Expected {len(axes)} angles per rotation, got shape {angles.shape}")
+    flat = angles.reshape(-1, len(axes))
+    out = np.empty((len(flat), 4))
+    for start in range(0, len(flat), _ROTATIONS_PER_CHUNK):  # temporaries stay in cache
+        out[start:start + _ROTATIONS_PER_CHUNK] = _axis_product(flat[start:start + _ROTATIONS_PER_CHUNK], axes)
+    return out.reshape(angles.shape[:-1] + (4,))
+
+
+_ROTATIONS_PER_CHUNK = 8192
+
+
+def _axis_product(angles: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
+    """:func:`euler_channels_to_quat` of ``(M, n)`` degrees: ``(M, 4)`` xyzw."""
+    # channel-major, contiguous: (n, M) half angles, their cosines and sines
+    half = np.radians(angles.T, out=np.empty(angles.T.shape))
+    half *= 0.5
     c, s = np.cos(half), np.sin(half)
-    q = quat_identity(half.shape[:-1])
+    # component-major x, y, z, w; start from the identity
+    q = [np.zeros(len(angles)) for _ in range(3)] + [np.ones(len(angles))]
     for i, a in enumerate(axes):
-        # q * (s e_a + c): the Hamilton product with a quaternion on one axis, as a permutation
+        # q * (s e_a + c) = q c + (q * e_a) s, q * e_a a signed permutation of q's components
         perm, sign = _AXIS_PRODUCT[a]
-        q = q * c[..., i, None] + q[..., perm] * (sign * s[..., i, None])
-    return q
+        new = []
+        for k in range(4):
+            term = np.multiply(q[perm[k]], s[i])
+            if sign[k] < 0:
+                np.negative(term, out=term)
+            out = np.multiply(q[k], c[i])
+            out += term
+            new.append(out)
+        q = new
+    return np.stack(q, axis=-1)
 
 
 # q * e_x = (w, z, -y, -x), q * e_y = (-z, w, x, -y), q * e_z = (y, -x, w, -z)  (xyzw)
@@ -434,13 +495,25 @@ _AXIS_PRODUCT = {0: ([3, 2, 1, 0], np.array([1.0, 1.0, -1.0, -1.0])),
 
 
 def _euler(q: np.ndarray, axes: str) -> np.ndarray:
-    """Intrinsic Euler angles (T, len(axes)) in degrees, unwrapped, for 1 to 3 axes."""
+    """Intrinsic Euler angles in degrees, unwrapped along time, for 1 to 3 axes.
+
+    ``q`` is ``(T, ..., 4)`` xyzw (any number of joints after the time axis, converted
+    in one scipy call); returns ``(T, ..., len(axes))``.
+    """
     full = axes
     if len(set(axes)) < 3 and len(axes) < 3:
         full = axes + "".join(a for a in _AXES if a not in axes)[: 3 - len(axes)]
+    q = np.asarray(q)
     with warnings.catch_warnings():  # gimbal lock: scipy zeroes the third angle, still exact
         warnings.simplefilter("ignore", UserWarning)
-        e = Rotation.from_quat(q).as_euler(full, degrees=True)[:, : len(axes)]
+        e = Rotation.from_quat(q.reshape(-1, 4)).as_euler(full, degrees=True)
+    if len(axes) == 2 and len(set(axes)) == 2:
+        # two channels: keep the solution whose dropped third angle is near 0, not 180; for three
+        # distinct axes (t1, t2, t3) and (t1 + 180, 180 - t2, t3 + 180) are the same rotation
+        flip = np.abs(e[:, 2]) > 90
+        e[flip, 0] = (e[flip, 0] + 360) % 360 - 180
+        e[flip, 1] = (360 - e[flip, 1]) % 360 - 180
+    e = e[:, : len(axes)].reshape(q.shape[:-1] + (len(axes),))
     return unwrap_deg(e, axis=0) if len(e) > 1 else e
 
 
@@ -448,8 +521,7 @@ def _format_rows(values: np.ndarray) -> str:
     if values.shape[1] == 0:
         return "\n" * values.shape[0]
     values = np.where(np.abs(values) < 5e-7, 0.0, values)  # no "-0.000000"
-    fmt = " ".join([_FMT] * values.shape[1]) + "\n"
-    return "".join(fmt % tuple(row) for row in values.tolist())
+    return format_rows_6f(values)
 
 
 def _motion_text(frames: int, fps: float, values: np.ndarray) -> str:
@@ -592,12 +664,16 @@ class BvhHandler:
         for r in range(J):
             if sk.parents[r] < 0:
                 emit(r, 0)
+        rotated = [j for j, kind in columns if kind == "r"]
+        euler = _euler(clip.rotations[:, rotated], order) if clip.num_frames and rotated else None
         parts = []
+        r = 0
         for j, kind in columns:
             if kind == "p":
                 parts.append(anim_t[:, j])
             else:
-                parts.append(_euler(clip.rotations[:, j], order) if clip.num_frames else np.zeros((0, 3)))
+                parts.append(euler[:, r] if euler is not None else np.zeros((clip.num_frames, 3)))
+                r += 1
         values = np.concatenate(parts, axis=1) if parts else np.zeros((clip.num_frames, 0))
         Path(path).write_text("\n".join(lines) + "\n" + _motion_text(clip.num_frames, clip.fps, values),
                               encoding="utf-8")
@@ -642,14 +718,20 @@ class BvhHandler:
                                      path=source)
         T = clip.num_frames
         _, anim_t = _baked_translations(clip)
-        parts = []
+        channelled = []  # (clip joint, [(kind, axis)], rotation axes, place in its rotation-order group)
+        groups: dict[str, list] = {}  # rotation axes ("ZXY") -> clip joints, converted in one call
         for bj in bvh.joints:
-            if not bj.channels:
-                continue
-            k = lookup[bj.name]
-            kinds = [_CHANNELS[c.lower()] for c in bj.channels]
-            raxes = "".join(_AXES[a] for kind, a in kinds if kind == "r")
-            e = _euler(clip.rotations[:, k], raxes) if raxes and T else np.zeros((T, len(raxes)))
+            if bj.channels:
+                k = lookup[bj.name]
+                kinds = [_CHANNELS[c.lower()] for c in bj.channels]
+                raxes = "".join(_AXES[a] for kind, a in kinds if kind == "r")
+                group = groups.setdefault(raxes, [])
+                channelled.append((k, kinds, raxes, len(group)))
+                group.append(k)
+        euler = {raxes: _euler(clip.rotations[:, ks], raxes) for raxes, ks in groups.items() if raxes and T}
+        parts = []
+        for k, kinds, raxes, g in channelled:
+            e = euler[raxes][:, g] if raxes and T else np.zeros((T, len(raxes)))
             ri = 0
             for kind, a in kinds:
                 if kind == "p":
