@@ -77,3 +77,11 @@ def test_ruff_clean():
     out = subprocess.run([ruff, "check", "usdhands", "tests", "benchmarks"], cwd=root,
                          capture_output=True, text=True)
     assert out.returncode == 0, out.stdout
+
+
+def test_numba_only_through_usdhands_jit():
+    """Kernels compile through usdhands.jit.njit, which caches them in the user's cache folder:
+    numba's own cache=True writes into the installed package (issue 9)."""
+    bad = [path.relative_to(PKG).as_posix() for path in sorted(PKG.rglob("*.py"))
+           if path.name != "jit.py" and any(m == "numba" or m.startswith("numba.") for m in imported_modules(path))]
+    assert bad == []

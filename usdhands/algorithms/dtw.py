@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
-from numba import njit
+from usdhands.jit import njit
 
 __all__ = [
     "Constraint", "Band", "WarpResult", "dtw", "dtw_naive", "check_constraints",

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from usdhands.jit import njit
 from scipy.signal import savgol_filter
 
 from usdhands.model.clip import Clip

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from usdhands.jit import njit, prange
 
 INF = np.inf
 

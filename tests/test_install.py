@@ -1,0 +1,93 @@
+"""Installing the package: the README's two installs, in order, in one fresh environment.
+
+A fresh virtual environment (its own site-packages; numpy, scipy, usd-core, ... come
+from the running interpreter's, so nothing is downloaded) gets a non-editable
+``pip install .`` of a copy of the checkout, runs ``usdhands synthesize`` (which compiles
+and caches the numba kernels), then ``pip install -e .`` and ``usdhands --version``.
+numba's own ``cache=True`` wrote ``.nbi``/``.nbc`` files into the installed package; the
+uninstall left that folder behind and it then imported as an empty namespace package
+(``ImportError: cannot import name '__version__'``).
+
+Takes about 20-40 s (a venv, two installs, one kernel compilation).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import sysconfig
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _run(cmd, **kw) -> subprocess.CompletedProcess:
+    out = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, timeout=300, **kw)
+    assert out.returncode == 0, f"{' '.join(map(str, cmd))} failed:\n{out.stdout[-2000:]}\n{out.stderr[-2000:]}"
+    return out
+
+
+def _venv_site_packages(venv: Path) -> Path:
+    return Path(sysconfig.get_path("purelib", vars={"base": str(venv), "platbase": str(venv)}))
+
+
+def _files_under(folder: Path) -> set[str]:
+    return {p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file()} if folder.exists() else set()
+
+
+@pytest.mark.slow
+def test_install_then_editable_install_keeps_a_working_command(tmp_path):
+    pytest.importorskip("setuptools", minversion="77")  # the build backend, used without isolation
+    src = tmp_path / "src"
+    shutil.copytree(ROOT / "usdhands", src / "usdhands",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc", "*.egg-info"))
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        if (ROOT / name).exists():
+            shutil.copy2(ROOT / name, src / name)
+    venv = tmp_path / "venv"
+    # without pip (and the old setuptools ensurepip would put beside it): the running pip
+    # installs into it with --python, setuptools comes from the running interpreter
+    _run([sys.executable, "-m", "venv", "--system-site-packages", "--without-pip", venv])
+    bindir = venv / ("Scripts" if os.name == "nt" else "bin")
+    python = bindir / "python"
+    site = _venv_site_packages(venv)
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR")}
+    env["USDHANDS_CACHE_DIR"] = str(tmp_path / "user-cache")
+    env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
+    work = tmp_path / "work"  # not the checkout: its usdhands must not be on sys.path
+    work.mkdir()
+    pip = [sys.executable, "-m", "pip", "--python", python, "install", "--quiet", "--no-deps", "--no-build-isolation"]
+
+    _run(pip + [src], env=env, cwd=work)
+    installed = site / "usdhands"
+    assert (installed / "__init__.py").is_file()
+    files_before = _files_under(installed)
+    where = _run([python, "-c", "import usdhands; print(usdhands.__file__)"], env=env, cwd=work).stdout.strip()
+    assert Path(where).resolve() == (installed / "__init__.py").resolve()
+
+    sample = ROOT / "sample_assets" / "conversation_bodyonly.bvh"
+    out = _run([bindir / "usdhands", "synthesize", sample, "-o", work / "out.bvh"], env=env, cwd=work)
+    assert (work / "out.bvh").is_file(), out.stdout
+    written = sorted(_files_under(installed) - files_before)
+    # compiled Python (.pyc) is the interpreter's business; anything else is ours
+    assert [f for f in written if not f.endswith(".pyc")] == []
+    cached = _files_under(tmp_path / "user-cache")
+    assert any(f.endswith(".nbi") for f in cached) and any(f.endswith(".nbc") for f in cached), cached
+
+    _run(pip + ["-e", src], env=env, cwd=work)
+    assert not installed.exists() or _files_under(installed) == set(), sorted(_files_under(installed))[:10]
+    version = _run([bindir / "usdhands", "--version"], env=env, cwd=work).stdout.strip()
+    assert version == f"usdhands {_package_version()}"
+    where = _run([python, "-c", "import usdhands; print(usdhands.__file__)"], env=env, cwd=work).stdout.strip()
+    assert Path(where).resolve() == (src / "usdhands" / "__init__.py").resolve()
+
+
+def _package_version() -> str:
+    for line in (ROOT / "pyproject.toml").read_text().splitlines():
+        if line.startswith("version"):
+            return line.split("=", 1)[1].strip().strip('"')
+    raise AssertionError("no version in pyproject.toml")

@@ -1,0 +1,125 @@
+"""numba's ``njit`` with the compiled kernels cached in the user's cache folder.
+
+numba's own ``cache=True`` writes ``.nbi``/``.nbc`` files into the ``__pycache__`` beside
+the source, which is inside the installed package: that fails on a read-only install,
+and after ``pip uninstall`` the left-over folder loads as an empty namespace package
+(``pip install .`` then ``pip install -e .`` broke ``usdhands``). Every kernel of the
+package is compiled through :func:`njit` here instead, which caches into
+:func:`kernel_cache_dir`:
+
+- ``$USDHANDS_CACHE_DIR/kernels`` when that variable is set;
+- else ``$NUMBA_CACHE_DIR`` when the user set numba's own variable;
+- else the platform's user cache folder: ``$XDG_CACHE_HOME/usdhands/kernels``
+  (``~/.cache/usdhands/kernels``) on Linux, ``~/Library/Caches/usdhands/kernels`` on
+  macOS, ``%LOCALAPPDATA%\\usdhands\\Cache\\kernels`` on Windows.
+
+When that folder cannot be written the kernels are compiled in memory on each run
+(slower, never written elsewhere). Only this package's kernels are affected: numba's
+setting is changed just while each kernel is decorated, then restored.
+
+First-run compilation takes tens of seconds; :func:`compile_listener` lets a caller
+(the command line's progress bar) hear about each kernel numba compiles, while the
+library itself prints nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Callable, Iterator
+
+__all__ = ["njit", "kernel_cache_dir", "user_cache_dir", "compile_listener"]  # and prange, numba's own
+
+_writable: dict[Path, bool] = {}
+
+
+def user_cache_dir() -> Path:
+    """The usdhands folder in the platform's per-user cache location (not created)."""
+    if os.environ.get("USDHANDS_CACHE_DIR"):
+        return Path(os.environ["USDHANDS_CACHE_DIR"]).expanduser()
+    home = Path.home()
+    if sys.platform == "win32":
+        base = Path(os.environ.get("LOCALAPPDATA") or home / "AppData" / "Local")
+        return base / "usdhands" / "Cache"
+    if sys.platform == "darwin":
+        return home / "Library" / "Caches" / "usdhands"
+    return Path(os.environ.get("XDG_CACHE_HOME") or home / ".cache") / "usdhands"
+
+
+def kernel_cache_dir() -> Path:
+    """The folder compiled kernels are cached in (see the module docstring for the order)."""
+    if not os.environ.get("USDHANDS_CACHE_DIR") and os.environ.get("NUMBA_CACHE_DIR"):
+        return Path(os.environ["NUMBA_CACHE_DIR"]).expanduser()
+    return user_cache_dir() / "kernels"
+
+
+def _can_write(folder: Path) -> bool:
+    if folder not in _writable:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            tempfile.TemporaryFile(dir=folder).close()
+            _writable[folder] = True
+        except OSError:
+            _writable[folder] = False
+    return _writable[folder]
+
+
+def njit(*args, cache: bool = True, **kwargs):
+    """``numba.njit`` with ``cache=True`` meaning the user cache folder, never the package.
+
+    Used exactly like ``numba.njit``: ``@njit``, ``@njit(parallel=True)``.
+    """
+    import numba
+    from numba.core import config
+
+    def decorate(fn):
+        dispatcher = numba.njit(cache=False, **kwargs)(fn)
+        folder = kernel_cache_dir()
+        if cache and _can_write(folder):
+            saved = config.CACHE_DIR
+            config.CACHE_DIR = str(folder)  # read once, when the kernel's cache locator is made
+            try:
+                dispatcher.enable_caching()
+            finally:
+                config.CACHE_DIR = saved
+        return dispatcher
+
+    if args and callable(args[0]):
+        return decorate(args[0])
+    if args:  # an explicit signature: njit("f8(f8)")
+        raise TypeError("usdhands.jit.njit takes keyword options only")
+    return decorate
+
+
+def __getattr__(name: str):
+    # ``prange`` must be numba's own object for numba to see a parallel loop; numba is
+    # imported only when a kernel module asks for it
+    if name == "prange":
+        import numba
+
+        return numba.prange
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+@contextlib.contextmanager
+def compile_listener(on_compile: Callable[[str], None]) -> Iterator[None]:
+    """Call ``on_compile(kernel_name)`` each time numba starts compiling a kernel, inside the block.
+
+    Loading a kernel from the cache is not a compilation: on every run after the first,
+    ``on_compile`` is not called. The callback runs in the compiling thread and must not raise.
+    """
+    from numba.core import event
+
+    class _Listener(event.Listener):
+        def on_start(self, ev):
+            dispatcher = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
+            on_compile(getattr(getattr(dispatcher, "py_func", None), "__name__", "kernel"))
+
+        def on_end(self, ev):
+            pass
+
+    with event.install_listener("numba:compile", _Listener()):
+        yield
