@@ -7,8 +7,8 @@ from scipy.spatial.transform import Rotation
 from usdhands.errors import InvalidAnimationError
 from usdhands.model import Clip, Skeleton, apply_finger_curves, finger_curves
 from usdhands.model.rotations import (
-    euler_deg_to_quat, quat_angle_deg, quat_canonical, quat_multiply, quat_slerp,
-    quat_to_euler_deg, trs_to_xform, xform_to_trs,
+    euler_deg_to_quat, matrix_to_quat, quat_angle_deg, quat_canonical, quat_multiply, quat_slerp,
+    quat_to_euler_deg, quat_to_matrix, quat_to_rotvec_deg, trs_to_xform, xform_to_trs,
 )
 
 
@@ -20,11 +20,81 @@ def chain_skeleton(n=3, length=1.0):
 
 def test_quat_multiply_matches_scipy():
     rng = np.random.default_rng(1)
-    a, b = Rotation.random(50, random_state=2), Rotation.random(50, random_state=3)
+    a = Rotation.from_quat(rng.normal(size=(500, 4)))
+    b = Rotation.from_quat(rng.normal(size=(500, 4)))
     ours = quat_multiply(a.as_quat(), b.as_quat())
     ref = (a * b).as_quat()
     assert np.allclose(quat_canonical(ours), quat_canonical(ref), atol=1e-12)
-    assert rng is not None
+    # the order matters, and is "b first, then a": the reversed product is another rotation
+    assert np.max(quat_angle_deg(ours, quat_multiply(b.as_quat(), a.as_quat()))) > 90
+    # by hand: 90 deg about z, then 90 deg about x, takes +x to +y, then to +z; +y to -x (stays)
+    s = np.sqrt(0.5)
+    about_z, about_x = np.array([0, 0, s, s]), np.array([s, 0, 0, s])
+    m = quat_to_matrix(quat_multiply(about_x, about_z))
+    np.testing.assert_allclose(m @ [1.0, 0, 0], [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(m @ [0, 1.0, 0], [-1, 0, 0], atol=1e-15)
+    # w = s*s, x = s*s, y = -s*s, z = s*s from the Hamilton product written out
+    np.testing.assert_allclose(quat_multiply(about_x, about_z), [0.5, -0.5, 0.5, 0.5], atol=1e-15)
+
+
+EULER_ORDERS = ["XYZ", "ZXY", "ZYX", "YZX", "XZY", "YXZ", "XYX", "ZXZ", "xyz", "zxy", "zyx", "yxy"]
+
+
+@pytest.mark.parametrize("order", EULER_ORDERS)
+def test_euler_conversions_match_scipy(order):
+    """Many random rotations and the gimbal-lock ones, each order against scipy's Rotation."""
+    rng = np.random.default_rng(sum(map(ord, order)))
+    q = rng.normal(size=(2000, 4)) * 3  # not unit: normalized like scipy does
+    ref = Rotation.from_quat(q).as_euler(order, degrees=True)
+    np.testing.assert_allclose(quat_to_euler_deg(q, order), ref, atol=1e-10)
+    e = rng.uniform(-180, 180, size=(2000, 3))
+    np.testing.assert_allclose(quat_canonical(euler_deg_to_quat(e, order)),
+                               quat_canonical(Rotation.from_euler(order, e, degrees=True).as_quat()), atol=1e-14)
+    middle = 0.0 if order[0].lower() == order[2].lower() else 90.0
+    locked = Rotation.from_euler(order, [[30, middle, 40], [-70, -middle or 180, 15]], degrees=True).as_quat()
+    with np.errstate(all="ignore"), pytest.warns(UserWarning, match="Gimbal lock"):
+        ref_locked = Rotation.from_quat(locked).as_euler(order, degrees=True)
+    np.testing.assert_allclose(quat_to_euler_deg(locked, order), ref_locked, atol=1e-6)
+
+
+def test_euler_round_trip():
+    """Round trips in several orders, and a case worked by hand."""
+    rng = np.random.default_rng(7)
+    e = np.stack([rng.uniform(-180, 180, 300), rng.uniform(-89, 89, 300), rng.uniform(-180, 180, 300)], axis=1)
+    for order in ("XYZ", "ZXY", "zyx"):
+        np.testing.assert_allclose(quat_to_euler_deg(euler_deg_to_quat(e, order), order), e, atol=1e-9)
+    # intrinsic XYZ (10, 0, 90): 10 deg about x, then 90 deg about the new z; takes +x to
+    # (0, cos 10, sin 10), which extrinsic xyz would not (it turns about the fixed z: +x to +y)
+    m = quat_to_matrix(euler_deg_to_quat([10.0, 0.0, 90.0], "XYZ"))
+    c, s = np.cos(np.radians(10)), np.sin(np.radians(10))
+    np.testing.assert_allclose(m @ [1.0, 0, 0], [0, c, s], atol=1e-15)
+    np.testing.assert_allclose(quat_to_matrix(euler_deg_to_quat([10.0, 0.0, 90.0], "xyz")) @ [1.0, 0, 0],
+                               [0, 1, 0], atol=1e-15)
+    np.testing.assert_allclose(quat_to_euler_deg(euler_deg_to_quat([10.0, 0.0, 90.0]), "XYZ"), [10, 0, 90],
+                               atol=1e-12)
+    with pytest.raises(ValueError, match="Expected consecutive axes to be different"):
+        euler_deg_to_quat([0, 0, 0], "XXY")
+    with pytest.raises(ValueError, match="Expected an Euler order"):
+        quat_to_euler_deg([0, 0, 0, 1], "XYz")
+
+
+def test_matrix_and_rotvec_conversions_match_scipy():
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(3000, 4))
+    r = Rotation.from_quat(q)
+    np.testing.assert_allclose(quat_to_matrix(q), r.as_matrix(), atol=1e-15)
+    assert np.array_equal(quat_to_matrix(q), r.as_matrix())  # the same arithmetic, to the bit
+    m = r.as_matrix()
+    assert np.array_equal(matrix_to_quat(m), Rotation.from_matrix(m).as_quat())
+    bent = m + rng.normal(scale=0.05, size=m.shape)  # not orthogonal: the nearest rotation, as scipy
+    np.testing.assert_allclose(matrix_to_quat(bent), Rotation.from_matrix(bent).as_quat(), atol=1e-12)
+    small = np.concatenate([q, [[1e-5, 0, 0, 1.0], [0, 0, 0, 1.0], [0, 0, 0, -1.0], [1, 0, 0, 0]]])
+    np.testing.assert_allclose(quat_to_rotvec_deg(small), Rotation.from_quat(small).as_rotvec(degrees=True),
+                               atol=1e-10)
+    with pytest.raises(ValueError, match="Non-positive determinant"):
+        matrix_to_quat(np.diag([-1.0, 1.0, 1.0]))
+    with pytest.raises(ValueError, match="zero norm"):
+        quat_to_matrix(np.zeros(4))
 
 
 def test_quat_shape_error_quotes_shape():
@@ -128,11 +198,6 @@ def test_skeleton_short_name_lookup():
     assert sk.index("j2") == 2 and sk.index("j0/j1/j2") == 2
     with pytest.raises(KeyError, match="No joint named 'nope'"):
         sk.index("nope")
-
-
-def test_euler_round_trip():
-    e = np.array([[10.0, -20.0, 30.0]])
-    assert np.allclose(quat_to_euler_deg(euler_deg_to_quat(e)), e)
 
 
 def test_ambiguous_short_name_needs_the_full_path():

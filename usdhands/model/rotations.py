@@ -11,12 +11,17 @@ Glossary (all arrays batch-first, any number of leading axes ``...``):
 
 Conversions are named ``source_to_target``. USD's ``Gf`` (row vectors, wxyz
 quaternions) is converted only in the USD format module.
+
+Plain NumPy, with the conventions and results of ``scipy.spatial.transform.Rotation``
+(the tests compare them): importing scipy.spatial costs a quarter of a second, more than
+everything else a command needs before it starts work.
 """
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 __all__ = [
     "DEFAULT_EULER_ORDER",
@@ -30,6 +35,7 @@ __all__ = [
     "matrix_to_quat",
     "quat_to_euler_deg",
     "euler_deg_to_quat",
+    "quat_to_rotvec_deg",
     "quat_angle_deg",
     "quat_canonical",
     "trs_to_xform",
@@ -126,40 +132,156 @@ def quat_slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray | float) -> np.ndarra
     return out / np.linalg.norm(out, axis=-1, keepdims=True)
 
 
+def _unit_quats(q: np.ndarray) -> np.ndarray:
+    """``q`` ``(..., 4)`` divided by its norm; ValueError on a zero norm (as scipy's from_quat)."""
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    n = np.sqrt(x * x + y * y + z * z + w * w)[..., None]  # scipy's order of operations, to the bit
+    if np.any(n == 0):
+        raise ValueError("Found zero norm quaternions in `quat`.")
+    return q / n
+
+
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)`` xyzw."""
-    q = check_quat(q)
-    shape = q.shape[:-1]
-    m = Rotation.from_quat(q.reshape(-1, 4)).as_matrix()
-    return m.reshape(shape + (3, 3))
+    """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)`` xyzw (normalized first)."""
+    x, y, z, w = np.moveaxis(_unit_quats(check_quat(q)), -1, 0)
+    x2, y2, z2, w2 = x * x, y * y, z * z, w * w
+    xy, zw, xz, yw, yz, xw = x * y, z * w, x * z, y * w, y * z, x * w
+    m = np.stack([
+        x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw),
+        2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw),
+        2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2,
+    ], axis=-1)
+    return m.reshape(m.shape[:-1] + (3, 3))
 
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
-    """Quaternions ``(..., 4)`` xyzw from rotation matrices ``(..., 3, 3)``."""
+    """Quaternions ``(..., 4)`` xyzw from rotation matrices ``(..., 3, 3)``.
+
+    A matrix that is not orthogonal is replaced by the nearest orthogonal one (SVD).
+
+    Raises
+    ------
+    ValueError
+        ``Non-positive determinant ...`` for a reflection or a singular matrix.
+    """
     m = np.asarray(m, dtype=np.float64)
     if m.shape[-2:] != (3, 3):
         raise ValueError(f"Expected matrix to have shape (..., 3, 3), got {m.shape}")
     shape = m.shape[:-2]
-    q = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_quat()
+    m = m.reshape(-1, 3, 3)
+    det = np.linalg.det(m)
+    if np.any(~(det > 0)):
+        i = int(np.flatnonzero(~(det > 0))[0])
+        raise ValueError(f"Non-positive determinant (left-handed or null coordinate frame) in rotation matrix {i}: "
+                         f"{m[i].tolist()}.")
+    gram = m @ np.swapaxes(m, -1, -2)
+    bent = ~np.all(np.isclose(gram, np.eye(3), atol=1e-12), axis=(-2, -1))
+    if np.any(bent):
+        u, _, vt = np.linalg.svd(m[bent])
+        m = m.copy()
+        m[bent] = u @ vt
+    # Markley's method: build from the largest of the diagonal and the trace
+    d0, d1, d2 = m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]
+    trace = d0 + d1 + d2
+    choice = np.argmax(np.stack([d0, d1, d2, trace], axis=-1), axis=-1)
+    cand = np.stack([
+        np.stack([1 - trace + 2 * d0, m[:, 1, 0] + m[:, 0, 1], m[:, 2, 0] + m[:, 0, 2], m[:, 2, 1] - m[:, 1, 2]], -1),
+        np.stack([m[:, 1, 0] + m[:, 0, 1], 1 - trace + 2 * d1, m[:, 2, 1] + m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0]], -1),
+        np.stack([m[:, 2, 0] + m[:, 0, 2], m[:, 2, 1] + m[:, 1, 2], 1 - trace + 2 * d2, m[:, 1, 0] - m[:, 0, 1]], -1),
+        np.stack([m[:, 2, 1] - m[:, 1, 2], m[:, 0, 2] - m[:, 2, 0], m[:, 1, 0] - m[:, 0, 1], 1 + trace], -1),
+    ], axis=1)
+    q = cand[np.arange(len(m)), choice]
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
     return q.reshape(shape + (4,))
+
+
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+
+def _check_order(order: str) -> tuple[list[int], bool]:
+    """Axis indices and extrinsic flag of an Euler order: ``"XYZ"`` intrinsic, ``"xyz"`` extrinsic."""
+    if not (isinstance(order, str) and len(order) == 3 and re.fullmatch(r"[XYZ]{3}|[xyz]{3}", order)):
+        raise ValueError(f"Expected an Euler order of 3 axes from 'XYZ' (intrinsic) or 'xyz' (extrinsic), got {order!r}")
+    if order[0] == order[1] or order[1] == order[2]:
+        raise ValueError(f"Expected consecutive axes to be different, got {order!r}")
+    return [_AXIS[a] for a in order.lower()], order.islower()
 
 
 def quat_to_euler_deg(q: np.ndarray, order: str = DEFAULT_EULER_ORDER) -> np.ndarray:
-    """Euler angles in degrees ``(..., 3)`` from quaternions ``(..., 4)`` xyzw."""
-    q = check_quat(q)
-    shape = q.shape[:-1]
-    e = Rotation.from_quat(q.reshape(-1, 4)).as_euler(order, degrees=True)
-    return e.reshape(shape + (3,))
+    """Euler angles in degrees ``(..., 3)``, each in [-180, 180), from quaternions ``(..., 4)`` xyzw.
+
+    ``order``: upper case intrinsic (``"XYZ"``: about x, then the new y, then the new z),
+    lower case extrinsic. In gimbal lock (middle angle 0 or 180° for proper Euler orders,
+    ±90° for Tait-Bryan ones) the third angle is 0. The method of Bernardes and Viollet
+    (2022), as in scipy.
+    """
+    q = _unit_quats(check_quat(q))
+    axes, extrinsic = _check_order(order)
+    i, j, k = axes if extrinsic else axes[::-1]
+    symmetric = i == k
+    if symmetric:
+        k = 3 - i - j
+    sign = (i - j) * (j - k) * (k - i) // 2
+    qw, qi, qj, qk = q[..., 3], q[..., i], q[..., j], q[..., k]
+    if symmetric:
+        a, b, c, d = qw, qi, qj, qk * sign
+    else:
+        a, b, c, d = qw - qj, qi + qk * sign, qj + qw, qk * sign - qi
+    half_sum = np.arctan2(b, a)
+    half_diff = np.arctan2(d, c)
+    middle = 2 * np.arctan2(np.hypot(c, d), np.hypot(a, b))
+    eps = 1e-7
+    at_zero = np.abs(middle) <= eps
+    at_pi = np.abs(middle - np.pi) <= eps
+    regular = ~(at_zero | at_pi)
+    first, third = (0, 2) if extrinsic else (2, 0)
+    out = np.zeros(q.shape[:-1] + (3,))
+    out[..., 1] = middle
+    # gimbal lock: the whole turn on the first angle of the sequence, 0 on the third
+    out[..., 0] = np.where(at_zero, 2 * half_sum, 2 * half_diff * (-1 if extrinsic else 1))
+    out[..., first] = np.where(regular, half_sum - half_diff, out[..., first])
+    last = np.where(regular, half_sum + half_diff, out[..., third])
+    if not symmetric:
+        last = last * sign
+        out[..., 1] -= np.pi / 2
+    out[..., third] = last
+    out = np.where(out < -np.pi, out + 2 * np.pi, np.where(out > np.pi, out - 2 * np.pi, out))
+    return np.degrees(out)
 
 
 def euler_deg_to_quat(e: np.ndarray, order: str = DEFAULT_EULER_ORDER) -> np.ndarray:
-    """Quaternions ``(..., 4)`` xyzw from Euler angles in degrees ``(..., 3)``."""
+    """Quaternions ``(..., 4)`` xyzw from Euler angles in degrees ``(..., 3)`` (order as in quat_to_euler_deg)."""
     e = np.asarray(e, dtype=np.float64)
     if e.ndim == 0 or e.shape[-1] != 3:
         raise ValueError(f"Expected euler_deg to have shape (..., 3), got {e.shape}")
-    shape = e.shape[:-1]
-    q = Rotation.from_euler(order, e.reshape(-1, 3), degrees=True).as_quat()
-    return q.reshape(shape + (4,))
+    axes, extrinsic = _check_order(order)
+    half = np.radians(e) / 2
+    out = None
+    for n, axis in enumerate(axes):
+        elem = np.zeros(e.shape[:-1] + (4,))
+        elem[..., axis] = np.sin(half[..., n])
+        elem[..., 3] = np.cos(half[..., n])
+        if out is None:
+            out = elem
+        else:  # intrinsic: each turn about the moving axes (right); extrinsic: about the fixed ones (left)
+            out = quat_multiply(elem, out) if extrinsic else quat_multiply(out, elem)
+    return out
+
+
+def quat_to_rotvec_deg(q: np.ndarray) -> np.ndarray:
+    """Rotation vectors ``(..., 3)``: the axis times the angle in degrees, angle in [0, 180]."""
+    q = _unit_quats(check_quat(q))
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    # scipy's canonical sign: w > 0, or the first non-zero of x, y, z positive when w = 0
+    flip = (w < 0) | ((w == 0) & ((x < 0) | ((x == 0) & ((y < 0) | ((y == 0) & (z < 0))))))
+    q = np.where(flip[..., None], -q, q)
+    x, y, z, w = np.moveaxis(q, -1, 0)
+    angle = 2 * np.arctan2(np.sqrt(x * x + y * y + z * z), w)
+    small = angle <= 1e-3
+    a2 = angle * angle
+    safe = np.where(small, 1.0, angle)
+    scale = np.where(small, 2 + a2 / 12 + 7 * a2 * a2 / 2880, safe / np.sin(safe / 2))
+    return np.degrees(scale[..., None] * q[..., :3])
 
 
 def quat_angle_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:

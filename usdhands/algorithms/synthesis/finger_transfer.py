@@ -33,12 +33,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from usdhands.errors import UnsupportedRigError
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
-from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_euler_deg, unwrap_deg
+from usdhands.model.rotations import matrix_to_quat, quat_conjugate, quat_multiply, quat_to_euler_deg, unwrap_deg
 from usdhands.model.skeleton import Skeleton
 
 __all__ = [
@@ -192,7 +191,7 @@ def hand_rig(skeleton: Skeleton, hand: HandSide, pose: Clip | None = None) -> Ha
             C = A.T @ rot[j]
             slot = fi * SLOTS_PER_FINGER + d
             slot_joint[slot] = j
-            frame[slot] = Rotation.from_matrix(C).as_quat()
+            frame[slot] = matrix_to_quat(C)
     reference = None
     if pose is not None:
         reference = np.zeros((NUM_SLOTS, 4))

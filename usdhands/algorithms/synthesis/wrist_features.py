@@ -40,11 +40,11 @@ hand point, in centimetres. Positions of a character are multiplied by
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
 from usdhands.model.skeleton import Skeleton
+from usdhands.model.rotations import matrix_to_quat, quat_to_rotvec_deg
 
 __all__ = [
     "FEATURE_JOINTS", "hand_point", "hand_frame", "guess_hand_frame", "REFERENCE_HAND", "reach_cm", "arm_features", "wrist_features",
@@ -236,9 +236,7 @@ def world_rotations(xforms: np.ndarray) -> np.ndarray:
 
 
 def _rotvec_deg(m: np.ndarray) -> np.ndarray:
-    shape = m.shape[:-2]
-    r = Rotation.from_matrix(m.reshape(-1, 3, 3)).as_rotvec(degrees=True)
-    return r.reshape(shape + (3,))
+    return quat_to_rotvec_deg(matrix_to_quat(m))
 
 
 def arm_features(clip: Clip, hand: HandSide, scale: float = 1.0,
