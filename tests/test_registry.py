@@ -17,9 +17,9 @@ from usdhands.formats.io import read_asset, read_clip, write_asset
 def fresh_registry(monkeypatch):
     """A registry whose additions vanish after the test."""
     monkeypatch.setattr(registry, "_extra", [])
-    monkeypatch.setattr(registry, "_loaded", None)
+    monkeypatch.setattr(registry, "_outside", None)
     yield registry
-    registry._loaded = None
+    registry._outside = None
 
 
 def test_builtins_by_extension_any_case():
@@ -32,6 +32,31 @@ def test_builtins_by_extension_any_case():
     with pytest.raises(AssetReadError) as e:
         registry.handler_for("notes.txt")
     assert str(e.value).startswith("notes.txt: unknown file extension '.txt'; readable: .bvh, .glb, .gltf, .usd,")
+
+
+@pytest.mark.parametrize("fmt", registry.BUILTIN_FORMATS, ids=lambda f: f.name)
+def test_builtin_extensions_are_the_handlers_own(fmt):
+    """The registry lists the built-ins' extensions so it need not import them; the lists must agree."""
+    h = fmt.load()
+    assert (h.name, h.read_extensions, h.write_extensions) == (fmt.name, fmt.read_extensions, fmt.write_extensions)
+
+
+@pytest.mark.parametrize("name,expected", [
+    ("conversation_bodyonly.bvh", []),
+    ("conversation_bodyonly.glb", ["pygltflib"]),
+    ("conversation_bodyonly.usdc", ["pxr"]),
+])
+def test_reading_a_file_imports_only_its_format_library(name, expected):
+    """The registry imported every handler (pxr: 0.2 s) on the first lookup, even for a BVH file."""
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    code = (f"import sys, usdhands; usdhands.read_clip({str(root / 'sample_assets' / name)!r}); "
+            "print(sorted(m for m in ('pxr', 'pygltflib', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == str(expected)
 
 
 PLUGIN = '''

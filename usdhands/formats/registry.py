@@ -1,7 +1,8 @@
 """Readers and writers found by file extension.
 
-Built-in handlers (USD, glTF, BVH) are imported only when a file of theirs is
-opened, so ``import usdhands`` never imports ``pxr`` or ``pygltflib``. Outside
+Built-in handlers (USD, glTF, BVH) are listed here with their extensions and imported
+only when a file of theirs is opened: reading a BVH file imports neither ``pxr`` nor
+``pygltflib``, and ``import usdhands`` imports neither. Outside
 packages add handlers through the entry-point group ``usdhands.formats``; each
 entry point names an object (or a zero-argument factory returning one) with:
 
@@ -19,24 +20,48 @@ import contextlib
 import importlib
 import os
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Protocol
 
 from usdhands.errors import AssetReadError, OutputPathError
 
 __all__ = [
-    "FormatHandler", "BUILTIN_HANDLERS", "handlers", "handler_for", "atomic_output",
+    "FormatHandler", "BuiltinFormat", "BUILTIN_FORMATS", "handlers", "handler_for", "atomic_output",
     "check_output_path", "register_handler",
 ]
 
 ENTRY_POINT_GROUP = "usdhands.formats"
 
-# extension -> "module:attribute" of a built-in handler
-BUILTIN_HANDLERS: dict[str, str] = {
-    "usd": "usdhands.formats.usd:HANDLER",
-    "gltf": "usdhands.formats.gltf:HANDLER",
-    "bvh": "usdhands.formats.bvh:HANDLER",
-}
+
+
+@dataclass(frozen=True)
+class BuiltinFormat:
+    """A built-in handler known by name and extensions before its module is imported.
+
+    ``target`` is ``"module:attribute"`` of the handler object. The extensions must equal
+    the handler's own (a test checks).
+    """
+
+    name: str
+    target: str
+    read_extensions: tuple[str, ...]
+    write_extensions: tuple[str, ...]
+
+    def load(self) -> "FormatHandler | None":
+        """The handler, importing its module; None when the module's dependency is missing."""
+        mod, attr = self.target.split(":")
+        try:
+            return getattr(importlib.import_module(mod), attr)
+        except ImportError:
+            return None
+
+
+BUILTIN_FORMATS: tuple[BuiltinFormat, ...] = (
+    BuiltinFormat("usd", "usdhands.formats.usd:HANDLER", (".usd", ".usda", ".usdc", ".usdz"), (".usd", ".usda", ".usdc")),
+    BuiltinFormat("gltf", "usdhands.formats.gltf:HANDLER", (".gltf", ".glb"), (".gltf", ".glb")),
+    BuiltinFormat("bvh", "usdhands.formats.bvh:HANDLER", (".bvh",), (".bvh",)),
+)
 
 
 class FormatHandler(Protocol):
@@ -51,15 +76,16 @@ class FormatHandler(Protocol):
     def write_clip(self, source: Path, clip: Any, path: Path, **options: Any) -> None: ...
 
 
-_loaded: dict[str, FormatHandler] | None = None
+_outside: list[FormatHandler] | None = None  # entry points, then registered handlers
+_builtin: dict[str, FormatHandler | None] = {}  # imported built-ins by name
 _extra: list[FormatHandler] = []
 
 
 def register_handler(handler: FormatHandler) -> None:
     """Add a handler at run time (takes precedence over built-ins for its extensions)."""
-    global _loaded
+    global _outside
     _extra.append(handler)
-    _loaded = None
+    _outside = None
 
 
 def _load_entry_points() -> list[FormatHandler]:
@@ -72,29 +98,48 @@ def _load_entry_points() -> list[FormatHandler]:
     return out
 
 
+def _outside_handlers() -> list[FormatHandler]:
+    """Handlers from entry points, then registered ones (later ones take precedence)."""
+    global _outside
+    if _outside is None:
+        _outside = _load_entry_points() + list(_extra)
+    return _outside
+
+
+def _builtin_handler(fmt: BuiltinFormat) -> FormatHandler | None:
+    if fmt.name not in _builtin:
+        _builtin[fmt.name] = fmt.load()
+    return _builtin[fmt.name]
+
+
+def _builtins_in_use() -> list[BuiltinFormat]:
+    """Built-ins not replaced by an outside handler of the same name."""
+    taken = {h.name for h in _outside_handlers()}
+    return [f for f in BUILTIN_FORMATS if f.name not in taken]
+
+
 def handlers() -> dict[str, FormatHandler]:
-    """All handlers by name: built-ins, then entry points, then registered ones."""
-    global _loaded
-    if _loaded is None:
-        found: dict[str, FormatHandler] = {}
-        for name, target in BUILTIN_HANDLERS.items():
-            mod, attr = target.split(":")
-            try:
-                found[name] = getattr(importlib.import_module(mod), attr)
-            except ImportError:  # the module's dependency is missing
-                continue
-        for h in _load_entry_points() + _extra:
-            found[h.name] = h
-        _loaded = found
-    return _loaded
+    """All handlers by name: built-ins (each imported), then entry points, then registered ones."""
+    found: dict[str, FormatHandler] = {}
+    for fmt in BUILTIN_FORMATS:
+        h = _builtin_handler(fmt)
+        if h is not None:
+            found[fmt.name] = h
+    for h in _outside_handlers():
+        found[h.name] = h
+    return found
 
 
 def _extension(path: Path) -> str:
     return path.suffix.lower()
 
 
+def _extensions(h, mode: str) -> tuple[str, ...]:
+    return h.read_extensions if mode == "read" else h.write_extensions
+
+
 def handler_for(path: str | os.PathLike, mode: str = "read") -> FormatHandler:
-    """The handler for ``path``'s extension.
+    """The handler for ``path``'s extension; of the built-ins only that one is imported.
 
     Parameters
     ----------
@@ -107,18 +152,18 @@ def handler_for(path: str | os.PathLike, mode: str = "read") -> FormatHandler:
     """
     path = Path(path)
     ext = _extension(path)
-    found = None
-    for h in reversed(list(handlers().values())):
-        exts = h.read_extensions if mode == "read" else h.write_extensions
-        if ext in exts:
-            found = h
-            break
-    if found is None:
-        known = sorted({e for h in handlers().values()
-                        for e in (h.read_extensions if mode == "read" else h.write_extensions)})
-        msg = f"unknown file extension {ext or '(none)'!r}; {'readable' if mode == 'read' else 'writable'}: {', '.join(known)}"
-        raise (AssetReadError if mode == "read" else OutputPathError)(msg, path=path)
-    return found
+    for h in reversed(_outside_handlers()):
+        if ext in _extensions(h, mode):
+            return h
+    for fmt in _builtins_in_use():
+        if ext in _extensions(fmt, mode):
+            h = _builtin_handler(fmt)
+            if h is not None:
+                return h
+    known = sorted({e for h in _outside_handlers() for e in _extensions(h, mode)}
+                   | {e for f in _builtins_in_use() if _builtin_handler(f) is not None for e in _extensions(f, mode)})
+    msg = f"unknown file extension {ext or '(none)'!r}; {'readable' if mode == 'read' else 'writable'}: {', '.join(known)}"
+    raise (AssetReadError if mode == "read" else OutputPathError)(msg, path=path)
 
 
 def check_output_path(out: str | os.PathLike, *inputs: str | os.PathLike) -> Path:
