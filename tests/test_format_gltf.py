@@ -226,7 +226,8 @@ def test_fps_option_and_detected_rates(tmp_path):
     assert np.allclose(clip.translations[2, 0], [0.5, 1, 0])
     for rate in (24, 30, 60, 40, 120):
         assert detect_fps((np.arange(50) / rate).astype(np.float32)) == rate
-    assert detect_fps(np.arange(20) / 29.97) == 29.97            # regular spacing outside the list
+    assert detect_fps(np.arange(20) / 29.97) == 30000 / 1001     # snapped to NTSC (29.97 is within 1e-6)
+    assert detect_fps(np.arange(20) / 29.5) == 29.5              # regular spacing outside the list
     # float32 keys every 0.027 s (a Leap BVH's frame time): exactly 1/0.027, so BVH -> glTF keeps the rate
     assert detect_fps((np.arange(317) * 0.027).astype(np.float32)) == 1 / 0.027
     assert detect_fps(np.array([0, 1, 3, 10, 11]) / 24) == 24.0  # keyframes on a 24 fps grid

@@ -21,6 +21,7 @@ Decisions (see docs/format-gltf.md):
 from __future__ import annotations
 
 import contextlib
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,15 +35,18 @@ from usdhands.model.rotations import quat_slerp, trs_to_xform, xform_to_trs
 from usdhands.model.skeleton import Skeleton
 
 __all__ = ["GltfScene", "SkeletonBinding", "read_gltf", "scan_scene", "detect_fps", "sample_channel",
-           "COMMON_FPS", "DEFAULT_FPS", "snap_time"]
+           "COMMON_FPS", "KNOWN_FPS", "DEFAULT_FPS", "EXTRAS_KEY", "recorded_fps", "snap_time"]
 
 #: Rates tried, in this order, when key times sit on a regular grid.
 COMMON_FPS = (30.0, 24.0, 25.0, 60.0, 50.0, 48.0, 120.0, 100.0, 90.0)
+#: Rates a regular key grid snaps to (within 0.01%): the common ones and NTSC's.
+KNOWN_FPS = COMMON_FPS + (24000 / 1001, 30000 / 1001, 60000 / 1001, 48000 / 1001, 120000 / 1001)
 #: Keys on a regular grid at this rate or more are read at their own rate.
 MIN_SAMPLED_FPS = 12.0
 #: Rate used when key times fit no grid.
 DEFAULT_FPS = 30.0
 _TRS_PATHS = ("translation", "rotation", "scale")
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -299,48 +303,99 @@ def _inverse_binds(doc: GltfFile, skin_index: int) -> np.ndarray | None:
 
 # -- animation ----------------------------------------------------------------
 
-def detect_fps(times: np.ndarray) -> float:
-    """A frame rate whose frames land on every key time.
+def detect_fps(times) -> float:
+    """A frame rate whose frames land on every key time, from the key times as a whole.
 
-    1. Keys on a regular grid of step ``d`` (the smallest key interval) with
-       ``1/d >= 12``: sampled animation, read at ``1/d`` (snapped to a rate of
-       :data:`COMMON_FPS` within 0.01%, so float32 keys every 1/24 s give 24; else
-       to the inverse of a frame time of at most 6 decimals within 1e-6, so keys
-       every 0.027 s give 1/0.027; else to 7 significant digits).
+    1. Keys on a regular grid: the step is first estimated from the median key
+       interval of the densest key array, refined over the whole span (steps counted
+       from first to last key) and then fitted by least squares over every key
+       (``t = t0 + k h``); float32 rounding of single keys averages out, so 29.97 fps
+       over thousands of frames stays 29.97. With ``1/h >= 12`` the rate is ``1/h``,
+       snapped to a rate of :data:`KNOWN_FPS` (NTSC ``24000/1001`` ...) within
+       0.01%, else to an integer within 1e-5, else to the inverse of a frame time of
+       at most 6 decimals within 1e-6 (BVH ``Frame Time: 0.027000``), else to 7
+       significant digits.
     2. Otherwise (sparse or irregular keys) the first rate of :data:`COMMON_FPS`
        (30 first) whose frames fall on every key.
     3. Otherwise :data:`DEFAULT_FPS`.
 
     Key times are measured from the first key; a key counts as on a frame within 1%
-    of a frame (float32 key times drift).
+    of a frame. No sort of all keys is needed: arrays already in order (as glTF
+    sampler inputs are) are used as they are.
 
     Parameters
     ----------
-    times : (K,) float
-        Key times in seconds, any order, repeats allowed.
+    times : (K,) float, or a sequence of such arrays
+        Key times in seconds (one array per distinct sampler input, or all keys
+        concatenated), any order, repeats allowed.
     """
-    t = np.unique(np.asarray(times, dtype=np.float64))
-    if t.size < 2:
+    arrays = _key_arrays(times)
+    if not arrays:
         return DEFAULT_FPS
-    rel = t - t[0]
-    step = float(np.diff(t).min())
+    t0 = min(float(a[0]) for a in arrays)
+    t1 = max(float(a[-1]) for a in arrays)
+    if not t1 > t0:
+        return DEFAULT_FPS
+    rel = np.concatenate(arrays) - t0
+    step = _typical_step(arrays)
     if step > 0 and 1.0 / step >= MIN_SAMPLED_FPS:
-        x = rel / step
-        if np.all(np.abs(x - np.round(x)) < 0.01):
-            rate = float(np.round(x[-1]) / rel[-1])  # steps over the whole span: float32 noise averages out
-            for f in COMMON_FPS:
-                if abs(rate - f) < 1e-4 * f:
-                    return f
-            # a frame time with at most 6 decimals (BVH "Frame Time: 0.027000"): its exact inverse
-            frame_time = round(1.0 / rate, 6)
-            if frame_time > 0 and abs(frame_time * rate - 1.0) < 1e-6:
-                return 1.0 / frame_time
-            return float(f"{rate:.7g}")
+        h = (t1 - t0) / max(1.0, np.round((t1 - t0) / step))  # steps over the whole span
+        k = np.round(rel / h)
+        h = _fit_step(k, rel)
+        if h > 0 and np.all(np.abs(rel / h - k) < 0.01):
+            return _snap_rate(1.0 / h)
     for f in COMMON_FPS:
         x = rel * f
         if np.all(np.abs(x - np.round(x)) < 0.01):
             return f
     return DEFAULT_FPS
+
+
+def _key_arrays(times) -> list[np.ndarray]:
+    """Non-empty 1-D float64 arrays in increasing order (sorted only when they are not)."""
+    if isinstance(times, np.ndarray) or (len(times) and np.isscalar(times[0])):
+        times = [times]
+    out = []
+    for a in times:
+        a = np.asarray(a, dtype=np.float64).reshape(-1)
+        if a.size == 0:
+            continue
+        if a.size > 1 and np.any(a[1:] < a[:-1]):
+            a = np.unique(a)  # all keys of all channels concatenated: repeats dropped too
+        out.append(a)
+    return out
+
+
+def _typical_step(arrays: list[np.ndarray]) -> float:
+    """Median positive key interval of the array with the smallest one (the densest keys)."""
+    best = 0.0
+    for a in arrays:
+        d = np.diff(a)
+        d = d[d > 0]
+        if d.size:
+            m = float(np.median(d))
+            best = m if best == 0.0 else min(best, m)
+    return best
+
+
+def _fit_step(k: np.ndarray, rel: np.ndarray) -> float:
+    """Least-squares slope ``h`` of ``rel = c + k h`` (seconds per frame)."""
+    km = k - k.mean()
+    den = float(km @ km)
+    return float(km @ (rel - rel.mean()) / den) if den > 0 else 0.0
+
+
+def _snap_rate(rate: float) -> float:
+    for f in KNOWN_FPS:
+        if abs(rate - f) < 1e-4 * f:
+            return f
+    if abs(rate - round(rate)) < 1e-5 * rate:
+        return float(round(rate))
+    # a frame time with at most 6 decimals (BVH "Frame Time: 0.027000"): its exact inverse
+    frame_time = round(1.0 / rate, 6)
+    if frame_time > 0 and abs(frame_time * rate - 1.0) < 1e-6:
+        return 1.0 / frame_time
+    return float(f"{rate:.7g}")
 
 
 def sample_channel(times: np.ndarray, values: np.ndarray, interpolation: str, at: np.ndarray,
@@ -457,6 +512,24 @@ def animation_channels(doc: GltfFile, anim_index: int, binding: SkeletonBinding)
     return out
 
 
+#: Key of the animation ``extras`` object usdhands writes (``{"fps": ..., "provenance": ...}``).
+EXTRAS_KEY = "usdhands"
+
+
+def recorded_fps(doc: GltfFile, anim_index: int) -> float | None:
+    """The frame rate usdhands recorded in the animation's ``extras`` (None when absent or unusable)."""
+    extras = doc.gltf.animations[anim_index].extras
+    ours = extras.get(EXTRAS_KEY) if isinstance(extras, dict) else None
+    fps = ours.get("fps") if isinstance(ours, dict) else None
+    if fps is None:
+        return None
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not 0 < fps <= MAX_FPS:
+        _log.warning("%s: animations[%d]: ignoring extras.%s.fps %r (not a rate in 0..%g); rate from key times",
+                     doc.path, anim_index, EXTRAS_KEY, fps, MAX_FPS)
+        return None
+    return float(fps)
+
+
 def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, fps: float | None,
                      name: str) -> Clip | None:
     """One clip of ``binding``'s skeleton from an animation, None if it animates none of its joints."""
@@ -464,14 +537,14 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     if not chans:
         return None
     keys = {c: channel_keys(doc, anim_index, c) for c, _, _ in chans}
-    all_times = np.concatenate([k[0] for k in keys.values()])
-    if all_times.size == 0:
+    inputs = list({id(k[0]): k[0] for k in keys.values() if k[0].size}.values())  # shared inputs once
+    if not inputs:
         raise doc.error("animation has no key times", f"animations[{anim_index}]")
-    rate = float(fps) if fps else detect_fps(all_times)
+    rate = float(fps) if fps else (recorded_fps(doc, anim_index) or detect_fps(inputs))
     if not rate <= MAX_FPS:
-        raise doc.error(f"key times {float(np.diff(np.unique(all_times)).min()):g} s apart give {rate:g} frames per "
+        raise doc.error(f"key times {1.0 / rate:g} s apart give {rate:g} frames per "
                         f"second (at most {MAX_FPS:g})", f"animations[{anim_index}]")
-    t0, t1 = float(all_times.min()), float(all_times.max())
+    t0, t1 = min(float(a[0]) for a in inputs), max(float(a[-1]) for a in inputs)
     if (t1 - t0) * rate >= MAX_FRAMES:  # 1e30 s: numpy's 'Maximum allowed size exceeded'
         raise doc.error(f"key times span {t1 - t0:g} s: over {MAX_FRAMES:g} frames at {rate:g} fps",
                         f"animations[{anim_index}]")

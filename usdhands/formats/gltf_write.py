@@ -20,8 +20,8 @@ import pygltflib
 from usdhands.errors import AssetReadError, JointMismatchError, OutputPathError
 from usdhands.formats.gltf_container import BinaryAppender, GltfFile, load_gltf, save_gltf
 from usdhands.formats.gltf_read import (
-    GltfScene, SkeletonBinding, animation_channels, channel_keys, malformed_as_read_error, sample_channel, scan_scene,
-    snap_time,
+    EXTRAS_KEY, GltfScene, SkeletonBinding, animation_channels, channel_keys, malformed_as_read_error, sample_channel,
+    scan_scene, snap_time,
 )
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
@@ -114,6 +114,13 @@ class _AnimationWriter:
                     sampler=s, target=pygltflib.AnimationChannelTarget(node=node, path=path)))
 
 
+def _record_fps(anim: pygltflib.Animation, fps: float) -> None:
+    """Record the clip's exact frame rate in ``anim.extras["usdhands"]["fps"]`` (other extras kept)."""
+    extras = anim.extras if isinstance(anim.extras, dict) else {}
+    ours = extras.get(EXTRAS_KEY) if isinstance(extras.get(EXTRAS_KEY), dict) else {}
+    anim.extras = {**extras, EXTRAS_KEY: {**ours, "fps": float(fps)}}
+
+
 def _differs_from_rest(values: np.ndarray, rest: np.ndarray, tol: float) -> np.ndarray:
     """Per joint: whether ``values (T, J, 3)`` leave ``rest (J, 3)`` anywhere (relative tolerance)."""
     if values.shape[0] == 0:
@@ -193,6 +200,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
         sk = asset.skeletons[si]
         c = clip_to_gltf_space(clip)
         anim = pygltflib.Animation(name=short if shorts.count(short) == 1 else clip.name)
+        _record_fps(anim, c.fps)
         w = _AnimationWriter(app, anim, _key_times(c))
         J = sk.num_joints
         nodes = skel_nodes[si]
@@ -462,6 +470,7 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
             g.animations.append(pygltflib.Animation(name=new_name))
             ai = len(g.animations) - 1
         anim = g.animations[ai]
+        _record_fps(anim, clip.fps)
         w = _AnimationWriter(app, anim, times)
         arrays = {"rotation": _continuous(clip.rotations), "translation": clip.translations, "scale": clip.scales}
         for path_, ks in changed.items():
