@@ -74,11 +74,14 @@ def test_gltf_reader_prefers_recorded_rate_and_ignores_a_bad_one(tmp_path, caplo
     path = write_asset(Asset("mem", (clip.skeleton,), (clip,)), tmp_path / "a.gltf")
     doc = json.loads(path.read_text())
     assert doc["animations"][0]["extras"]["usdhands"]["fps"] == 37.0
-    doc["animations"][0]["extras"]["usdhands"]["fps"] = 12.0  # recorded rate wins over the keys
+    doc["animations"][0]["extras"]["usdhands"]["fps"] = 74.0  # keys on every other frame: the recorded rate wins
     path.write_text(json.dumps(doc))
-    assert read_asset(path).clips[0].fps == 12.0
-    doc["animations"][0]["extras"]["usdhands"]["fps"] = "fast"
-    path.write_text(json.dumps(doc))
-    with caplog.at_level("WARNING", logger="usdhands"):
-        assert read_asset(path).clips[0].fps == 37.0
-    assert "ignoring extras.usdhands.fps 'fast'" in caplog.text
+    assert (read_asset(path).clips[0].fps, read_asset(path).clips[0].num_frames) == (74.0, 79)
+    for bad, says in (("fast", "ignoring extras.usdhands.fps 'fast'"),
+                      (12.0, "key times are not on the frames of the recorded 12 fps")):
+        doc["animations"][0]["extras"]["usdhands"]["fps"] = bad
+        path.write_text(json.dumps(doc))
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="usdhands"):
+            assert read_asset(path).clips[0].fps == 37.0
+        assert says in caplog.text

@@ -388,7 +388,8 @@ def _gltf_with_key_times(data: bytes, times) -> str:
 @pytest.mark.parametrize("name, times, message", [
     ("nan", [0, np.nan, np.nan, np.nan, np.nan, np.nan], "animations[0].channels[0]: sampler input times are not finite"),
     ("tiny", np.arange(6) * 1e-9, "animations[0]: key times 1e-09 s apart give 1e+09 frames per second (at most 10000)"),
-    ("huge", np.arange(6) * 1e30, "animations[0]: key times span 5e+30 s: over 1e+07 frames at 30 fps"),
+    # the rate is the one the writer recorded in extras (the BVH source is at 40 fps): the keys sit on its frames
+    ("huge", np.arange(6) * 1e30, "animations[0]: key times span 5e+30 s: over 1e+07 frames at 40 fps"),
 ])
 def test_gltf_key_times_out_of_range(name, times, message, originals, tmp_path, capsys):
     """NaN key times were 'malformed glTF (ValueError: cannot convert float NaN to integer)', times 1e30 s

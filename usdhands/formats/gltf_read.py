@@ -530,6 +530,17 @@ def recorded_fps(doc: GltfFile, anim_index: int) -> float | None:
     return float(fps)
 
 
+def _keys_on_frames(inputs: list[np.ndarray], fps: float) -> bool:
+    """Every key within 1% of a frame at ``fps`` and no two distinct keys on one frame."""
+    t0 = min(float(a[0]) for a in inputs)
+    for a in inputs:
+        x = (a - t0) * fps
+        k = np.round(x)
+        if np.any(np.abs(x - k) >= 0.01) or np.any((np.diff(a) > 0) & (np.diff(k) <= 0)):
+            return False
+    return True
+
+
 def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, fps: float | None,
                      name: str) -> Clip | None:
     """One clip of ``binding``'s skeleton from an animation, None if it animates none of its joints."""
@@ -540,7 +551,14 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     inputs = list({id(k[0]): k[0] for k in keys.values() if k[0].size}.values())  # shared inputs once
     if not inputs:
         raise doc.error("animation has no key times", f"animations[{anim_index}]")
-    rate = float(fps) if fps else (recorded_fps(doc, anim_index) or detect_fps(inputs))
+    rate = float(fps) if fps else None
+    if rate is None:
+        rate = recorded_fps(doc, anim_index)
+        if rate is not None and not _keys_on_frames(inputs, rate):
+            _log.warning("%s: animations[%d]: key times are not on the frames of the recorded %g fps; "
+                         "rate from key times", doc.path, anim_index, rate)
+            rate = None
+        rate = rate or detect_fps(inputs)
     if not rate <= MAX_FPS:
         raise doc.error(f"key times {1.0 / rate:g} s apart give {rate:g} frames per "
                         f"second (at most {MAX_FPS:g})", f"animations[{anim_index}]")
