@@ -33,17 +33,17 @@ def _trimesh_of(prop: PropMesh) -> trimesh.Trimesh:
 
 
 def _trimesh_reference(mesh: trimesh.Trimesh, pts: np.ndarray) -> np.ndarray:
-    """trimesh's exact distance, negative inside any closed body (trimesh's ray test per body).
+    """The naive answer: per closed body, trimesh's signed distance; the least over the bodies
+    (negative inside any body).
 
-    ``trimesh.proximity.signed_distance`` alone takes its sign from the nearest face,
-    which is wrong inside the cup's wall where the handle's closed tube enters it, and
-    ``contains`` on the whole mesh counts two crossings there (outside by parity).
+    On the whole cup ``trimesh.proximity.signed_distance`` takes its sign from the nearest
+    face, which is wrong inside the cup's wall where the handle's closed tube enters it,
+    and measures to the tube's buried faces there.
     """
-    d = np.abs(trimesh.proximity.signed_distance(mesh, pts))
-    inside = np.zeros(len(pts), dtype=bool)
+    out = np.full(len(pts), np.inf)
     for body in mesh.split(only_watertight=False):
-        inside |= body.contains(pts)
-    return np.where(inside, -d, d)
+        out = np.minimum(out, -trimesh.proximity.signed_distance(body, pts))
+    return out
 
 
 def test_fast_signed_distance_matches_trimesh_on_the_sample_cup():
@@ -52,9 +52,9 @@ def test_fast_signed_distance_matches_trimesh_on_the_sample_cup():
     fast = MeshProximity(mesh.vertices, mesh.faces).signed_distance(pts)
     np.testing.assert_allclose(fast, _trimesh_reference(mesh, pts), atol=1e-6)
     assert (fast < 0).sum() > 300 and (fast > 0).sum() > 300  # both sides exercised
-    # where the two bodies overlap trimesh's normal-based sign says outside; the winding number says inside
-    ref = -trimesh.proximity.signed_distance(mesh, pts)
-    assert np.mean(np.sign(fast) == np.sign(ref)) > 0.99
+    # trimesh on the whole mesh: the sign is wrong at a few points in the wall where the handle enters
+    whole = -trimesh.proximity.signed_distance(mesh, pts)
+    assert 0.99 < np.mean(np.sign(fast) == np.sign(whole)) < 1.0
 
 
 @pytest.mark.skipif(not MUG.exists(), reason="shared assets not present")

@@ -7,7 +7,7 @@ import pytest
 from usdhands.json_schemas import first_schema_error, load_schema
 
 SOURCES = Path(__file__).resolve().parent.parent / "schemas"
-NAMES = ["handmap", "database", "synthesis_config", "reduction_model"]
+NAMES = ["handmap", "database", "synthesis_config", "reduction_model", "interaction_config"]
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -9,7 +9,9 @@ holes). A trilinear distance grid is faster per query but approximate (mm errors
 usable cell sizes) and slow to build finely; open3d is a 1 GB install. trimesh remains
 the loader and the reference the tests hold this against.
 
-Sign convention: **negative inside**, positive outside (trimesh's is the opposite).
+The sign: a closed shell's from the side of its nearest face (free); open shells' from the
+fast winding number (see :class:`MeshProximity`). Convention: **negative inside**,
+positive outside (trimesh's is the opposite).
 """
 
 from __future__ import annotations
@@ -17,6 +19,108 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["MeshProximity"]
+
+
+def _shells(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
+    """Face indices of each connected shell (faces sharing vertices)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    F = len(faces)
+    rows = np.repeat(np.arange(F), 3)
+    graph = coo_matrix((np.ones(3 * F), (rows, faces.reshape(-1))), shape=(F, n_vertices)).tocsr()
+    n, labels = connected_components(graph @ graph.T, directed=False)
+    order = np.argsort(labels, kind="stable")
+    return np.split(order, np.cumsum(np.bincount(labels, minlength=n))[:-1])
+
+
+def _closed(faces: np.ndarray) -> bool:
+    """Whether every edge is shared by exactly two faces, in opposite directions (a closed, oriented shell)."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    key = np.sort(e, axis=1)
+    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    if np.any(counts != 2):
+        return False
+    forward = (e[:, 0] < e[:, 1]).astype(int)
+    per_edge = np.bincount(inv.reshape(-1), weights=forward, minlength=len(counts))
+    return bool(np.all(per_edge == 1))
+
+
+class _Part:
+    """One closed shell (sign from the nearest face's side) or all open shells together (winding number)."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, closed: bool):
+        import igl
+
+        used = np.unique(faces)
+        remap = np.full(len(vertices), -1, dtype=np.int64)
+        remap[used] = np.arange(len(used))
+        self.vertices = np.ascontiguousarray(vertices[used])
+        self.faces = np.ascontiguousarray(remap[faces])
+        self.closed = closed
+        self.bounds = np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+        self.tree = igl.AABB()
+        self.tree.init(self.vertices, self.faces)
+        self.winding = None
+        if not closed:
+            self.winding = igl.FastWindingNumberBVH()
+            self.winding.init(self.vertices, self.faces, 2)
+        tri = self.vertices[self.faces]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        self.normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    def bbox_distance(self, p: np.ndarray) -> np.ndarray:
+        gap = np.maximum(0.0, np.maximum(self.bounds[0] - p, p - self.bounds[1]))
+        return np.linalg.norm(gap, axis=-1)
+
+    def distance(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        d2, face, closest = self.tree.squared_distance(self.vertices, self.faces, p)
+        return np.sqrt(np.maximum(d2, 0.0)), np.asarray(face, dtype=np.int64), closest
+
+    def inside(self, p: np.ndarray) -> np.ndarray:
+        if self.winding is not None:
+            return self.winding.winding_number(p) > 0.5
+        return self.signed_distance(p) < 0
+
+    def signed_distance(self, p: np.ndarray) -> np.ndarray:
+        d, face, closest = self.distance(p)
+        if self.winding is not None:
+            return np.where(self.winding.winding_number(p) > 0.5, -d, d)
+        # a closed shell: the point is inside iff it lies behind the nearest face, where the
+        # nearest point is inside that face; on an edge or a vertex, the pseudo-normal test
+        # of the faces around it is replaced by an exact ray parity count (rare)
+        side = np.einsum("ij,ij->i", p - closest, self.normals[face])
+        tri = self.vertices[self.faces[face]]
+        bary = _barycentric(closest, tri)
+        interior = np.all(bary > 1e-6, axis=1) & (np.abs(side) > 1e-12 * (1.0 + d))
+        inside = side < 0
+        rest = ~interior & (d > 0)
+        if rest.any():
+            inside[rest] = self._parity(p[rest])
+        return np.where(inside, -d, d)
+
+    def _parity(self, p: np.ndarray) -> np.ndarray:
+        """Inside test by the generalised winding number (exact solid angles), for the few ambiguous points."""
+        import igl
+
+        return igl.winding_number(self.vertices, self.faces, np.ascontiguousarray(p)) > 0.5
+
+
+def _barycentric(x: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates ``(N, 3)`` of points ``x`` ``(N, 3)`` in triangles ``tri`` ``(N, 3, 3)``."""
+    e0 = tri[:, 1] - tri[:, 0]
+    e1 = tri[:, 2] - tri[:, 0]
+    r = x - tri[:, 0]
+    d00 = np.einsum("ij,ij->i", e0, e0)
+    d01 = np.einsum("ij,ij->i", e0, e1)
+    d11 = np.einsum("ij,ij->i", e1, e1)
+    d20 = np.einsum("ij,ij->i", r, e0)
+    d21 = np.einsum("ij,ij->i", r, e1)
+    den = d00 * d11 - d01 * d01
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = np.where(den > 0, (d11 * d20 - d01 * d21) / den, -1.0)
+        w = np.where(den > 0, (d00 * d21 - d01 * d20) / den, -1.0)
+    return np.stack([1.0 - v - w, v, w], axis=1)
 
 
 class MeshProximity:
@@ -31,43 +135,53 @@ class MeshProximity:
 
     Notes
     -----
-    Inside is where the winding number exceeds 0.5: right for closed meshes, and the
-    sensible answer for meshes with small holes (the teapot's 96 open edges).
+    The mesh is split into connected shells. Each closed, consistently oriented shell
+    gets its own AABB tree and takes its sign from the side of the nearest face (free,
+    and right for any closed shell); the open shells together get one tree and the
+    sign from the fast winding number (inside where it exceeds 0.5), which is right on
+    meshes with holes (the teapot's 96 open edges, its lid resting on an open body).
+    The distance to the mesh is the least over the parts: exact outside, and negative
+    inside any part (overlapping closed shells, the cup's handle entering its wall,
+    count as inside). On the 192-triangle test cylinder the winding number alone cost
+    24 µs per point; the side test, under 3.
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
-        import igl
-
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64)
         self.faces = np.ascontiguousarray(faces, dtype=np.int64)
         if self.vertices.ndim != 2 or self.vertices.shape[1] != 3 or len(self.faces) == 0:
             raise ValueError(f"Expected vertices (V, 3) and at least one face, got {self.vertices.shape}, "
                              f"{self.faces.shape}")
-        self._tree = igl.AABB()
-        self._tree.init(self.vertices, self.faces)
-        self._winding = igl.FastWindingNumberBVH()
-        self._winding.init(self.vertices, self.faces, 2)
         self.bounds = np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+        closed, open_ = [], []
+        for shell in _shells(self.faces, len(self.vertices)):
+            (closed if _closed(self.faces[shell]) else open_).append(shell)
+        self.parts = [_Part(self.vertices, self.faces[s], True) for s in closed]
+        if open_:
+            self.parts.append(_Part(self.vertices, self.faces[np.concatenate(open_)], False))
+
+    def _each(self, points: np.ndarray, fn) -> np.ndarray:
+        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        out = np.full(len(p), np.inf)
+        if len(p) == 0:
+            return np.zeros(0)
+        for part in self.parts:
+            near = part.bbox_distance(p) < np.abs(out)
+            if near.any():
+                out[near] = np.minimum(out[near], fn(part, np.ascontiguousarray(p[near])))
+        return out
 
     def distance(self, points: np.ndarray) -> np.ndarray:
         """Unsigned distance ``(N,)`` from each of ``points`` ``(N, 3)`` to the surface."""
-        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        if len(p) == 0:
-            return np.zeros(0)
-        d2, _, _ = self._tree.squared_distance(self.vertices, self.faces, p)
-        return np.sqrt(np.maximum(d2, 0.0))
-
-    def inside(self, points: np.ndarray) -> np.ndarray:
-        """Whether each of ``points`` ``(N, 3)`` is inside (winding number above 0.5), ``(N,)`` bool."""
-        p = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-        if len(p) == 0:
-            return np.zeros(0, dtype=bool)
-        return self._winding.winding_number(p) > 0.5
+        return self._each(points, lambda part, q: part.distance(q)[0])
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance ``(N,)``: negative inside, positive outside, mesh units."""
-        d = self.distance(points)
-        return np.where(self.inside(points), -d, d)
+        return self._each(points, lambda part, q: part.signed_distance(q))
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """Whether each of ``points`` ``(N, 3)`` is inside, ``(N,)`` bool."""
+        return self.signed_distance(points) < 0
 
     def bbox_distance(self, points: np.ndarray) -> np.ndarray:
         """A lower bound on :meth:`distance`: the distance to the mesh's bounding box ``(N,)`` (0 inside it)."""

@@ -1,0 +1,243 @@
+"""The hand as capsules: one per finger segment, with joint axes and limits from the rig.
+
+Radii per finger and segment are those of an average adult hand (about 6.5 to 10 mm,
+proximal to distal), configurable; lengths come from the rig (joint to child joint, the
+last segment to the end joint, or 0.8 of the previous bone where the rig has no end
+joint). Each finger joint's Euler axes get a role found from the rest pose: **twist**
+along the bone, **flexion** across the hand (the axis nearest the line from the index
+base to the pinky base), **abduction** the third; flexion is signed so that positive
+curls toward the palm (the side the thumb base stands out to). Limits per finger, joint
+and role, in degrees.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from usdhands.errors import ConfigError
+from usdhands.json_schemas import first_schema_error
+from usdhands.model.handmap import FINGERS, HandSide
+from usdhands.model.rotations import DEFAULT_EULER_ORDER
+from usdhands.model.skeleton import Skeleton
+
+__all__ = ["InteractionConfig", "FingerChain", "finger_chains", "load_interaction_config",
+           "DEFAULT_RADII_MM", "DEFAULT_LIMITS_DEG"]
+
+#: Capsule radius per finger, proximal to distal segment, millimetres (average adult hand).
+DEFAULT_RADII_MM = {
+    "thumb": (10.0, 9.0, 8.0),
+    "index": (9.0, 8.0, 7.0),
+    "middle": (9.0, 8.5, 7.0),
+    "ring": (8.5, 8.0, 7.0),
+    "pinky": (8.0, 7.0, 6.5),
+}
+
+_FINGER_LIMITS = {"flexion": [[-45.0, 110.0], [-15.0, 125.0], [-20.0, 100.0]],
+                  "abduction": [[-35.0, 35.0], [-20.0, 20.0], [-20.0, 20.0]],
+                  "twist": [[-40.0, 40.0], [-30.0, 30.0], [-30.0, 30.0]]}
+_THUMB_LIMITS = {"flexion": [[-60.0, 100.0], [-40.0, 100.0], [-40.0, 110.0]],
+                 "abduction": [[-70.0, 70.0], [-40.0, 40.0], [-30.0, 30.0]],
+                 "twist": [[-70.0, 70.0], [-45.0, 45.0], [-40.0, 40.0]]}
+#: Joint limits per finger, role and joint (proximal to distal), degrees from the rest pose.
+DEFAULT_LIMITS_DEG = {f: (_THUMB_LIMITS if f == "thumb" else _FINGER_LIMITS) for f in FINGERS}
+
+ROLES = ("flexion", "abduction", "twist")
+
+
+@dataclass(frozen=True)
+class InteractionConfig:
+    """Finger geometry, joint limits and correction settings (``schemas/interaction_config.schema.json``).
+
+    Parameters
+    ----------
+    radii_mm : dict
+        Finger name to capsule radii, proximal to distal segment, mm. Chains with more
+        joints (metacarpals) use the proximal radius for the extra segments.
+    limits_deg : dict
+        Finger name to ``{"flexion"|"abduction"|"twist": [[lo, hi] per joint]}``, degrees
+        from the rest pose; extra proximal joints use the first entry.
+    tip_fraction : float
+        Length of the last segment where the rig has no end joint, as a fraction of the one before.
+    tolerance_mm : float
+        Half the deepest penetration the clearance test lets through (the search's resolution).
+    smoothing_s : float
+        Time scale of the smoother on the correction, seconds.
+    """
+
+    radii_mm: dict = field(default_factory=lambda: {k: tuple(v) for k, v in DEFAULT_RADII_MM.items()})
+    limits_deg: dict = field(default_factory=lambda: json.loads(json.dumps(DEFAULT_LIMITS_DEG)))
+    tip_fraction: float = 0.8
+    tolerance_mm: float = 0.2
+    smoothing_s: float = 0.05
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "InteractionConfig":
+        """Build from a (possibly partial) dict: omitted fingers and keys keep their defaults."""
+        base = cls()
+        radii = dict(base.radii_mm)
+        radii.update({k: tuple(v) for k, v in d.get("radii_mm", {}).items()})
+        limits = json.loads(json.dumps(base.limits_deg))
+        for finger, roles in d.get("limits_deg", {}).items():
+            limits[finger].update(roles)
+        rest = {k: d[k] for k in ("tip_fraction", "tolerance_mm", "smoothing_s") if k in d}
+        return cls(radii_mm=radii, limits_deg=limits, **rest)
+
+
+def load_interaction_config(path: str | Path) -> InteractionConfig:
+    """Read and validate an interaction configuration file (JSON).
+
+    Raises
+    ------
+    ConfigError
+        Missing, not JSON, or not matching the schema (the message names the key).
+    """
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError("no such configuration file", path=path) from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ConfigError(f"not valid JSON: {e}", path=path) from None
+    except OSError as e:
+        raise ConfigError(f"cannot read the configuration: {e.strerror}", path=path) from None
+    error = first_schema_error(data, "interaction_config")
+    if error is not None:
+        where, message = error
+        raise ConfigError(f"invalid interaction configuration at {where}: {message}", path=path)
+    return InteractionConfig.from_dict(data)
+
+
+@dataclass(frozen=True, eq=False)
+class FingerChain:
+    """One finger of one hand as the correction sees it.
+
+    Parameters
+    ----------
+    side, finger : str
+    joints : tuple of int, length n
+        Skeleton indices, proximal to distal.
+    tip_offset : (3,) float
+        The finger tip in the last joint's local frame, clip units.
+    radii : (n,) float
+        Capsule radius of each segment (joint k to joint k+1, the last to the tip), clip units.
+    axes : (n, 3) int
+        For each joint, the Euler-angle index (into the curves' order) of flexion, abduction, twist.
+    flexion_sign : (n,) float
+        +1 where a positive Euler angle on the flexion axis curls toward the palm, else -1.
+    limits : (n, 3, 2) float
+        Lower and upper bound of each Euler angle, degrees, in curve-axis order.
+    """
+
+    side: str
+    finger: str
+    joints: tuple
+    tip_offset: np.ndarray
+    radii: np.ndarray
+    axes: np.ndarray
+    flexion_sign: np.ndarray
+    limits: np.ndarray
+
+    @property
+    def name(self) -> str:
+        """``"left index"``."""
+        return f"{self.side} {self.finger}"
+
+
+def _per_joint(values: list, n: int) -> list:
+    """Values given proximal to distal for the last ``len(values)`` joints, the first repeated before them."""
+    values = list(values)
+    if n <= len(values):
+        return values[len(values) - n:]
+    return [values[0]] * (n - len(values)) + values
+
+
+def _joint_roles(R_world: np.ndarray, bone_world: np.ndarray, across: np.ndarray, palm: np.ndarray,
+                 order: str) -> tuple[np.ndarray, float]:
+    """Euler indices of (flexion, abduction, twist) and the flexion sign of one joint at rest."""
+    local_bone = R_world.T @ bone_world
+    local_across = R_world.T @ across
+    letters = "XYZ"
+    twist = int(np.argmax(np.abs(local_bone)))
+    cand = [k for k in range(3) if k != twist]
+    flex = max(cand, key=lambda k: abs(local_across[k]))
+    abd = [k for k in cand if k != flex][0]
+    axis_world = R_world[:, flex]
+    sign = float(np.sign(np.dot(np.cross(axis_world, bone_world), palm)) or 1.0)
+    idx = [order.index(letters[k]) for k in (flex, abd, twist)]
+    return np.array(idx), sign
+
+
+def finger_chains(skeleton: Skeleton, hand: HandSide, config: InteractionConfig | None = None,
+                  order: str = DEFAULT_EULER_ORDER) -> list[FingerChain]:
+    """The finger chains of one hand with their capsules, axes and limits.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        In the clip's units.
+    hand : HandSide
+    config : InteractionConfig, optional
+    order : str
+        Euler order of the finger curves.
+    """
+    cfg = config or InteractionConfig()
+    mm = 0.001 / skeleton.meters_per_unit
+    rest = skeleton.rest_world_xforms()
+    pos = rest[:, :3, 3]
+    chains_joints = {f: [skeleton.index(j) for j in hand.fingers[f]] for f in hand.present_fingers}
+    wrist = skeleton.index(hand.wrist)
+    bases = {f: pos[js[-3] if len(js) >= 3 else js[0]] for f, js in chains_joints.items()}
+    if "index" in bases and "pinky" in bases:
+        across = bases["pinky"] - bases["index"]
+    elif len(bases) >= 2:
+        names = [f for f in FINGERS if f in bases and f != "thumb"] or list(bases)
+        across = bases[names[-1]] - bases[names[0]]
+    else:
+        across = np.cross(pos[wrist] - pos[skeleton.parents[wrist]] if skeleton.parents[wrist] >= 0
+                          else np.array([1.0, 0, 0]), [0, 1.0, 0])
+    across = across / max(np.linalg.norm(across), 1e-12)
+    long_finger = next((f for f in ("middle", "index", "ring", "pinky") if f in bases), None)
+    forward = (bases[long_finger] if long_finger else pos[wrist] + across) - pos[wrist]
+    palm = np.cross(forward, across)
+    palm /= max(np.linalg.norm(palm), 1e-12)
+    if "thumb" in chains_joints:
+        thumb_base = pos[chains_joints["thumb"][0]]
+        if np.dot(thumb_base - pos[wrist], palm) < 0:
+            palm = -palm
+    out = []
+    children = {j: skeleton.children(j) for js in chains_joints.values() for j in js}
+    for finger, js in chains_joints.items():
+        n = len(js)
+        last = js[-1]
+        kids = children[last]
+        if kids:
+            tip = np.asarray(skeleton.rest_translations[kids[0]], dtype=np.float64)
+        else:
+            tip = np.asarray(skeleton.rest_translations[last], dtype=np.float64) * cfg.tip_fraction
+        radii = np.array(_per_joint(cfg.radii_mm[finger], n), dtype=np.float64) * mm
+        axes, signs, limits = [], [], []
+        lim_cfg = cfg.limits_deg[finger]
+        per_role = {r: _per_joint(lim_cfg[r], n) for r in ROLES}
+        for k, j in enumerate(js):
+            child_pos = pos[js[k + 1]] if k + 1 < n else rest[last] @ np.append(tip, 1.0)
+            bone = child_pos[:3] - pos[j]
+            if np.linalg.norm(bone) < 1e-12:
+                bone = forward
+            idx, sign = _joint_roles(rest[j, :3, :3] / np.linalg.norm(rest[j, :3, 0]), bone / np.linalg.norm(bone),
+                                     across, palm, order)
+            box = np.zeros((3, 2))
+            for role_i, role in enumerate(ROLES):
+                lo, hi = per_role[role][k]
+                if role == "flexion" and sign < 0:
+                    lo, hi = -hi, -lo
+                box[idx[role_i]] = (lo, hi)
+            axes.append(idx)
+            signs.append(sign)
+            limits.append(box)
+        out.append(FingerChain(hand.side, finger, tuple(js), tip, radii, np.array(axes), np.array(signs),
+                               np.array(limits)))
+    return out

@@ -1,0 +1,150 @@
+"""Inverse kinematics on a finger chain: the largest curl that stays clear of the colliders.
+
+A chain's pose is opened along one path, ``u`` from 0 (the pose given) to 1 (every
+joint at its rest angles, within limits). The path opens the distal joint first and
+the proximal last, in overlapping ramps, so a touching finger tip straightens the last
+joint before the knuckle moves (the order cyclic coordinate descent visits joints, end
+effector first, changing as little of the chain as it can). Every angle stays inside
+the joint's limits. Bisection on ``u`` per frame, all frames at once, finds the least
+opening whose capsules pass :func:`~usdhands.algorithms.interaction.clearance.axis_clearance`:
+the bound the smoother must stay above.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from usdhands.algorithms.interaction.clearance import axis_clearance
+from usdhands.algorithms.interaction.finger_geometry import FingerChain
+from usdhands.model.rotations import DEFAULT_EULER_ORDER, euler_deg_to_quat, quat_multiply, trs_to_xform
+
+__all__ = ["ChainPoser", "opening_weights"]
+
+
+def opening_weights(u: np.ndarray, n: int) -> np.ndarray:
+    """How far each joint is opened, ``(K, n)`` in [0, 1], for path parameters ``u`` ``(K,)``.
+
+    Joint ``k`` (0 proximal) ramps over ``[(n-1-k)/(n+1), (n+1-k)/(n+1)]``: the distal
+    joint first, neighbours overlapping; all 0 at ``u = 0``, all 1 at ``u = 1``.
+    """
+    u = np.asarray(u, dtype=np.float64)[:, None]
+    k = np.arange(n)[None, :]
+    return np.clip((u * (n + 1) - (n - 1 - k)) / 2.0, 0.0, 1.0)
+
+
+@dataclass(eq=False)
+class ChainPoser:
+    """Poses and capsules of one finger chain along its opening path, for a clip.
+
+    Parameters
+    ----------
+    chain : FingerChain
+    parent_world : (T, 4, 4) float
+        World transform of the chain's parent joint per frame (never changed).
+    translations, scales : (T, n, 3) float
+        The chain joints' local translations and scales per frame.
+    rest_rotations : (n, 4) float
+        The chain joints' rest rotations, xyzw.
+    order : str
+        Euler order of the curves.
+    """
+
+    chain: FingerChain
+    parent_world: np.ndarray
+    translations: np.ndarray
+    scales: np.ndarray
+    rest_rotations: np.ndarray
+    order: str = DEFAULT_EULER_ORDER
+
+    def angles(self, base: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Euler angles ``(K, n, 3)`` degrees at path parameters ``u`` ``(K,)`` from ``base`` ``(K, n, 3)``.
+
+        ``u == 0`` returns ``base`` itself (not clamped); otherwise the path is clamped into the limits.
+        """
+        base = np.asarray(base, dtype=np.float64)
+        lo, hi = self.chain.limits[..., 0], self.chain.limits[..., 1]
+        start = np.clip(base, lo, hi)
+        target = np.clip(np.zeros_like(base[:1]), lo, hi)
+        w = opening_weights(u, base.shape[1])[..., None]
+        out = np.clip(start + w * (target - start), lo, hi)
+        same = np.asarray(u) <= 0
+        out[same] = base[same]
+        return out
+
+    def local_rotations(self, angles: np.ndarray) -> np.ndarray:
+        """Local rotations ``(K, n, 4)`` xyzw from Euler angles relative to rest ``(K, n, 3)``."""
+        rel = euler_deg_to_quat(angles, self.order)
+        return quat_multiply(self.rest_rotations[None], rel)
+
+    def capsules(self, frames: np.ndarray, angles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Segment end points ``a, b`` ``(K, n, 3)``, world, clip units."""
+        frames = np.asarray(frames, dtype=np.int64)
+        q = self.local_rotations(angles)
+        local = trs_to_xform(self.translations[frames], q, self.scales[frames])
+        n = q.shape[1]
+        world = self.parent_world[frames]
+        pts = np.empty((len(frames), n + 1, 3))
+        for k in range(n):
+            world = world @ local[:, k]
+            pts[:, k] = world[:, :3, 3]
+        pts[:, n] = world[:, :3, :3] @ self.chain.tip_offset + world[:, :3, 3]
+        return pts[:, :-1], pts[:, 1:]
+
+    def clear(self, colliders, frames: np.ndarray, angles: np.ndarray, margin: float,
+              resolution: float) -> np.ndarray:
+        """Whether every capsule of the chain clears the colliders by ``margin`` (up to
+        ``resolution / 2``), ``(K,)`` bool."""
+        frames = np.asarray(frames, dtype=np.int64)
+        K = len(frames)
+        if K == 0:
+            return np.zeros(0, dtype=bool)
+        a, b = self.capsules(frames, angles)
+        n = a.shape[1]
+        need = np.tile(self.chain.radii + margin, K)
+        f = np.repeat(frames, n)
+        lower, upper = axis_clearance(colliders, f, a.reshape(-1, 3), b.reshape(-1, 3), need, resolution)
+        ok = (lower >= need - 0.5 * resolution) & (upper >= need)
+        return ok.reshape(K, n).all(axis=1)
+
+    def least_opening(self, colliders, frames: np.ndarray, base: np.ndarray, margin: float, resolution: float,
+                      iterations: int = 12) -> tuple[np.ndarray, np.ndarray]:
+        """The least path parameter clear of the colliders at each frame, by bisection.
+
+        Parameters
+        ----------
+        frames : (K,) int
+        base : (K, n, 3) float
+            The poses to open, Euler degrees.
+
+        Returns
+        -------
+        u : (K,) float
+            0 where ``base`` is clear; otherwise the smallest ``u`` found clear (within
+            ``2**-iterations``), tested; 1 where even the open pose is not clear.
+        resolved : (K,) bool
+            False where even the fully open pose touches (the palm or wrist is inside a prop).
+        """
+        frames = np.asarray(frames, dtype=np.int64)
+        K = len(frames)
+        u = np.zeros(K)
+        resolved = np.ones(K, dtype=bool)
+        bad = ~self.clear(colliders, frames, base, margin, resolution)
+        if not bad.any():
+            return u, resolved
+        idx = np.nonzero(bad)[0]
+        ones = np.ones(len(idx))
+        open_ok = self.clear(colliders, frames[idx], self.angles(base[idx], ones), margin, resolution)
+        u[idx] = 1.0
+        resolved[idx[~open_ok]] = False
+        idx = idx[open_ok]
+        lo = np.zeros(len(idx))
+        hi = np.ones(len(idx))
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            ok = self.clear(colliders, frames[idx], self.angles(base[idx], mid), margin, resolution)
+            hi = np.where(ok, mid, hi)
+            lo = np.where(ok, lo, mid)
+        u[idx] = hi
+        return u, resolved
