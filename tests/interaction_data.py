@@ -122,3 +122,51 @@ def cup_against_tip(tip: np.ndarray, depth_cm: float, tip_radius_cm: float) -> P
     cup = cup_mesh()
     turned = cup.vertices * [-1.0, 1.0, -1.0]  # half a turn about +Y: the handle toward -X
     return PropMesh("cup", turned + centre, cup.faces)
+
+
+def grasping_clip(seconds: float = 60.0, fps: float = 30.0, noise_deg: float = 0.5, seed: int = 0) -> Clip:
+    """Both hands of the humanoid curl and open every 3 s (the four long fingers; fully curled as
+    the left hand passes the middle of its sweep) while the left arm sweeps forward and back about
+    the vertical every 6 s; cm, Y up.
+
+    The left hand's path at the middle of a sweep is :func:`grasping_mug_position`.
+    """
+    from usdhands.model.rotations import quat_multiply
+
+    sk = humanoid_skeleton()
+    hm = humanoid_handmap(sk)
+    T = int(round(seconds * fps)) + 1
+    t = np.arange(T) / fps
+    rng = np.random.default_rng(seed)
+    rot = np.tile(sk.rest_rotations, (T, 1, 1))
+    arm = sk.index("LeftArm")
+    yaw = np.radians(25.0) * np.sin(2 * np.pi * t / 6.0)
+    q = np.stack([np.zeros(T), np.sin(yaw / 2), np.zeros(T), np.cos(yaw / 2)], axis=1)
+    # the rotation about world +Y expressed in the arm's parent frame is applied before its rest
+    parent_world = sk.rest_world_xforms()[sk.parents[arm], :3, :3]
+    from usdhands.model.rotations import matrix_to_quat
+
+    pq = matrix_to_quat(parent_world)
+    pq_inv = pq * [-1, -1, -1, 1]
+    local = quat_multiply(quat_multiply(pq_inv[None], q), quat_multiply(pq[None], rot[:, arm]))
+    rot[:, arm] = local
+    clip = Clip(sk, fps, rot, name="grasping")
+    s = 0.5 + 0.5 * np.cos(2 * np.pi * t / 3.0)
+    for side in ("left", "right"):
+        for chain in finger_chains(sk, hm[side]):
+            n = len(chain.joints)
+            amount = 0.0 if chain.finger == "thumb" else 1.0
+            e = np.zeros((T, n, 3))
+            for k in range(n):
+                e[:, k, chain.axes[k, 0]] = chain.flexion_sign[k] * (amount * CURL_DEG[k] * s
+                                                                     + noise_deg * rng.normal(size=T))
+            names = tuple(sk.joint_names[j] for j in chain.joints)
+            clip = apply_finger_curves(clip, FingerCurves(chain.joints, names, e.reshape(T, -1)))
+    return clip
+
+
+def grasping_mug_position() -> np.ndarray:
+    """Where to put the mug's origin (cm) so it sits under the left palm's little-finger side at the
+    middle of a sweep, its rim 4.2 cm below the palm, clear of the open hand and of the thumb (which
+    hangs 4 cm below); the curled middle, ring and little fingers reach over its rim."""
+    return np.array([81.0, 144.0 - 4.2 - 7.2, -4.5])

@@ -41,7 +41,7 @@ def test_cylinder_penetration_removed_to_half_a_millimetre_by_exact_measure(clos
     assert before.max() > 15.0  # the fingers curl deep into the cylinder
     assert after.max() <= 0.5
     # the report's fast measure agrees with trimesh's within its resolution
-    np.testing.assert_allclose(report.penetration_before_mm, before, atol=0.05)
+    assert np.all(report.penetration_before_mm >= before - 1e-6) and np.all(report.penetration_before_mm <= before + 0.06)
     assert report.penetration_after_mm.max() <= 0.5
     d = report.to_dict()
     assert set(d) == {"penetration_before_mm", "penetration_after_mm", "frames_corrected", "jitter_before",
@@ -109,7 +109,7 @@ def test_sample_cup_with_a_known_penetration():
     cup = cup_against_tip(b[0, -1], 0.4, index.chain.radii[-1])  # the tip 4 mm into the wall
     cols = colliders_for(clip, cup)
     assert exact_capsule_depth_mm(clip, [cup], posers)[0] == pytest.approx(4.0, abs=1e-6)
-    assert penetration_depth_mm(clip, posers, cols)[0] == pytest.approx(4.0, abs=0.05)
+    assert 4.0 <= penetration_depth_mm(clip, posers, cols)[0] <= 4.05  # an upper bound within its resolution
     out, report = correct_clip(clip, hm, cols)
     assert report.chains_corrected == ["left index"]
     gaps = exact_capsule_gaps_mm(out, [cup], chain_posers(out, hm, InteractionConfig()))

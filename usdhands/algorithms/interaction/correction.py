@@ -48,7 +48,7 @@ class CorrectionReport:
     ----------
     penetration_before_mm, penetration_after_mm : (T,) float
         Deepest finger penetration into any collider per frame, mm (0 where clear),
-        measured along the capsule axes to 0.02 mm.
+        measured along the capsule axes to 0.05 mm (an upper bound).
     frames_corrected : int
         Frames where some finger rotation changed.
     jitter_before, jitter_after : float
@@ -96,19 +96,22 @@ def chain_posers(clip: Clip, handmap: HandMap, config: InteractionConfig) -> lis
             js = list(chain.joints)
             parent = int(clip.skeleton.parents[js[0]])
             pw = world[:, parent] if parent >= 0 else np.broadcast_to(np.eye(4), (clip.num_frames, 4, 4))
+            last = world[:, js[-1]]
+            tip = last[:, :3, :3] @ chain.tip_offset + last[:, :3, 3]
+            given = np.concatenate([world[:, js][:, :, :3, 3], tip[:, None]], axis=1)
             out.append(ChainPoser(chain, np.ascontiguousarray(pw), np.asarray(clip.translations[:, js]),
-                                  np.asarray(clip.scales[:, js]), np.asarray(clip.skeleton.rest_rotations[js])))
+                                  np.asarray(clip.scales[:, js]), np.asarray(clip.skeleton.rest_rotations[js]),
+                                  given_points=given))
     return out
 
 
-def _near_frames(poser: ChainPoser, colliders, angles: np.ndarray, reach: float) -> np.ndarray:
-    """Frames whose capsules come within ``reach`` (radius + margin added) of some collider's box."""
-    T = len(angles)
-    frames = np.arange(T)
-    a, b = poser.capsules(frames, angles)
+def _near_frames(poser: ChainPoser, colliders, reach: float) -> np.ndarray:
+    """Frames where the chain, as given, comes within ``reach`` (radius + margin added) of some collider's box."""
+    pts = poser.given_points
+    frames = np.arange(len(pts))
     r = float(poser.chain.radii.max()) + reach
-    lo = np.minimum(a, b).min(axis=1) - r
-    hi = np.maximum(a, b).max(axis=1) + r
+    lo = pts.min(axis=1) - r
+    hi = pts.max(axis=1) + r
     return frames[colliders.bbox_gap(frames, lo, hi) <= 0]
 
 
@@ -117,7 +120,7 @@ def _chain_angles(clip: Clip, chain: FingerChain) -> np.ndarray:
     return finger_curves(clip, chain.joints).values.reshape(T, n, 3)
 
 
-def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolution_mm: float = 0.02) -> np.ndarray:
+def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolution_mm: float = 0.05) -> np.ndarray:
     """Deepest penetration of any finger capsule into any collider per frame, ``(T,)`` mm.
 
     An upper bound within ``resolution_mm`` of the exact depth (the axis search's lower bound).
@@ -125,10 +128,10 @@ def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolu
     mm = 0.001 / clip.skeleton.meters_per_unit
     depth = np.zeros(clip.num_frames)
     for poser in posers:
-        angles = _chain_angles(clip, poser.chain)
-        frames = _near_frames(poser, colliders, angles, 0.0)
+        frames = _near_frames(poser, colliders, 0.0)
         if len(frames) == 0:
             continue
+        angles = _chain_angles(clip, poser.chain)
         a, b = poser.capsules(frames, angles[frames])
         n = a.shape[1]
         need = np.tile(poser.chain.radii, len(frames))
@@ -206,10 +209,10 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     ramp = int(round(2 * cfg.smoothing_s * clip.fps)) if smooth else 0
     weight = smoothness_weight(clip.fps, cfg.smoothing_s) if smooth else 0.0
     for poser in posers:
-        angles = _chain_angles(clip, poser.chain)
-        near = _near_frames(poser, colliders, angles, margin)
+        near = _near_frames(poser, colliders, margin)
         if len(near) == 0:
             continue
+        angles = _chain_angles(clip, poser.chain)
         ok = poser.clear(colliders, near, angles[near], margin, resolution)
         hit = np.zeros(T, dtype=bool)
         hit[near[~ok]] = True
@@ -221,8 +224,9 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         frames = np.nonzero(w > 0)[0]
         base = np.array(angles)
         if smooth and cfg.smoothing_s > 0:
-            sm = rts_smooth(angles.reshape(T, -1), clip.fps, cfg.smoothing_s).reshape(T, n, 3)
-            base[frames] = angles[frames] + w[frames, None, None] * (sm[frames] - angles[frames])
+            for run in _runs(frames):  # the smoother runs over each window only
+                sm = rts_smooth(angles[run].reshape(len(run), -1), clip.fps, cfg.smoothing_s).reshape(-1, n, 3)
+                base[run] = angles[run] + w[run, None, None] * (sm - angles[run])
         bound, resolved = poser.least_opening(colliders, frames, base[frames], margin, resolution)
         for f in frames[~resolved]:
             unresolved.append((poser.chain.name, int(f)))

@@ -71,7 +71,7 @@ class InteractionConfig:
     radii_mm: dict = field(default_factory=lambda: {k: tuple(v) for k, v in DEFAULT_RADII_MM.items()})
     limits_deg: dict = field(default_factory=lambda: json.loads(json.dumps(DEFAULT_LIMITS_DEG)))
     tip_fraction: float = 0.8
-    tolerance_mm: float = 0.2
+    tolerance_mm: float = 0.5
     smoothing_s: float = 0.05
 
     @classmethod

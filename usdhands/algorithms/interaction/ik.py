@@ -49,6 +49,9 @@ class ChainPoser:
         The chain joints' rest rotations, xyzw.
     order : str
         Euler order of the curves.
+    given_points : (T, n + 1, 3) float, optional
+        The chain's joint positions and tip in the pose given, world (from the clip's
+        forward kinematics), for the broad phase.
     """
 
     chain: FingerChain
@@ -57,6 +60,7 @@ class ChainPoser:
     scales: np.ndarray
     rest_rotations: np.ndarray
     order: str = DEFAULT_EULER_ORDER
+    given_points: np.ndarray | None = None
 
     def angles(self, base: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Euler angles ``(K, n, 3)`` degrees at path parameters ``u`` ``(K,)`` from ``base`` ``(K, n, 3)``.
@@ -109,7 +113,7 @@ class ChainPoser:
         return ok.reshape(K, n).all(axis=1)
 
     def least_opening(self, colliders, frames: np.ndarray, base: np.ndarray, margin: float, resolution: float,
-                      iterations: int = 12) -> tuple[np.ndarray, np.ndarray]:
+                      iterations: int = 9) -> tuple[np.ndarray, np.ndarray]:
         """The least path parameter clear of the colliders at each frame, by bisection.
 
         Parameters

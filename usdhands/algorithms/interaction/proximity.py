@@ -62,6 +62,7 @@ class _Part:
         self.tree = igl.AABB()
         self.tree.init(self.vertices, self.faces)
         self.winding = None
+        self._fwn = None
         if not closed:
             self.winding = igl.FastWindingNumberBVH()
             self.winding.init(self.vertices, self.faces, 2)
@@ -87,8 +88,8 @@ class _Part:
         if self.winding is not None:
             return np.where(self.winding.winding_number(p) > 0.5, -d, d)
         # a closed shell: the point is inside iff it lies behind the nearest face, where the
-        # nearest point is inside that face; on an edge or a vertex, the pseudo-normal test
-        # of the faces around it is replaced by an exact ray parity count (rare)
+        # nearest point is inside that face; on an edge or a vertex (ambiguous) the fast
+        # winding number decides
         side = np.einsum("ij,ij->i", p - closest, self.normals[face])
         tri = self.vertices[self.faces[face]]
         bary = _barycentric(closest, tri)
@@ -100,10 +101,13 @@ class _Part:
         return np.where(inside, -d, d)
 
     def _parity(self, p: np.ndarray) -> np.ndarray:
-        """Inside test by the generalised winding number (exact solid angles), for the few ambiguous points."""
-        import igl
+        """Inside test by the fast winding number (its hierarchy built on first use), for the ambiguous points."""
+        if self._fwn is None:
+            import igl
 
-        return igl.winding_number(self.vertices, self.faces, np.ascontiguousarray(p)) > 0.5
+            self._fwn = igl.FastWindingNumberBVH()
+            self._fwn.init(self.vertices, self.faces, 2)
+        return self._fwn.winding_number(np.ascontiguousarray(p)) > 0.5
 
 
 def _barycentric(x: np.ndarray, tri: np.ndarray) -> np.ndarray:

@@ -46,7 +46,7 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
     q = time_scale_s ** -4
     Q = q * np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]])
     r = 1.0
-    # gains shared by every curve
+    # covariances and gains: the same for every curve, 2x2 per frame
     P_pred = np.empty((T, 2, 2))
     P_filt = np.empty((T, 2, 2))
     K = np.empty((T, 2))
@@ -54,24 +54,37 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
     for t in range(T):
         if t > 0:
             P = F @ P @ F.T + Q
+        if t > 1 and np.allclose(P, P_pred[t - 1], rtol=1e-13, atol=0.0):  # steady state reached
+            P_pred[t:], K[t:], P_filt[t:] = P_pred[t - 1], K[t - 1], P_filt[t - 1]
+            break
         P_pred[t] = P
         k = P[:, 0] / (P[0, 0] + r)
         K[t] = k
         P = P - np.outer(k, P[0])
         P_filt[t] = P
-    x = np.empty((T, 2) + z.shape[1:])
-    state = np.stack([z[0], np.zeros_like(z[0])])
-    for t in range(T):
+    G = P_filt[:-1] @ F.T @ np.linalg.inv(P_pred[1:])  # (T-1, 2, 2) smoother gains
+    flat = z.reshape(T, -1)
+    pos = np.empty_like(flat)
+    vel = np.empty_like(flat)
+    p, v = flat[0].copy(), np.zeros(flat.shape[1])
+    for t in range(T):  # filter: predict, then correct with the shared gain
         if t > 0:
-            state = np.tensordot(F, state, axes=1)
-        state = state + K[t].reshape((2,) + (1,) * (z.ndim - 1)) * (z[t] - state[0])
-        x[t] = state
-    out = np.empty_like(x)
-    out[-1] = x[-1]
-    for t in range(T - 2, -1, -1):
-        G = P_filt[t] @ F.T @ np.linalg.inv(P_pred[t + 1])
-        out[t] = x[t] + np.tensordot(G, out[t + 1] - np.tensordot(F, x[t], axes=1), axes=1)
-    return out[:, 0]
+            p = p + dt * v
+        innov = flat[t] - p
+        p = p + K[t, 0] * innov
+        v = v + K[t, 1] * innov
+        pos[t] = p
+        vel[t] = v
+    sp, sv = pos[-1].copy(), vel[-1].copy()
+    out = np.empty_like(flat)
+    out[-1] = sp
+    for t in range(T - 2, -1, -1):  # RTS backward pass
+        dp = sp - (pos[t] + dt * vel[t])
+        dv = sv - vel[t]
+        sp = pos[t] + G[t, 0, 0] * dp + G[t, 0, 1] * dv
+        sv = vel[t] + G[t, 1, 0] * dp + G[t, 1, 1] * dv
+        out[t] = sp
+    return out.reshape(z.shape)
 
 
 def smoothness_weight(fps: float, time_scale_s: float) -> float:
