@@ -15,6 +15,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import stat
 import struct
 import urllib.parse
 from dataclasses import dataclass, field
@@ -41,6 +42,8 @@ COMPONENT_DTYPES: dict[int, np.dtype] = {
 }
 #: accessor type -> number of components
 TYPE_SIZES: dict[str, int] = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+#: bytes asked of the system per read of an external file
+READ_CHUNK = 1 << 26
 _DTYPE_COMPONENTS = {np.dtype("<u1"): 5121, np.dtype("<u2"): 5123, np.dtype("<u4"): 5125, np.dtype("<f4"): 5126,
                      np.dtype("<i1"): 5120, np.dtype("<i2"): 5122}
 
@@ -142,7 +145,7 @@ def _buffer_bytes(path: Path, gltf: pygltflib.GLTF2, i: int, bin_chunk: bytes | 
         if i != 0 or bin_chunk is None:
             raise AssetReadError("buffer has no uri and there is no GLB binary chunk", path=path, location=where)
         data = bin_chunk
-    elif buf.uri.startswith("data:"):
+    elif isinstance(buf.uri, str) and buf.uri.startswith("data:"):
         head, _, payload = buf.uri.partition(",")
         if not head.endswith(";base64"):
             raise AssetReadError("data URI buffer is not base64", path=path, location=where)
@@ -151,15 +154,91 @@ def _buffer_bytes(path: Path, gltf: pygltflib.GLTF2, i: int, bin_chunk: bytes | 
         except ValueError as e:
             raise AssetReadError(f"bad base64 in data URI buffer ({e})", path=path, location=where) from None
     else:
-        file = path.parent / urllib.parse.unquote(buf.uri)
-        try:
-            data = file.read_bytes()
-        except OSError as e:
-            raise AssetReadError(f"buffer file {buf.uri!r} cannot be read ({e.strerror or e})", path=path,
-                                 location=where) from None
+        if not isinstance(buf.byteLength, int) or buf.byteLength < 0:
+            raise AssetReadError(f"byteLength {buf.byteLength!r} is not a number of bytes", path=path, location=where)
+        return read_external(path, buf.uri, "buffer", where, buf.byteLength)
     if buf.byteLength is None or len(data) < buf.byteLength:
         raise AssetReadError(f"buffer holds {len(data)} bytes, byteLength says {buf.byteLength}", path=path,
                              location=where)
+    return data
+
+
+def contained_file(path: Path, uri: str, what: str, location: str) -> Path:
+    """The file a glTF's external ``uri`` names, resolved inside the glTF's folder.
+
+    ``path`` is the glTF file; ``what`` says what the URI is for ("buffer", "image") in
+    messages. The URI must be a relative path (percent-encoded or not) that stays in
+    ``path``'s folder once both the folder and the URI's target are resolved through
+    symlinks. Nothing is opened here, and a refusal tells nothing about the target
+    (whether it exists, its size, its kind).
+
+    Raises
+    ------
+    AssetReadError
+        A URI with a scheme (``file:``, ``http:``), an absolute path, or one that
+        leads out of the folder (``..``, a symlink to elsewhere).
+    """
+    try:
+        scheme = urllib.parse.urlsplit(uri).scheme if isinstance(uri, str) else "?"
+    except ValueError:  # "//[x": a malformed network location
+        scheme = "?"
+    if scheme:
+        raise AssetReadError(f"{what} URI {uri!r} is not a relative file path", path=path, location=location)
+    rel = urllib.parse.unquote(uri)
+    if not rel or "\0" in rel or os.path.isabs(rel) or rel.startswith(("/", "\\")):
+        raise AssetReadError(f"{what} URI {uri!r} points outside the glTF's folder", path=path, location=location)
+    folder = path.parent.resolve()
+    try:
+        target = (folder / rel).resolve()
+    except (OSError, RuntimeError):  # a symlink loop
+        raise AssetReadError(f"{what} file {uri!r} cannot be read (symlink loop)", path=path,
+                             location=location) from None
+    if not target.is_relative_to(folder):
+        raise AssetReadError(f"{what} URI {uri!r} points outside the glTF's folder", path=path, location=location)
+    return target
+
+
+def read_external(path: Path, uri: str, what: str, location: str, byte_length: int | None = None) -> bytes:
+    """The bytes of the regular file ``uri`` names in ``path``'s folder (:func:`contained_file`).
+
+    With ``byte_length`` (a buffer's), only its first ``byte_length`` bytes: a longer
+    file is fine (the rest is not the buffer's) and is never read past that; a
+    shorter one is refused. Never blocks on a FIFO, never reads a device.
+
+    Raises
+    ------
+    AssetReadError
+        As :func:`contained_file`; a file that is missing, unreadable, not a regular
+        file, or shorter than ``byte_length``.
+    """
+    file = contained_file(path, uri, what, location)
+    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(file, flags)
+    except OSError as e:
+        raise AssetReadError(f"{what} file {uri!r} cannot be read ({e.strerror or e})", path=path,
+                             location=location) from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise AssetReadError(f"{what} file {uri!r} is not a regular file", path=path, location=location)
+        want = info.st_size if byte_length is None else byte_length
+        if info.st_size < want:
+            raise AssetReadError(f"{what} holds {info.st_size} bytes, byteLength says {want}", path=path,
+                                 location=location)
+        data = bytearray()
+        while len(data) < want:  # one read(2) returns at most about 2 GiB
+            chunk = os.read(fd, min(want - len(data), READ_CHUNK))
+            if not chunk:
+                raise AssetReadError(f"{what} file {uri!r} changed while being read", path=path,
+                                     location=location)
+            data += chunk
+    except OSError as e:
+        raise AssetReadError(f"{what} file {uri!r} cannot be read ({e.strerror or e})", path=path,
+                             location=location) from None
+    finally:
+        os.close(fd)
+    data = bytes(data)
     return data
 
 

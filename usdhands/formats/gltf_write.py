@@ -9,8 +9,8 @@ transforms), so no extra node appears.
 
 from __future__ import annotations
 
+import base64
 import os
-import posixpath
 import urllib.parse
 from pathlib import Path
 
@@ -18,7 +18,9 @@ import numpy as np
 import pygltflib
 
 from usdhands.errors import AssetReadError, JointMismatchError, OutputPathError
-from usdhands.formats.gltf_container import BinaryAppender, GltfFile, load_gltf, save_gltf
+from usdhands.formats.gltf_container import (
+    BinaryAppender, GltfFile, contained_file, load_gltf, read_external, save_gltf,
+)
 from usdhands.formats.gltf_read import (
     EXTRAS_KEY, GltfScene, SkeletonBinding, animation_channels, channel_keys, malformed_as_read_error, sample_channel,
     scan_scene, snap_time,
@@ -345,15 +347,39 @@ def _find_animation(doc: GltfFile, clip: Clip, animation: str | int | None) -> t
     return None, wanted
 
 
-def _relocate_uri(uri: str | None, source_dir: Path, out_dir: Path) -> str | None:
-    """A relative external URI re-expressed from ``out_dir`` (data URIs and absolute URLs unchanged)."""
-    if uri is None or uri.startswith("data:") or urllib.parse.urlparse(uri).scheme or uri.startswith("/"):
+#: media type of an embedded image by file extension (glTF 2.0 core: PNG and JPEG; common extensions)
+IMAGE_TYPES = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".webp": "image/webp",
+               ".ktx2": "image/ktx2"}
+
+
+def _carry_uri(uri: str | None, source: Path, out_dir: Path, what: str, location: str,
+               content=None, media_type: str | None = None) -> str | None:
+    """An external URI of ``source`` as the output in ``out_dir`` must spell it.
+
+    Unchanged in the same folder; re-expressed from ``out_dir`` when the file lies
+    inside it; otherwise embedded as a data URI of ``content()`` (a reference out of
+    the output's folder would be refused on reading it back). Data URIs and None are
+    unchanged.
+
+    Raises
+    ------
+    AssetReadError
+        The URI does not name a file inside ``source``'s folder
+        (:func:`~usdhands.formats.gltf_container.contained_file`), or the file to
+        embed cannot be read.
+    """
+    if uri is None or (isinstance(uri, str) and uri.startswith("data:")):
         return uri
-    if source_dir.resolve() == out_dir.resolve():
+    target = contained_file(source, uri, what, location)
+    out_dir = out_dir.resolve()
+    if source.parent.resolve() == out_dir:
         return uri
-    target = (source_dir / urllib.parse.unquote(uri)).resolve()
-    rel = os.path.relpath(target, out_dir.resolve())
-    return urllib.parse.quote(Path(rel).as_posix() if os.sep != posixpath.sep else rel)
+    if target.is_relative_to(out_dir):
+        rel = target.relative_to(out_dir).as_posix()
+        return urllib.parse.quote(rel)
+    data = content() if content is not None else read_external(source, uri, what, location)
+    kind = media_type or IMAGE_TYPES.get(target.suffix.lower(), "application/octet-stream")
+    return f"data:{kind};base64," + base64.b64encode(data).decode("ascii")
 
 
 def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLike, *,
@@ -408,6 +434,11 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
         scene = scan_scene(doc)
     binding = _find_binding(scene, clip, source)
     g = doc.gltf
+    for i, b in enumerate(g.buffers):
+        b.uri = _carry_uri(b.uri, source, final.parent, "buffer", f"buffers[{i}]", content=lambda i=i: doc.buffers[i],
+                           media_type="application/octet-stream")
+    for i, im in enumerate(g.images):
+        im.uri = _carry_uri(im.uri, source, final.parent, "image", f"images[{i}]", media_type=im.mimeType)
     sk = binding.skeleton
     clip = clip_to_gltf_space(clip)
     ai, new_name = _find_animation(doc, clip, animation)
@@ -457,11 +488,6 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
     for i, b in enumerate(g.buffers):  # a GLB chunk may carry up to 3 padding bytes past byteLength
         if b.uri is None:
             buffers[i] = buffers[i][: b.byteLength]
-    if source.parent.resolve() != final.parent.resolve():
-        for b in g.buffers:
-            b.uri = _relocate_uri(b.uri, source.parent, final.parent)
-        for im in g.images:
-            im.uri = _relocate_uri(im.uri, source.parent, final.parent)
 
     if any(changed.values()):
         target = _data_buffer(g, buffers, out_glb)

@@ -31,7 +31,7 @@ def read_asset(path: str | os.PathLike, *, fps: float | None = None, **options) 
     Raises
     ------
     AssetReadError
-        Missing file, unknown extension, corrupt content.
+        Missing file, a folder, a FIFO or device, unknown extension, corrupt content.
     """
     if fps is not None and not (fps > 0 and math.isfinite(fps)):
         raise ValueError(f"Expected fps > 0 and finite, got {fps}")
@@ -40,6 +40,8 @@ def read_asset(path: str | os.PathLike, *, fps: float | None = None, **options) 
         raise AssetReadError("no such file", path=path)
     if path.is_dir():
         raise AssetReadError("is a folder, not a file", path=path)
+    if not path.is_file():  # a FIFO blocks the read forever, /dev/zero never ends
+        raise AssetReadError("not a regular file", path=path)
     asset = handler_for(path, "read").read(path, fps=fps, **options)
     for clip in asset.clips:
         clip.validate(str(path))

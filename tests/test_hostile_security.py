@@ -1,0 +1,310 @@
+"""Issue 8, "Security first": glTF URIs kept inside the glTF's folder, inputs that are not
+regular files refused.
+
+Every case is built here in ``tmp_path``: a ``.gltf`` whose buffer is an external file
+(from the sample ``ok_00.glb``), files outside its folder, symlinks, FIFOs and hard links.
+Cases that would block or run out of memory if the code were wrong run in a subprocess
+with a timeout and an address-space limit.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import os
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pygltflib
+import pytest
+
+from cli_helpers import run
+from usdhands.formats.gltf_container import load_gltf, read_external, save_gltf
+from usdhands.formats.io import read_clip
+
+ROOT = Path(__file__).resolve().parent.parent
+SECRET_SIZE = 123457  # the outside file's size: must never appear in a message
+OUTSIDE_URI = "../../outside/secret.bin"
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def sha(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def snapshot(folder: Path) -> dict[str, str]:
+    """Every file under ``folder`` (symlinks as their target) and its checksum: "nothing written"."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = str(p.relative_to(folder))
+        if p.is_symlink():
+            out[rel] = "-> " + os.readlink(p)
+        elif p.is_file():
+            out[rel] = sha(p)
+        elif p.is_dir():
+            out[rel] = "dir"
+        else:
+            out[rel] = "special"
+    return out
+
+
+def make_gltf(ok_glb: Path, folder: Path, uri: str | None = "humanoid.bin", images=()) -> Path:
+    """``folder/humanoid.gltf`` with its buffer in ``folder/humanoid.bin`` (named by ``uri``) and
+    unreferenced images of the given URIs; returns the .gltf."""
+    doc = load_gltf(ok_glb)
+    g = doc.gltf
+    data = doc.buffers[0][: g.buffers[0].byteLength]
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "humanoid.bin").write_bytes(data)
+    g.buffers[0].uri = uri
+    g.images = [pygltflib.Image(uri=u) for u in images]
+    save_gltf(g, [data], folder / "humanoid.gltf", glb=False)
+    return folder / "humanoid.gltf"
+
+
+@pytest.fixture()
+def scene(ok_glb, tmp_path):
+    """``tmp/a/b/humanoid.gltf`` (+ .bin, tex.png) and ``tmp/outside/secret.bin`` (the real buffer
+    padded to SECRET_SIZE bytes, so reading it would succeed: the bug was exit 0)."""
+    gltf = make_gltf(ok_glb, tmp_path / "a" / "b")
+    (tmp_path / "outside").mkdir()
+    data = (gltf.parent / "humanoid.bin").read_bytes()
+    (tmp_path / "outside" / "secret.bin").write_bytes(data + b"\0" * (SECRET_SIZE - len(data)))
+    (tmp_path / "outside" / "tex.png").write_bytes(b"\x89PNG outside")
+    (gltf.parent / "tex.png").write_bytes(b"\x89PNG inside")
+    ok_glb.unlink()
+    return gltf
+
+
+def set_uri(gltf: Path, uri: str, *, image: bool = False) -> None:
+    g = pygltflib.GLTF2.gltf_from_json(gltf.read_text())
+    if image:
+        g.images = [pygltflib.Image(uri=uri)]
+    else:
+        g.buffers[0].uri = uri
+    gltf.write_text(g.gltf_to_json())
+
+
+def subprocess_python(*argv, cwd: Path, timeout: float = 120, memory: int = 1 << 30):
+    """``python ARGV`` with a time and an address-space limit: (exit, stderr lines)."""
+    def limit():
+        resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT), OPENBLAS_NUM_THREADS="1")
+    r = subprocess.run([sys.executable, *map(str, argv)], cwd=cwd, env=env, preexec_fn=limit,
+                       capture_output=True, text=True, timeout=timeout)
+    return r.returncode, r.stderr.strip().splitlines()
+
+
+def subprocess_cli(*argv, cwd: Path, timeout: float = 120):
+    """``usdhands ARGV`` in a subprocess under limits (:func:`subprocess_python`)."""
+    return subprocess_python("-m", "usdhands", *argv, cwd=cwd, timeout=timeout)
+
+
+# --------------------------------------------------------------------------- buffer URIs
+
+
+def _escape_variants(tmp_path: Path, gltf: Path) -> dict[str, str]:
+    """name -> buffer URI, each reaching tmp/outside/secret.bin (or a device) from gltf's folder."""
+    folder = gltf.parent
+    os.symlink(tmp_path / "outside" / "secret.bin", folder / "linked.bin")
+    os.symlink(tmp_path / "outside", folder / "res")
+    os.symlink("/dev/zero", folder / "zero.bin")
+    return {
+        "relative": OUTSIDE_URI,
+        "percent-encoded": "..%2F..%2Foutside%2Fsecret.bin",
+        "percent-encoded dots": "%2E%2E/%2E%2E/outside/secret.bin",
+        "absolute": str(tmp_path / "outside" / "secret.bin"),
+        "absolute percent-encoded": "%2F" + str(tmp_path / "outside" / "secret.bin").lstrip("/"),
+        "deep relative": "../" * 12 + str(tmp_path / "outside" / "secret.bin").lstrip("/"),
+        "symlinked file": "linked.bin",
+        "symlinked folder": "res/secret.bin",
+        "dev zero": "/dev/zero",
+        "symlink to dev zero": "zero.bin",
+        "inside then out": "sub/../../../outside/secret.bin",
+    }
+
+
+ESCAPES = ["relative", "percent-encoded", "percent-encoded dots", "absolute", "absolute percent-encoded",
+           "deep relative", "symlinked file", "symlinked folder", "dev zero", "symlink to dev zero",
+           "inside then out"]
+
+
+@pytest.mark.parametrize("variant", ESCAPES)
+def test_buffer_uri_out_of_folder_refused(scene, tmp_path, capsys, variant):
+    uri = _escape_variants(tmp_path, scene)[variant]
+    set_uri(scene, uri)
+    before = snapshot(tmp_path)
+    # a device read whole would exhaust memory: those cases run under limits in a subprocess
+    cli = (lambda *a: subprocess_cli(*a, cwd=tmp_path)) if "zero" in variant else (lambda *a: run(capsys, *a))
+    code, err = cli("inspect", scene)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: buffers[0]: buffer URI {uri!r} points outside "
+                               "the glTF's folder"])
+    assert str(SECRET_SIZE) not in err[0]
+    out = tmp_path / "out.glb"
+    code, err = cli("convert", scene, out)
+    assert code == 2 and len(err) == 1 and "points outside the glTF's folder" in err[0]
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("uri", ["file:///etc/passwd", "http://example.com/humanoid.bin", "C:/x/humanoid.bin"])
+def test_buffer_uri_with_a_scheme_refused(scene, capsys, uri):
+    set_uri(scene, uri)
+    code, err = run(capsys, "inspect", scene)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: buffers[0]: buffer URI {uri!r} is not a relative "
+                               "file path"])
+
+
+def test_etc_passwd_size_never_shown(scene, capsys):
+    uri = "../" * 30 + "etc/passwd"
+    set_uri(scene, uri)
+    code, err = run(capsys, "inspect", scene)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: buffers[0]: buffer URI {uri!r} points outside "
+                               "the glTF's folder"])
+    assert str(os.path.getsize("/etc/passwd")) not in err[0]
+
+
+def test_buffer_that_is_a_folder_refused(scene, capsys):
+    (scene.parent / "sub").mkdir()
+    set_uri(scene, "sub")
+    code, err = run(capsys, "inspect", scene)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: buffers[0]: buffer file 'sub' is not a regular file"])
+
+
+def test_buffer_that_is_a_fifo_refused_without_blocking(scene, tmp_path):
+    (scene.parent / "humanoid.bin").unlink()
+    os.mkfifo(scene.parent / "humanoid.bin")
+    before = snapshot(tmp_path)
+    code, err = subprocess_cli("inspect", scene, cwd=tmp_path, timeout=60)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: buffers[0]: buffer file 'humanoid.bin' is not a "
+                               "regular file"])
+    assert snapshot(tmp_path) == before
+
+
+def test_buffer_file_longer_than_byte_length_read_only_up_to_it(scene, tmp_path, capsys):
+    """A longer file is valid (the rest is not the buffer's); a 4 GiB sparse tail is never read:
+    under a 1 GiB address-space limit, reading it whole would fail."""
+    reference = read_clip(scene)
+    data = (scene.parent / "humanoid.bin").read_bytes()
+    with open(scene.parent / "humanoid.bin", "r+b") as f:
+        f.truncate(4 << 30)
+    assert read_external(scene, "humanoid.bin", "buffer", "buffers[0]", len(data)) == data
+    again = read_clip(scene)
+    assert np.array_equal(again.rotations, reference.rotations)
+    assert np.array_equal(again.translations, reference.translations)
+    code, err = subprocess_cli("inspect", scene, cwd=tmp_path, timeout=120)
+    assert (code, err) == (0, [])
+
+
+def test_buffer_file_shorter_than_byte_length_refused(scene, capsys):
+    data = (scene.parent / "humanoid.bin").read_bytes()
+    (scene.parent / "humanoid.bin").write_bytes(data[:-10])
+    code, err = run(capsys, "inspect", scene)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: buffers[0]: buffer holds {len(data) - 10} bytes, "
+                               f"byteLength says {len(data)}"])
+
+
+def test_buffer_with_negative_byte_length_refused(scene, capsys):
+    g = pygltflib.GLTF2.gltf_from_json(scene.read_text())
+    g.buffers[0].byteLength = -1            # read(-1) would read the whole file
+    scene.write_text(g.gltf_to_json())
+    code, err = run(capsys, "inspect", scene)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: buffers[0]: byteLength -1 is not a number of bytes"])
+
+
+def test_symlinked_gltf_folder_is_its_folder(scene, tmp_path, capsys):
+    """The glTF's own folder reached through a symlink: its files are inside it."""
+    os.symlink(scene.parent, tmp_path / "via")
+    code, err = run(capsys, "inspect", tmp_path / "via" / "humanoid.gltf")
+    assert (code, err) == (0, [])
+
+
+# --------------------------------------------------------------------------- image URIs (carried on write)
+
+
+@pytest.mark.parametrize("variant", ESCAPES)
+def test_image_uri_out_of_folder_refused_on_write(scene, tmp_path, capsys, variant):
+    uri = _escape_variants(tmp_path, scene)[variant].replace("secret.bin", "tex.png")
+    set_uri(scene, uri, image=True)
+    before = snapshot(tmp_path)
+    out = scene.parent / "out.gltf"
+    code, err = run(capsys, "reduce", scene, "-o", out)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: images[0]: image URI {uri!r} points outside "
+                               "the glTF's folder"])
+    assert snapshot(tmp_path) == before
+
+
+def test_image_uri_with_a_scheme_refused_on_write(scene, tmp_path, capsys):
+    set_uri(scene, "file:///etc/passwd", image=True)
+    code, err = run(capsys, "reduce", scene, "-o", scene.parent / "out.gltf")
+    assert (code, err) == (2, [f"usdhands: error: {scene}: images[0]: image URI 'file:///etc/passwd' is not a "
+                               "relative file path"])
+    assert not (scene.parent / "out.gltf").exists()
+
+
+def test_external_files_carried_into_another_folder(scene, tmp_path, capsys):
+    """Output in a parent folder: relative URIs into the source's folder. Output elsewhere:
+    the buffer and the image embedded (a reference out of the output's folder would be
+    refused on reading it back)."""
+    set_uri(scene, "tex.png", image=True)
+    up = tmp_path / "a" / "up.gltf"
+    code, _ = run(capsys, "reduce", scene, "-o", up)
+    assert code == 0
+    g = pygltflib.GLTF2.gltf_from_json(up.read_text())
+    assert g.buffers[0].uri == "b/humanoid.bin" and g.images[0].uri == "b/tex.png"
+    (tmp_path / "elsewhere").mkdir()
+    away = tmp_path / "elsewhere" / "away.gltf"
+    code, _ = run(capsys, "reduce", scene, "-o", away)
+    assert code == 0
+    g = pygltflib.GLTF2.gltf_from_json(away.read_text())
+    assert g.images[0].uri == "data:image/png;base64," + base64.b64encode(b"\x89PNG inside").decode()
+    assert g.buffers[0].uri.startswith("data:application/octet-stream;base64,")
+    assert np.array_equal(read_clip(up).rotations, read_clip(away).rotations)
+    for out in (up, away):
+        code, err = run(capsys, "inspect", out)
+        assert (code, err) == (0, [])
+
+
+def test_image_fifo_refused_when_embedded(scene, tmp_path):
+    (scene.parent / "tex.png").unlink()
+    os.mkfifo(scene.parent / "tex.png")
+    set_uri(scene, "tex.png", image=True)
+    (tmp_path / "elsewhere").mkdir()
+    out = tmp_path / "elsewhere" / "away.gltf"
+    code, err = subprocess_cli("reduce", scene, "-o", out, cwd=tmp_path, timeout=120)
+    assert (code, err) == (2, [f"usdhands: error: {scene}: images[0]: image file 'tex.png' is not a "
+                               "regular file"])
+    assert list((tmp_path / "elsewhere").iterdir()) == []
+
+
+# --------------------------------------------------------------------------- inputs that are not regular files
+
+
+@pytest.mark.parametrize("kind", ["fifo", "dev zero symlink"])
+def test_main_input_not_a_regular_file(tmp_path, kind):
+    path = tmp_path / "in.glb"
+    if kind == "fifo":
+        os.mkfifo(path)
+    else:
+        os.symlink("/dev/zero", path)
+    for argv in (["inspect", path], ["convert", path, tmp_path / "out.glb"], ["handmap", path]):
+        code, err = subprocess_cli(*argv, cwd=tmp_path, timeout=60)
+        assert (code, err) == (2, [f"usdhands: error: {path}: not a regular file"]), argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.glb"]
+
+
+@pytest.mark.parametrize("kind", ["fifo", "dev zero symlink"])
+def test_read_asset_refuses_what_is_not_a_regular_file(tmp_path, kind):
+    """The library's own check (the CLI refuses earlier, in check_paths)."""
+    path = tmp_path / "in.bvh"
+    os.mkfifo(path) if kind == "fifo" else os.symlink("/dev/zero", path)
+    code, err = subprocess_python("-c", "from usdhands.formats.io import read_asset\n"
+                                  "try:\n    read_asset('in.bvh')\n"
+                                  "except Exception as e:\n    print(type(e).__name__, e, file=__import__('sys').stderr)",
+                                  cwd=tmp_path, timeout=60)
+    assert (code, err) == (0, ["AssetReadError in.bvh: not a regular file"])
