@@ -1,5 +1,5 @@
 """Issue 8, "Security first": glTF URIs kept inside the glTF's folder, inputs that are not
-regular files refused.
+regular files refused, and no output ever written over an input (side files included).
 
 Every case is built here in ``tmp_path``: a ``.gltf`` whose buffer is an external file
 (from the sample ``ok_00.glb``), files outside its folder, symlinks, FIFOs and hard links.
@@ -298,6 +298,12 @@ def test_main_input_not_a_regular_file(tmp_path, kind):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in.glb"]
 
 
+def test_side_input_fifo_refused(ok_glb, tmp_path):
+    os.mkfifo(tmp_path / "map.json")
+    code, err = subprocess_cli("inspect", ok_glb, "--handmap", tmp_path / "map.json", cwd=tmp_path, timeout=60)
+    assert (code, err) == (2, [f"usdhands: error: {tmp_path / 'map.json'}: not a regular file"])
+
+
 @pytest.mark.parametrize("kind", ["fifo", "dev zero symlink"])
 def test_read_asset_refuses_what_is_not_a_regular_file(tmp_path, kind):
     """The library's own check (the CLI refuses earlier, in check_paths)."""
@@ -308,3 +314,79 @@ def test_read_asset_refuses_what_is_not_a_regular_file(tmp_path, kind):
                                   "except Exception as e:\n    print(type(e).__name__, e, file=__import__('sys').stderr)",
                                   cwd=tmp_path, timeout=60)
     assert (code, err) == (0, ["AssetReadError in.bvh: not a regular file"])
+
+
+# --------------------------------------------------------------------------- outputs over inputs
+
+
+# (argv, the side input the output lands on, the label in the message); "{side}" is replaced by
+# the output's spelling, "{in}" by the side input's path, "{clip}" by the main input
+CASES = {
+    "handmap --handmap": (["handmap", "{clip}", "--handmap", "{in}", "-o", "{side}"], "map.json", "--handmap"),
+    "handmap input": (["handmap", "{clip}", "-o", "{side}"], "ok.glb", "input"),
+    "convert input": (["convert", "{clip}", "{side}"], "ok.glb", "input"),
+    "db build input": (["db", "build", "{clip}", "-o", "{side}"], "ok.glb", "input"),
+    "db build --labels-file": (["db", "build", "{clip}", "--labels-file", "{in}", "-o", "{side}"], "labels.csv",
+                               "--labels-file"),
+    "db build --config": (["db", "build", "{clip}", "--config", "{in}", "-o", "{side}"], "config.json", "--config"),
+    "db build --handmap": (["db", "build", "{clip}", "--handmap", "{in}", "-o", "{side}"], "map.json", "--handmap"),
+    "synthesize --config": (["synthesize", "{clip}", "--config", "{in}", "-o", "{side}"], "config.glb", "--config"),
+    "synthesize --handmap": (["synthesize", "{clip}", "--handmap", "{in}", "-o", "{side}"], "map.glb", "--handmap"),
+    "splice HANDS": (["splice", "{clip}", "{in}", "-o", "{side}"], "hands.glb", "input"),
+    "splice --body-markers": (["splice", "{clip}", "{clip}", "--body-markers", "{in}", "-o", "{side}"], "m.csv",
+                              "--body-markers"),
+    "splice --hands-markers": (["splice", "{clip}", "{clip}", "--hands-markers", "{in}", "-o", "{side}"], "m.csv",
+                               "--hands-markers"),
+    "splice --body-handmap": (["splice", "{clip}", "{clip}", "--body-handmap", "{in}", "-o", "{side}"], "m.glb",
+                              "--body-handmap"),
+    "splice --hands-handmap": (["splice", "{clip}", "{clip}", "--hands-handmap", "{in}", "-o", "{side}"], "m.glb",
+                               "--hands-handmap"),
+    "reduce --handmap": (["reduce", "{clip}", "--handmap", "{in}", "-o", "{side}"], "map.glb", "--handmap"),
+    "reduce --model over --handmap": (["reduce", "{clip}", "--handmap", "{in}", "--model", "{side}"], "map.json",
+                                      "--handmap"),
+    "reduce --model over input": (["reduce", "{clip}", "--model", "{side}"], "ok.glb", "input"),
+    "reduce --model over -o": (["reduce", "{clip}", "-o", "{in}", "--model", "{side}"], "new.glb", "-o"),
+    "expand --model": (["expand", "{clip}", "--model", "{in}", "-o", "{side}"], "model.json", "--model"),
+}
+SPELLINGS = ["same", "symlink", "hard link", "./", "../dir/"]
+
+
+@pytest.mark.parametrize("spelling", SPELLINGS)
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_output_never_lands_on_an_input(ok_glb, tmp_path, capsys, monkeypatch, case, spelling):
+    argv, name, label = CASES[case]
+    side = tmp_path / name
+    if not side.exists():
+        side.write_text(f"side input of {case}\n")
+    monkeypatch.chdir(tmp_path)
+    out = {"same": side, "symlink": tmp_path / f"link{side.suffix}", "hard link": tmp_path / f"hard{side.suffix}",
+           "./": f"./{name}", "../dir/": f"../{tmp_path.name}/{name}"}[spelling]
+    if spelling == "symlink":
+        os.symlink(side, out)
+    elif spelling == "hard link":
+        os.link(side, out)
+    checksum = sha(side)
+    before = snapshot(tmp_path)
+    code, err = run(capsys, *[a.format(side=out, clip=ok_glb, **{"in": side}) for a in argv])
+    folder = "folder" if argv[:2] == ["db", "build"] else "file"
+    what = "the input" if label == "input" else f"the {label} file"
+    assert (code, err) == (2, [f"usdhands: error: {Path(out)}: output path equals {what}; choose another {folder}"])
+    assert sha(side) == checksum and snapshot(tmp_path) == before
+
+
+def test_db_build_output_folder_holding_an_input_refused(ok_glb, tmp_path, capsys):
+    db = tmp_path / "db"
+    code, _ = run(capsys, "db", "build", "--samples", "-o", db)
+    assert code == 0
+    clip = db / "ok.glb"
+    ok_glb.rename(clip)
+    (db / "cfg.json").write_text("{}\n")
+    before = snapshot(tmp_path)
+    code, err = run(capsys, "db", "build", clip, "-o", db)
+    assert (code, err) == (2, [f"usdhands: error: {db}: output folder holds an input {str(clip)!r}, and is "
+                               "replaced whole; choose another folder"])
+    cfg = tmp_path / "db" / ".." / "db" / "cfg.json"
+    code, err = run(capsys, "db", "build", "--samples", "--config", cfg, "-o", db)
+    assert (code, err) == (2, [f"usdhands: error: {db}: output folder holds --config {str(cfg)!r}, and is "
+                               "replaced whole; choose another folder"])
+    assert snapshot(tmp_path) == before

@@ -561,7 +561,7 @@ def test_cli_user_mistakes(shared_assets, tmp_path, capsys):
     code, _, err = run_cli(capsys, "reduce", src, "--hands", "left")
     assert code == 2 and err == f"usdhands: error: {src}: no left hand with fingers (hands found: right)\n"
     code, _, err = run_cli(capsys, "reduce", src, "--model", tmp_path / "x.bvh", "-o", tmp_path / "x.bvh")
-    assert code == 2 and err == f"usdhands: error: {tmp_path / 'x.bvh'}: the model JSON would overwrite this file\n"
+    assert code == 2 and err == f"usdhands: error: {tmp_path / 'x.bvh'}: output path equals the -o file; choose another file\n"
     cesium = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
     code, _, err = run_cli(capsys, "reduce", cesium)
     assert code == 2 and err.startswith(f"usdhands: error: {cesium}: no hand found in skeleton") and err.count("\n") == 1

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import check_fps
+from usdhands.commands._output import MAIN_INPUT, check_paths
 from usdhands.errors import AssetReadError, NoSkeletonError
 from usdhands.formats.bvh import UNITS, units_to_meters
 from usdhands.formats.io import read_asset, write_asset
@@ -86,6 +87,7 @@ def convert(src: Path, dst: Path, animation: str | None = None, fps: float | Non
 
 def run(args) -> int:
     check_fps(args.fps)
+    check_paths({MAIN_INPUT: args.input}, {"OUT": args.output})
     notes: list[str] = []
     asset = convert(args.input, args.output, args.animation, args.fps, args.bvh_units, notes)
     for note in notes:

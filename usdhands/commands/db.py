@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import Progress, check_fps, print_json, print_table
+from usdhands.commands._output import MAIN_INPUT, check_paths
 from usdhands.errors import UsdHandsError
 
 
@@ -53,15 +54,17 @@ def run_build(args) -> int:
         expand_inputs, labeller, load_config, read_labelled, sample_database_items,
     )
 
+    if args.samples and args.inputs:
+        raise UsdHandsError("give input files or --samples, not both")
+    if not args.samples and not args.inputs:
+        raise UsdHandsError("no input files given (or use --samples)")
+    paths = [] if args.samples else expand_inputs(args.inputs)
+    check_paths({MAIN_INPUT: [*args.inputs, *paths], "--labels-file": args.labels_file, "--config": args.config,
+                 "--handmap": args.handmap}, replaced_folders={"-o": args.output})
     cfg = load_config(args.config)
     if args.samples:
-        if args.inputs:
-            raise UsdHandsError("give input files or --samples, not both")
         items = sample_database_items()
     else:
-        if not args.inputs:
-            raise UsdHandsError("no input files given (or use --samples)")
-        paths = expand_inputs(args.inputs)
         label_of = labeller(args.labels, args.labels_file)
         if args.animation == "all":
             read = _read_all_animations(paths, label_of, args.handmap, Progress("reading"))

@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from usdhands.commands._common import Progress, check_fps, check_seed, print_json, print_table
+from usdhands.commands._output import MAIN_INPUT, check_paths
 from usdhands.errors import UsdHandsError
 
 
@@ -65,6 +66,8 @@ def run(args) -> int:
 
     check_fps(args.fps)
     check_seed(args.seed)
+    check_paths({MAIN_INPUT: args.inputs, "--labels-file": args.labels_file, "--config": args.config,
+                 "--handmap": args.handmap})
 
     if args.k is not None and args.k < 1:
         raise UsdHandsError(f"--k must be at least 1, got {args.k}")

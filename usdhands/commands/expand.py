@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import print_json
-from usdhands.commands._output import add_layer_argument, layer_options
+from usdhands.commands._output import MAIN_INPUT, add_layer_argument, check_paths, layer_options
 from usdhands.errors import JointMismatchError, UsdHandsError
 
 
@@ -66,6 +66,7 @@ def run(args) -> int:
     from usdhands.algorithms.reduction.model import ReductionModel
     from usdhands.formats.io import read_clip, write_clip
 
+    check_paths({MAIN_INPUT: args.file, "--model": args.model}, {"-o": args.output})
     write_opts = layer_options(args.layer, args.file, args.output)
     model = ReductionModel.load(args.model)
     clip = read_clip(args.file, animation=args.animation)

@@ -7,10 +7,11 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import print_table
+from usdhands.commands._output import MAIN_INPUT, check_paths
 from usdhands.errors import AssetReadError, NoSkeletonError
 from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset
-from usdhands.formats.registry import atomic_output, check_output_path
+from usdhands.formats.registry import atomic_output
 from usdhands.model.handmap import FINGERS, SIDES, HandMap
 from usdhands.model.skeleton import short_joint_name
 
@@ -67,8 +68,7 @@ def handmap_rows(hm: HandMap) -> list[tuple]:
 
 
 def run(args) -> int:
-    if args.output is not None:
-        check_output_path(args.output, args.file)
+    check_paths({MAIN_INPUT: args.file, "--handmap": args.handmap}, {"-o": args.output})
     asset = read_asset(args.file)
     sk = _pick_skeleton(asset, args.file, args.animation, args.skeleton)
     hm, source = hands_for(args.file, sk, args.handmap, side_hint=args.side)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from usdhands.commands._common import print_json, print_table
+from usdhands.commands._output import MAIN_INPUT, check_paths
 from usdhands.errors import NoHandsError
 from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset
@@ -62,6 +63,7 @@ def inspect_asset(path: Path, handmap_path: Path | None = None) -> dict:
 
 
 def run(args) -> int:
+    check_paths({MAIN_INPUT: args.file, "--handmap": args.handmap})
     report = inspect_asset(args.file, args.handmap)
     if args.json:
         print_json(report)

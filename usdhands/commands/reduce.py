@@ -13,8 +13,8 @@ import dataclasses
 from pathlib import Path
 
 from usdhands.commands._common import parse_list, print_json, print_table
-from usdhands.commands._output import add_layer_argument, layer_options
-from usdhands.errors import OutputPathError, UsdHandsError
+from usdhands.commands._output import MAIN_INPUT, add_layer_argument, check_paths, layer_options
+from usdhands.errors import UsdHandsError
 
 
 def register(sub) -> None:
@@ -100,17 +100,12 @@ def run(args) -> int:
     from usdhands.algorithms.reduction.reduce import RangeRule, curve_names, paper_style_names, parse_steps, reduce_curves
     from usdhands.commands._common import Progress
     from usdhands.commands._synthesis_common import check_plot_folder
-    from usdhands.formats.registry import check_output_path
 
     steps = parse_steps(args.steps)
     write_opts = layer_options(args.layer, args.file, args.output) if args.output is not None else {}
     if args.layer and args.output is None:
         raise UsdHandsError("--as-layer needs -o OUT")
-    if args.model is not None:
-        for other in (args.file, args.output):
-            if other is not None and args.model.resolve() == Path(other).resolve():
-                raise OutputPathError("the model JSON would overwrite this file", path=args.model)
-        check_output_path(args.model)  # a folder or a missing folder, refused before any work
+    check_paths({MAIN_INPUT: args.file, "--handmap": args.handmap}, {"-o": args.output, "--model": args.model})
     check_plot_folder(args.plot)
     progress = Progress("reduce")
     progress(0, 3, "reading")

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import Progress, print_json, print_table
-from usdhands.commands._output import add_layer_argument, layer_options
+from usdhands.commands._output import MAIN_INPUT, add_layer_argument, check_paths, layer_options
 from usdhands.errors import UsdHandsError
 
 DURATION_RATIO_NOTE = 1.5
@@ -221,7 +221,6 @@ def run(args) -> int:
     from usdhands.algorithms.splicing.splice import SpliceOptions, splice_clips
     from usdhands.formats.io import read_clip, write_clip
     from usdhands.commands._synthesis_common import check_plot_folder
-    from usdhands.formats.registry import check_output_path
 
     constraints = [parse_match(t) for t in args.match]
     band1, band2 = parse_band(args.band)
@@ -229,7 +228,9 @@ def run(args) -> int:
         raise UsdHandsError(f"bad --blend {args.blend}: expected a number of frames >= 0")
     if not math.isfinite(args.hand_yaw):
         raise UsdHandsError(f"bad --hand-yaw {args.hand_yaw}: expected a finite angle in degrees")
-    check_output_path(args.output, args.body, args.hands)
+    check_paths({MAIN_INPUT: (args.body, args.hands), "--body-markers": args.body_markers,
+                 "--hands-markers": args.hands_markers, "--body-handmap": args.body_handmap,
+                 "--hands-handmap": args.hands_handmap}, {"-o": args.output})
     check_plot_folder(args.plot)
     opts = layer_options(args.layer, args.body, args.output)
     body = read_clip(args.body, animation=args.animation)

@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from usdhands.commands._common import Progress, print_json, print_table
-from usdhands.commands._output import layer_options
+from usdhands.commands._output import MAIN_INPUT, check_paths, layer_options
 from usdhands.commands._synthesis_common import check_plot_folder
 from usdhands.errors import UsdHandsError
 
@@ -231,9 +231,10 @@ def _check_output(args) -> None:
     """Refuse a bad output before any work: the input itself, a missing folder, --as-layer
     without USD on both sides, or another format than the input's (without --graft-hands,
     which writes a new file in any format)."""
-    from usdhands.formats.registry import check_output_path, handler_for
+    from usdhands.formats.registry import handler_for
 
-    check_output_path(args.output, args.file)
+    check_paths({MAIN_INPUT: args.file, "--db": args.db, "--config": args.config, "--handmap": args.handmap},
+                {"-o": args.output})
     layer_options(args.layer, args.file, args.output)
     check_plot_folder(args.plot)
     if not args.graft_hands and args.file.exists():

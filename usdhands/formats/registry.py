@@ -28,7 +28,7 @@ from usdhands.errors import AssetReadError, OutputPathError
 
 __all__ = [
     "FormatHandler", "BuiltinFormat", "BUILTIN_FORMATS", "handlers", "handler_for", "atomic_output",
-    "check_output_path", "register_handler",
+    "check_output_path", "register_handler", "same_file",
 ]
 
 ENTRY_POINT_GROUP = "usdhands.formats"
@@ -166,14 +166,27 @@ def handler_for(path: str | os.PathLike, mode: str = "read") -> FormatHandler:
     raise (AssetReadError if mode == "read" else OutputPathError)(msg, path=path)
 
 
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """Whether two paths name one file: the same path in any spelling (``./x``,
+    ``../dir/x``), through symlinks, or a hard link of it."""
+    a, b = Path(a), Path(b)
+    try:
+        if a.resolve() == b.resolve():
+            return True
+    except (OSError, RuntimeError):  # a symlink loop: compare as spelled
+        if os.path.abspath(a) == os.path.abspath(b):
+            return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return False
+
+
 def check_output_path(out: str | os.PathLike, *inputs: str | os.PathLike) -> Path:
-    """Refuse an output path that is one of the inputs or whose folder does not exist."""
+    """Refuse an output path that is one of the inputs (:func:`same_file`) or whose folder does not exist."""
     out = Path(out)
     for i in inputs:
-        if i is None:
-            continue
-        i = Path(i)
-        if out.resolve() == i.resolve() or (out.exists() and i.exists() and os.path.samefile(out, i)):
+        if i is not None and same_file(out, i):
             raise OutputPathError("output path equals the input; choose another file", path=out)
     if not out.parent.resolve().is_dir():
         raise OutputPathError(f"output folder {str(out.parent)!r} does not exist", path=out)
