@@ -27,7 +27,7 @@ import pygltflib
 from usdhands.errors import AssetReadError
 
 __all__ = [
-    "GltfFile", "load_gltf", "read_accessor", "BinaryAppender", "save_gltf",
+    "GltfFile", "load_gltf", "read_accessor", "BinaryAppender", "save_gltf", "contained_file", "read_external",
     "COMPONENT_DTYPES", "TYPE_SIZES",
 ]
 
