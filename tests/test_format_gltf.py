@@ -568,3 +568,56 @@ def test_write_clip_keeps_extensions_materials_extras_and_other_animations(tmp_p
     back = read_asset(out)
     assert quat_angle_deg(back.clip("Anim").rotations[:, hand], qz(40)).max() < 1e-4
     np.testing.assert_array_equal(back.clip("Other").rotations, read_asset(src).clip("Other").rotations)
+
+
+@pytest.mark.parametrize("name", ["robot_expressive/RobotExpressive.glb", "SAMPLE:conversation.glb",
+                                  "SAMPLE:humanoid.glb"])
+def test_clips_equal_channel_by_channel_sampling(shared_assets, name):
+    """read_gltf copies baked channels straight into the clip (keys checked once per input
+    accessor): the same arrays, to the bit, as sampling every channel on its own."""
+    from usdhands.formats.gltf_container import load_gltf
+    from usdhands.formats.gltf_read import animation_channels, channel_keys, detect_fps, scan_scene, snap_time
+
+    path = (Path(__file__).resolve().parent.parent / "sample_assets" / name[7:] if name.startswith("SAMPLE:")
+            else shared_assets / name)
+    asset = read_asset(path)
+    doc = load_gltf(path)
+    scene = scan_scene(doc)
+    binding = scene.bindings[0]
+    sk = binding.skeleton
+    clips = [c for c in asset.clips if c.skeleton.joint_names == sk.joint_names]
+    assert len(clips) == len([a for a in range(len(doc.gltf.animations)) if animation_channels(doc, a, binding)])
+    for a, clip in zip(range(len(doc.gltf.animations)), clips):
+        chans = animation_channels(doc, a, binding)
+        keys = {c: channel_keys(doc, a, c) for c, _, _ in chans}
+        rate = detect_fps(np.concatenate([k[0] for k in keys.values()]))
+        t0 = min(float(k[0].min()) for k in keys.values())
+        at = t0 + np.arange(clip.num_frames) / rate
+        want = {"rotation": np.broadcast_to(sk.rest_rotations, clip.rotations.shape).copy(),
+                "translation": np.broadcast_to(sk.rest_translations, clip.translations.shape).copy(),
+                "scale": np.broadcast_to(sk.rest_scales, clip.scales.shape).copy()}
+        for c, j, path_ in chans:
+            times, values, interp = keys[c]
+            want[path_][:, j] = sample_channel(times, values, interp, at, path_ == "rotation", snap_time(rate))
+        assert clip.fps == rate
+        assert np.array_equal(clip.rotations, want["rotation"])
+        assert np.array_equal(clip.translations, want["translation"])
+        assert np.array_equal(clip.scales, want["scale"])
+
+
+def test_differs_from_rest_equals_the_frame_by_frame_test():
+    """The writer's min/max shortcut against |values - rest| > tol at every frame, NaN and inf included."""
+    from usdhands.formats.gltf_write import _differs_from_rest
+
+    rng = np.random.default_rng(0)
+    for trial in range(200):
+        T, J = rng.integers(1, 6), rng.integers(1, 8)
+        rest = rng.normal(size=(J, 3)) * 10.0 ** rng.integers(-3, 4)
+        v = rest[None] + rng.normal(size=(T, J, 3)) * 10.0 ** rng.integers(-9, 0) * (rng.random((T, J, 3)) < 0.3)
+        if trial % 5 == 0:
+            v[rng.random(v.shape) < 0.2] = np.nan
+        if trial % 7 == 0:
+            v[rng.random(v.shape) < 0.1] = np.inf
+        for tol in (1e-6, 0.0, 1e-3):
+            naive = np.any(np.abs(v - rest[None]) > tol * np.maximum(1.0, np.abs(rest))[None], axis=(0, 2))
+            assert np.array_equal(_differs_from_rest(v, rest, tol), naive)

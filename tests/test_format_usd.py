@@ -769,3 +769,33 @@ def test_folded_roots_are_unfolded_when_written_back(tmp_path):
     np.testing.assert_allclose(back.world_positions(), moved.world_positions(), atol=1e-5)
     np.testing.assert_allclose(back.world_positions()[:, 0] - clip.world_positions()[:, 0],
                                np.tile([0, 0.25, 0], (4, 1)), atol=1e-5)
+
+
+def test_one_value_at_a_later_frame_is_refused_not_broadcast(tmp_path):
+    """The reader copies whole frames at once; a frame with one translation for 3 joints
+    would broadcast into all three: it must still be refused, naming the time."""
+    p = build_stage(tmp_path / "one.usda")
+    stage = Usd.Stage.Open(str(p))
+    attr = UsdSkel.Animation(stage.GetPrimAtPath("/Char/Skel/Anim")).GetTranslationsAttr()
+    t = attr.GetTimeSamples()[1]
+    attr.Set(Vt.Vec3fArray([Gf.Vec3f(1, 2, 3)]), t)
+    stage.Save()
+    with pytest.raises(JointMismatchError) as e:
+        read_asset(p)
+    assert str(e.value) == f"{p}: /Char/Skel/Anim: translations has 1 values for 3 joints at time {t:g}"
+
+
+def test_clip_values_are_the_authored_samples(tmp_path):
+    """Every frame's rotations and translations equal attribute.Get at that time (the whole-frame copy)."""
+    p = build_stage(tmp_path / "anim.usda")
+    clip = HANDLER.read(p).clip()
+    stage = Usd.Stage.Open(str(p))
+    anim = UsdSkel.Animation(stage.GetPrimAtPath("/Char/Skel/Anim"))
+    order = [clip.skeleton.joint_names.index(str(j)) for j in anim.GetJointsAttr().Get()]
+    times = anim.GetRotationsAttr().GetTimeSamples()
+    assert clip.num_frames == len(times) > 1
+    for f, t in enumerate(times):
+        q = np.array(anim.GetRotationsAttr().Get(t), dtype=np.float64)
+        tr = np.array(anim.GetTranslationsAttr().Get(t), dtype=np.float64)
+        assert np.array_equal(clip.rotations[f, order], q)
+        assert np.array_equal(clip.translations[f, order], tr)

@@ -431,7 +431,7 @@ def sample_channel(times: np.ndarray, values: np.ndarray, interpolation: str, at
     if K == 1:
         out = np.broadcast_to(vals[0], (at.shape[0], vals.shape[1])).copy()
         return _norm(out) if rotation else out
-    if K == at.shape[0] and np.all(np.abs(times - at) <= snap):  # keys on the frames: the values themselves
+    if _keys_are_frames(times, at, snap):  # keys on the frames: the values themselves
         out = np.array(vals, dtype=np.float64)
         return _norm(out) if rotation else out
     if interpolation == "STEP":
@@ -462,9 +462,14 @@ def snap_time(fps: float) -> float:
     return 1e-3 / fps
 
 
-def _norm(q: np.ndarray) -> np.ndarray:
+def _keys_are_frames(times: np.ndarray, at: np.ndarray, snap: float) -> bool:
+    """Whether key times ``(K,)`` are the frame times ``at (T,)``, each within ``snap`` seconds."""
+    return times.shape[0] == at.shape[0] and bool(np.all(np.abs(times - at) <= snap))
+
+
+def _norm(q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     n = np.linalg.norm(q, axis=-1, keepdims=True)
-    return q / np.where(n > 0, n, 1.0)  # zero quaternions stay zero: Clip.validate reports them
+    return np.divide(q, np.where(n > 0, n, 1.0), out=out)  # zero quaternions stay zero: Clip.validate reports them
 
 
 def channel_keys(doc: GltfFile, anim_index: int, channel_index: int) -> tuple[np.ndarray, np.ndarray, str]:
@@ -548,7 +553,10 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     if not chans:
         return None
     keys = {c: channel_keys(doc, anim_index, c) for c, _, _ in chans}
-    inputs = list({id(k[0]): k[0] for k in keys.values() if k[0].size}.values())  # shared inputs once
+    anim = doc.gltf.animations[anim_index]
+    accessor_of = {c: anim.samplers[anim.channels[c].sampler].input for c in keys}  # key times accessor per channel
+    # each input accessor once (channels usually share one; each channel_keys call gives a new view)
+    inputs = list({accessor_of[c]: k[0] for c, k in keys.items() if k[0].size}.values())
     if not inputs:
         raise doc.error("animation has no key times", f"animations[{anim_index}]")
     rate = float(fps) if fps else None
@@ -574,9 +582,20 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     tra = np.broadcast_to(sk.rest_translations, (n, J, 3)).copy()
     sca = np.broadcast_to(sk.rest_scales, (n, J, 3)).copy()
     target = {"rotation": rot, "translation": tra, "scale": sca}
+    snap = snap_time(rate)
+    on_frames: dict[int, bool] = {}  # input accessor -> its keys are the frames
     for c, j, path in chans:
         times, values, interp = keys[c]
-        target[path][:, j] = sample_channel(times, values, interp, at, path == "rotation", snap_time(rate))
+        if accessor_of[c] not in on_frames:
+            on_frames[accessor_of[c]] = _keys_are_frames(times, at, snap)
+        if on_frames[accessor_of[c]]:  # baked keys: the values themselves, as sample_channel gives them, in place
+            vals = values[1::3] if interp == "CUBICSPLINE" else values
+            if path == "rotation":
+                _norm(vals, out=target[path][:, j])
+            else:
+                target[path][:, j] = vals
+        else:
+            target[path][:, j] = sample_channel(times, values, interp, at, path == "rotation", snap)
     return Clip(sk, rate, rot, tra, sca, name=name, start_time=t0)
 
 

@@ -127,8 +127,12 @@ def _differs_from_rest(values: np.ndarray, rest: np.ndarray, tol: float) -> np.n
     """Per joint: whether ``values (T, J, 3)`` leave ``rest (J, 3)`` anywhere (relative tolerance)."""
     if values.shape[0] == 0:
         return np.zeros(values.shape[1], dtype=bool)
-    scale = np.maximum(1.0, np.abs(rest))
-    return np.any(np.abs(values - rest[None]) > tol * scale[None], axis=(0, 2))
+    limit = tol * np.maximum(1.0, np.abs(rest))
+    # |v - rest| > limit at some frame  <=>  max(v) - rest > limit or rest - min(v) > limit (rounding is
+    # monotonic); fmax/fmin skip NaN as the comparison does
+    over = np.fmax.reduce(values, axis=0) - rest > limit
+    under = rest - np.fmin.reduce(values, axis=0) > limit
+    return np.any(over | under, axis=-1)
 
 
 # -- new files ---------------------------------------------------------------------

@@ -341,26 +341,34 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
     r_k = np.empty((T, K, 4), dtype=np.float32)
     t_k = np.empty((T, K, 3), dtype=np.float32)
     s_k = np.empty((T, K, 3), dtype=np.float32)
-    has = {"translations": False, "rotations": False, "scales": False}
-    for f, code in enumerate(codes):
-        values = anim_query.ComputeJointLocalTransformComponents(code)
-        if not values:
-            continue
-        for label, arr, dst in zip(("translations", "rotations", "scales"), values, (t_k, r_k, s_k)):
-            n = len(arr)
-            if n == 0:
-                if has[label]:
-                    raise JointMismatchError(f"{label} is empty at time {code.GetValue()}", path=path,
-                                             location=where)
+    try:  # every frame all three components, one value per joint: no per-frame checks
+        for f, code in enumerate(codes):
+            tr, ro, sc = anim_query.ComputeJointLocalTransformComponents(code)
+            if len(tr) != K or len(ro) != K or len(sc) != K:  # (one value would broadcast)
+                raise ValueError
+            t_k[f], r_k[f], s_k[f] = tr, ro, sc
+        has = {"translations": True, "rotations": True, "scales": True}
+    except (ValueError, TypeError):  # no values at some frame, or a wrong count: the checks say which
+        has = {"translations": False, "rotations": False, "scales": False}
+        for f, code in enumerate(codes):
+            values = anim_query.ComputeJointLocalTransformComponents(code)
+            if not values:
                 continue
-            if n != K:
-                at = "" if code.IsDefault() else f" at time {code.GetValue():g}"
-                raise JointMismatchError(f"{label} has {n} values for {K} joints{at}", path=path, location=where)
-            if f > 0 and not has[label]:
-                raise JointMismatchError(f"{label} is missing before time {code.GetValue():g}", path=path,
-                                         location=where)
-            has[label] = True
-            dst[f] = np.asarray(arr)
+            for label, arr, dst in zip(("translations", "rotations", "scales"), values, (t_k, r_k, s_k)):
+                n = len(arr)
+                if n == 0:
+                    if has[label]:
+                        raise JointMismatchError(f"{label} is empty at time {code.GetValue()}", path=path,
+                                                 location=where)
+                    continue
+                if n != K:
+                    at = "" if code.IsDefault() else f" at time {code.GetValue():g}"
+                    raise JointMismatchError(f"{label} has {n} values for {K} joints{at}", path=path, location=where)
+                if f > 0 and not has[label]:
+                    raise JointMismatchError(f"{label} is missing before time {code.GetValue():g}", path=path,
+                                             location=where)
+                has[label] = True
+                dst[f] = np.asarray(arr)
     if not has["rotations"]:
         # the query answered nothing (no translations authored): check what is authored.
         # Otherwise it hands the authored quaternions over as they are, and
