@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from usdhands.commands._common import check_fps
@@ -72,9 +73,9 @@ def convert(src: Path, dst: Path, animation: str | None = None, fps: float | Non
             hint = " (choose another with --animation)" if len(clips) > 1 or len(asset.skeletons) > 1 else ""
             notes.append(f"BVH holds one skeleton and one animation: took animation {taken.name!r} of skeleton "
                          f"{taken.skeleton.name!r}; left out {', '.join(left)}{hint}")
-        asset = Asset(asset.path, (taken.skeleton,), (taken,), ())
+        asset = replace(asset, skeletons=(taken.skeleton,), clips=(taken,), meshes=())
     else:
-        asset = Asset(asset.path, asset.skeletons, clips, asset.meshes)
+        asset = replace(asset, clips=clips)
     mpu, up = TARGET_CONVENTIONS.get(target.name, (None, None))
     options = {}
     if target.name == "bvh":

@@ -51,6 +51,7 @@ Writing
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import warnings
@@ -66,6 +67,8 @@ from usdhands.model.asset import Asset
 from usdhands.model.clip import Clip
 from usdhands.model.rotations import quat_identity, unwrap_deg
 from usdhands.model.skeleton import Skeleton
+
+_log = logging.getLogger(__name__)
 
 __all__ = ["HANDLER", "BvhHandler", "UNITS", "units_to_meters", "parse_bvh", "BvhFile", "euler_channels_to_quat"]
 
@@ -605,8 +608,12 @@ class BvhHandler:
         return bvh_to_asset(parse_bvh(path), path, units_to_meters(units), fps)
 
     def write(self, asset: Asset, path: str | os.PathLike, *, order: str = DEFAULT_ORDER,
-              units: str | float | None = None, animation: str | int | None = None, **options) -> None:
+              units: str | float | None = None, animation: str | int | None = None,
+              provenance: dict | None = None, **options) -> None:
         """Write a new BVH file from an asset's first clip (or ``animation``).
+
+        BVH has no place for a provenance record: one given (or the asset's, for the
+        clip written) is named in a warning and not kept.
 
         Parameters
         ----------
@@ -627,6 +634,7 @@ class BvhHandler:
             clip = Clip(sk, 30.0, sk.rest_rotations[None], name=sk.name)
         else:
             raise AssetReadError("nothing to write as BVH: no skeleton", path=asset.path)
+        _warn_provenance_lost(provenance if provenance is not None else asset.provenance.get(clip.name))
         clip = _clip_in(clip, mpu)
         sk = clip.skeleton
         names = _bvh_names(sk)
@@ -679,8 +687,10 @@ class BvhHandler:
                               encoding="utf-8")
 
     def write_clip(self, source: str | os.PathLike, clip: Clip, path: str | os.PathLike, *,
-                   units: str | float | None = None, **options) -> None:
+                   units: str | float | None = None, provenance: dict | None = None, **options) -> None:
         """Write ``source``'s hierarchy (text unchanged) with ``clip``'s motion.
+
+        A ``provenance`` record is named in a warning and not kept (BVH has no place for it).
 
         Every ROOT/JOINT of the source must be in the clip's skeleton (matched by
         short name); channel orders are the source's.
@@ -704,6 +714,7 @@ class BvhHandler:
         """
         source = Path(source)
         bvh = parse_bvh(source)
+        _warn_provenance_lost(provenance)
         clip = _clip_in(clip, units_to_meters(units))
         sk = clip.skeleton
         lookup = {}
@@ -741,6 +752,12 @@ class BvhHandler:
                     ri += 1
         values = np.concatenate(parts, axis=1) if parts else np.zeros((T, 0))
         Path(path).write_text(bvh.hierarchy_text + _motion_text(T, clip.fps, values), encoding="utf-8")
+
+
+def _warn_provenance_lost(record: dict | None) -> None:
+    if record:
+        _log.warning("BVH cannot record how the finger motion was made (method %r): provenance not kept",
+                     record.get("method"))
 
 
 HANDLER = BvhHandler()

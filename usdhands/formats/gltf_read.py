@@ -31,6 +31,7 @@ from usdhands.errors import AssetReadError
 from usdhands.formats.gltf_container import GltfFile, load_gltf
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
+from usdhands.model.provenance import provenance_record
 from usdhands.model.rotations import quat_slerp, trs_to_xform, xform_to_trs
 from usdhands.model.skeleton import Skeleton
 
@@ -731,16 +732,36 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
             scene = scan_scene(load_gltf(path))
         doc = scene.doc
         clips: list[Clip] = []
+        provenance: dict[str, dict] = {}
         for ai, anim in enumerate(doc.gltf.animations):
             name = anim.name or f"animation{ai}"
+            record = recorded_provenance(doc, ai)
             k = 0
             for binding in scene.bindings:
                 clip = sample_animation(doc, ai, binding, fps, name if k == 0 else f"{name}:{binding.skeleton.name}")
                 if clip is not None:
                     clips.append(clip)
+                    if record is not None:
+                        provenance[clip.name] = record
                     k += 1
         meshes = read_meshes(scene)
-    return Asset(str(path), tuple(b.skeleton for b in scene.bindings), tuple(clips), tuple(meshes))
+    return Asset(str(path), tuple(b.skeleton for b in scene.bindings), tuple(clips), tuple(meshes),
+                 provenance=provenance)
+
+
+def recorded_provenance(doc: GltfFile, anim_index: int) -> dict | None:
+    """The finger-motion record of the animation's ``extras.usdhands.provenance`` (None when absent;
+    a malformed one is named in a warning and left out)."""
+    extras = doc.gltf.animations[anim_index].extras
+    ours = extras.get(EXTRAS_KEY) if isinstance(extras, dict) else None
+    record = ours.get("provenance") if isinstance(ours, dict) else None
+    if record is None:
+        return None
+    try:
+        return provenance_record(record if isinstance(record, dict) else {"method": record})
+    except (ValueError, TypeError) as e:
+        _log.warning("%s: animations[%d]: ignoring extras.%s.provenance (%s)", doc.path, anim_index, EXTRAS_KEY, e)
+        return None
 
 
 @contextlib.contextmanager

@@ -27,6 +27,7 @@ from usdhands.formats.gltf_read import (
 )
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
+from usdhands.model.provenance import provenance_record
 from usdhands.model.rotations import quat_angle_deg
 from usdhands.model.skeleton import short_joint_name
 from usdhands.model.units import asset_to, clip_to, skeleton_to
@@ -116,11 +117,22 @@ class _AnimationWriter:
                     sampler=s, target=pygltflib.AnimationChannelTarget(node=node, path=path)))
 
 
-def _record_fps(anim: pygltflib.Animation, fps: float) -> None:
-    """Record the clip's exact frame rate in ``anim.extras["usdhands"]["fps"]`` (other extras kept)."""
+def _record(anim: pygltflib.Animation, key: str, value) -> None:
+    """Set ``anim.extras["usdhands"][key]`` (other extras kept)."""
     extras = anim.extras if isinstance(anim.extras, dict) else {}
     ours = extras.get(EXTRAS_KEY) if isinstance(extras.get(EXTRAS_KEY), dict) else {}
-    anim.extras = {**extras, EXTRAS_KEY: {**ours, "fps": float(fps)}}
+    anim.extras = {**extras, EXTRAS_KEY: {**ours, key: value}}
+
+
+def _record_fps(anim: pygltflib.Animation, fps: float) -> None:
+    """Record the clip's exact frame rate in ``extras.usdhands.fps``."""
+    _record(anim, "fps", float(fps))
+
+
+def _record_provenance(anim: pygltflib.Animation, record: dict | None) -> None:
+    """Record how the finger motion was made in ``extras.usdhands.provenance`` (nothing for None)."""
+    if record is not None:
+        _record(anim, "provenance", provenance_record(record))
 
 
 def _differs_from_rest(values: np.ndarray, rest: np.ndarray, tol: float) -> np.ndarray:
@@ -137,7 +149,7 @@ def _differs_from_rest(values: np.ndarray, rest: np.ndarray, tol: float) -> np.n
 
 # -- new files ---------------------------------------------------------------------
 
-def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
+def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None = None, **options) -> None:
     """Write ``asset`` as a new ``.gltf`` (buffers embedded as data URIs) or ``.glb``.
 
     Every skeleton becomes a node tree with a skin (inverse bind matrices), every
@@ -152,6 +164,9 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
     asset : Asset
     path : path-like
         ``.glb`` for binary, anything else for JSON.
+    provenance : dict, optional
+        How the finger motion of every clip was made, recorded in each animation's
+        ``extras.usdhands.provenance``; by default the asset's record of each clip.
     """
     if options:
         raise TypeError(f"unexpected options for glTF write: {sorted(options)}")
@@ -207,6 +222,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, **options) -> None:
         c = clip_to_gltf_space(clip)
         anim = pygltflib.Animation(name=short if shorts.count(short) == 1 else clip.name)
         _record_fps(anim, c.fps)
+        _record_provenance(anim, provenance if provenance is not None else asset.provenance.get(clip.name))
         w = _AnimationWriter(app, anim, _key_times(c))
         J = sk.num_joints
         nodes = skel_nodes[si]
@@ -388,7 +404,7 @@ def _carry_uri(uri: str | None, source: Path, out_dir: Path, what: str, location
 
 def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLike, *,
                     final_path: str | os.PathLike | None = None, animation: str | int | None = None,
-                    **options) -> None:
+                    provenance: dict | None = None, **options) -> None:
     """Copy ``source`` to ``path`` with ``clip`` written into one of its animations.
 
     The animation is ``animation`` (name or index) or, when None, the one named like
@@ -415,6 +431,9 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
         The file's final location, used to re-express relative URIs of external
         buffers and images when it is in another folder than ``source``.
     animation : str or int, optional
+    provenance : dict, optional
+        How the finger motion was made, recorded in the animation's
+        ``extras.usdhands.provenance`` (even when no channel changed).
     as_layer : bool, optional
         Only False is accepted (override layers are a USD feature).
 
@@ -493,6 +512,10 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
         if b.uri is None:
             buffers[i] = buffers[i][: b.byteLength]
 
+    if provenance is not None:
+        provenance = provenance_record(provenance)  # checked before anything is written
+        if ai is None and not any(changed.values()):
+            changed["rotation"] = list(range(len(cj)))  # a new animation to hold the record
     if any(changed.values()):
         target = _data_buffer(g, buffers, out_glb)
         app = BinaryAppender(g, target, buffers[target])
@@ -507,6 +530,8 @@ def write_clip_gltf(source: str | os.PathLike, clip: Clip, path: str | os.PathLi
             w.add(path_, ks, [nodes[k] for k in ks], arrays[path_], replace=existing)
         _drop_unused_samplers(anim)
         app.finish(buffers)
+    if provenance is not None:
+        _record_provenance(g.animations[ai], provenance)
     save_gltf(g, buffers, path, glb=out_glb)
 
 

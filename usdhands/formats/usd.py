@@ -29,20 +29,22 @@ class UsdHandler:
         """Every Skeleton, SkelAnimation and skinned Mesh of a file (:func:`read_usd`)."""
         return read_usd(path, fps=fps)
 
-    def write(self, asset: Asset, path: Path, **options) -> None:
-        """A standalone stage (:func:`write_usd`); takes no options."""
+    def write(self, asset: Asset, path: Path, *, provenance: dict | None = None, **options) -> None:
+        """A standalone stage (:func:`write_usd`); ``provenance`` becomes every animation's
+        ``UsdHandsFingerMotionAPI``."""
         if options:
             raise TypeError(f"Unexpected options for USD write: {sorted(options)}")
-        write_usd(asset, path)
+        write_usd(asset, path, provenance=provenance)
 
     def write_clip(self, source: Path, clip: Clip, path: Path, *, final_path: str | os.PathLike | None = None,
-                   animation: str | None = None, as_layer: bool = False, hand_map=None, finger_motion=None,
-                   **options) -> None:
-        """``source`` with ``clip`` put into its animation (:func:`write_usd_clip`)."""
+                   animation: str | None = None, as_layer: bool = False, hand_map=None, provenance=None,
+                   finger_motion=None, **options) -> None:
+        """``source`` with ``clip`` put into its animation (:func:`write_usd_clip`); ``provenance``
+        (``finger_motion`` is its older name) becomes the animation's ``UsdHandsFingerMotionAPI``."""
         if options:
             raise TypeError(f"Unexpected options for USD write_clip: {sorted(options)}")
         write_usd_clip(source, clip, path, final_path=final_path, animation=animation, as_layer=as_layer,
-                       hand_map=hand_map, finger_motion=finger_motion)
+                       hand_map=hand_map, finger_motion=provenance if provenance is not None else finger_motion)
 
 
 HANDLER = UsdHandler()

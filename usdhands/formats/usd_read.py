@@ -27,6 +27,7 @@ from usdhands.formats.usd_common import (
     skeleton_tokens_and_names,
     skeleton_world_xforms,
 )
+from usdhands.formats.usd_schema_data import read_finger_motion
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
 from usdhands.model.rotations import xform_to_trs
@@ -153,7 +154,13 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
             for sq in binding.GetSkinningTargets():
                 if sq.GetPrim().IsA(UsdGeom.Mesh):
                     meshes.append(_read_mesh(sq, k, tokens_of[k], path, worlds[k]))
-    return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes))
+    provenance = {}
+    for clip in clips:
+        record = read_finger_motion(stage.GetPrimAtPath(clip.name))
+        if record is not None:
+            provenance[clip.name] = record
+    return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes),
+                 provenance=provenance)
 
 
 def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_unit: float = 1.0,

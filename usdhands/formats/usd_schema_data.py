@@ -24,6 +24,7 @@ from pxr import Sdf, Usd, UsdSkel
 from usdhands.errors import ConfigError
 from usdhands.formats.usd_common import open_stage, quiet_diagnostics, skeleton_tokens_and_names
 from usdhands.model.handmap import FINGERS, SIDES, HandMap, HandSide
+from usdhands.model.provenance import FINGER_MOTION_METHODS
 
 __all__ = [
     "HAND_MAP_API", "FINGER_MOTION_API", "FINGER_MOTION_METHODS", "write_hand_map", "read_hand_map",
@@ -32,7 +33,6 @@ __all__ = [
 
 HAND_MAP_API = "UsdHandsHandMapAPI"
 FINGER_MOTION_API = "UsdHandsFingerMotionAPI"
-FINGER_MOTION_METHODS = ("none", "synthesis", "interaction", "splicing", "reduction", "keyed")
 _SINGLE = ("wrist", "forearm", "shoulder", "root")
 
 

@@ -34,6 +34,7 @@ from usdhands.formats.usd_schema_data import write_finger_motion, write_hand_map
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import HandMap
+from usdhands.model.provenance import provenance_record
 from usdhands.model.rotations import quat_angle_deg
 from usdhands.model.skeleton import Skeleton
 
@@ -156,7 +157,7 @@ def _set_time_range(layer: Sdf.Layer, codes: np.ndarray, *, extend: bool) -> Non
 
 
 # --------------------------------------------------------------------------- standalone
-def write_usd(asset: Asset, path: str | os.PathLike) -> None:
+def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None = None) -> None:
     """Write ``asset`` as a standalone stage.
 
     Layout: ``/Root`` is the default prim, a SkelRoot holding the Skeleton, its
@@ -168,13 +169,21 @@ def write_usd(asset: Asset, path: str | os.PathLike) -> None:
     the Skeleton prim's customData ``usdhands:sourceJointNames``, which the reader
     restores.
 
+    Every SkelAnimation whose clip has a provenance record (``provenance``, else the
+    asset's record for that clip) gets ``UsdHandsFingerMotionAPI``.
+
     Parameters
     ----------
     asset : Asset
     path : path-like
         ``.usd`` (binary), ``.usda`` or ``.usdc``.
+    provenance : dict, optional
+        How the finger motion of every clip was made
+        (:func:`usdhands.model.provenance.provenance_record`).
     """
     path = Path(path)
+    records = [provenance_record(provenance) if provenance is not None else asset.provenance.get(c.name)
+               for c in asset.clips]
     if not asset.skeletons:
         raise ValueError("Expected an asset with at least one skeleton, got none")
     owner = [_owner(asset.skeletons, c) for c in asset.clips]
@@ -217,7 +226,7 @@ def write_usd(asset: Asset, path: str | os.PathLike) -> None:
             skel.CreateBindTransformsAttr().Set(numpy_to_matrices(bind))
             binding = UsdSkel.BindingAPI.Apply(skel.GetPrim())
             bound = False
-            for clip, o in zip(asset.clips, owner):
+            for clip, o, record in zip(asset.clips, owner, records):
                 if o != k:
                     continue
                 if abs(clip.skeleton.meters_per_unit - mpu) > 1e-12:
@@ -227,6 +236,8 @@ def write_usd(asset: Asset, path: str | os.PathLike) -> None:
                 codes = frame_time_codes(clip, tcps)
                 all_codes.append(codes)
                 author_animation(anim, clip, np.arange(sk.num_joints), tokens, codes)
+                if record is not None:
+                    write_finger_motion(anim.GetPrim(), **provenance_record(record))
                 if not bound:
                     binding.CreateAnimationSourceRel().SetTargets([anim.GetPath()])
                     bound = True
@@ -359,11 +370,7 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
         if hand_map is not None:
             write_hand_map(skel_prim, hand_map)
         if finger_motion is not None:
-            fm = dict(finger_motion)
-            unknown = set(fm) - {"method", "database", "parameters", "version"}
-            if unknown or "method" not in fm:
-                raise ValueError(f"Expected finger_motion keys method, database, parameters, version; got {sorted(fm)}")
-            write_finger_motion(anim_prim, fm.pop("method"), **fm)
+            write_finger_motion(anim_prim, **provenance_record(finger_motion))
         _set_time_range(layer, codes, extend=True)
         if as_layer:
             rel = _relative_asset_path(source, final_path.parent)

@@ -63,12 +63,17 @@ class Asset:
     clips : tuple of Clip
         Every animation, each on one of ``skeletons`` (same object).
     meshes : tuple of SkinnedMesh
+    provenance : dict str -> dict
+        Clip name -> how its finger motion was made (a record of
+        :func:`usdhands.model.provenance.provenance_record`), for the clips whose file
+        recorded one; writers record it again.
     """
 
     path: str
     skeletons: tuple[Skeleton, ...] = ()
     clips: tuple[Clip, ...] = ()
     meshes: tuple[SkinnedMesh, ...] = ()
+    provenance: dict[str, dict] = field(default_factory=dict)
 
     def clip(self, animation: str | int | None = None) -> Clip:
         """One clip by name or index; the first when ``animation`` is None.

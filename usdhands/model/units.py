@@ -91,4 +91,4 @@ def asset_to(asset: Asset, meters_per_unit: float | None = None, up_axis: str | 
                   else clip_to(c, skeleton_to(c.skeleton, meters_per_unit, up_axis)) for c in asset.clips)
     meshes = tuple(_mesh_to(m, asset.skeletons[m.skeleton_index], skeletons[m.skeleton_index])
                    for m in asset.meshes)
-    return Asset(asset.path, skeletons, clips, meshes)
+    return replace(asset, skeletons=skeletons, clips=clips, meshes=meshes)
