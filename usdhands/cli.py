@@ -11,6 +11,7 @@ status 2; no traceback.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import pkgutil
@@ -45,11 +46,34 @@ def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="usdhands: %(message)s", stream=sys.stderr)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return EXIT_USER_ERROR
+    with _logging_to_stderr(logging.INFO if args.verbose else logging.WARNING):
+        return _run(args)
+
+
+@contextlib.contextmanager
+def _logging_to_stderr(level: int):
+    """The library's loggers (``usdhands.*``) print ``usdhands: message`` lines on the current
+    stderr at ``level`` and above while a command runs (also when called in-process, where
+    the root logger may already have handlers); restored afterwards."""
+    log = logging.getLogger("usdhands")
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("usdhands: %(message)s"))
+    saved = log.level, log.propagate
+    log.addHandler(handler)
+    log.setLevel(level)
+    log.propagate = False
+    try:
+        yield
+    finally:
+        log.removeHandler(handler)
+        log.setLevel(saved[0])
+        log.propagate = saved[1]
+
+
+def _run(args) -> int:
     try:
         return int(args.func(args) or 0)
     except UsdHandsError as e:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -14,6 +15,8 @@ from usdhands.formats.io import read_asset, write_asset
 from usdhands.formats.registry import check_output_path, handler_for
 from usdhands.model.asset import Asset
 from usdhands.model.units import asset_to
+
+_log = logging.getLogger(__name__)
 
 # what each target format is defined in: (metres per unit, up axis); None keeps the source's
 TARGET_CONVENTIONS = {
@@ -55,6 +58,9 @@ def convert(src: Path, dst: Path, animation: str | None = None, fps: float | Non
     asset = read_asset(src, fps=fps, **({"units": bvh_units} if source.name == "bvh" else {}))
     if not asset.skeletons:
         raise NoSkeletonError("no skeleton in file", path=src)
+    if asset.left_out:
+        _log.warning("%s: not converted (usdhands reads skeletons, animations and skinned meshes): %s",
+                     src, "; ".join(asset.left_out))
     clips = asset.clips
     if animation is not None:
         try:

@@ -745,8 +745,57 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
                         provenance[clip.name] = record
                     k += 1
         meshes = read_meshes(scene)
+        left_out = left_out_of(scene, meshes)
+    for thing in left_out:
+        _log.info("%s: not read: %s", path, thing)
     return Asset(str(path), tuple(b.skeleton for b in scene.bindings), tuple(clips), tuple(meshes),
-                 provenance=provenance)
+                 provenance=provenance, left_out=left_out)
+
+
+def left_out_of(scene: GltfScene, meshes: list[SkinnedMesh]) -> tuple[str, ...]:
+    """What the file holds that the model does not (materials, morph targets, meshes not
+    skinned, cameras, ...), one short phrase each; samplers resampled to frames are named too."""
+    g = scene.doc.gltf
+    out = []
+
+    def n(count: int, what: str) -> None:
+        if count:
+            out.append(f"{count} {what}")
+
+    read_vertices = sum(int(np.asarray(m.points).shape[0]) for m in meshes)
+    rigid_nodes = [i for i, node in enumerate(g.nodes) if node.mesh is not None
+                   and (node.skin is None or node.skin not in scene.skin_binding)]
+    rigid_vertices = 0
+    for i in rigid_nodes:
+        for prim in g.meshes[g.nodes[i].mesh].primitives:
+            pos = _attributes(prim).get("POSITION")
+            if pos is not None and 0 <= pos < len(g.accessors):
+                rigid_vertices += int(g.accessors[pos].count or 0)
+    if rigid_nodes:
+        out.append(f"{len(rigid_nodes)} mesh node(s) not skinned ({rigid_vertices} vertices; "
+                   f"{read_vertices} skinned vertices read)")
+    n(sum(len(p.targets or []) for m in g.meshes for p in m.primitives), "morph target(s)")
+    n(len(g.materials), "material(s)")
+    n(len(g.textures), "texture(s)")
+    n(len(g.cameras), "camera(s)")
+    weights = sum(1 for a in g.animations for ch in a.channels if ch.target is not None and ch.target.path == "weights")
+    n(weights, "morph weight channel(s)")
+    joints = set()
+    for b in scene.bindings:
+        joints.update(b.node_to_joint)
+    other = sum(1 for a in g.animations for ch in a.channels if ch.target is not None and ch.target.path in _TRS_PATHS
+                and ch.target.node not in joints)
+    n(other, "channel(s) on nodes outside the skeletons")
+    interp = {}
+    for a in g.animations:
+        for smp in a.samplers:
+            if smp.interpolation in ("STEP", "CUBICSPLINE"):
+                interp[smp.interpolation] = interp.get(smp.interpolation, 0) + 1
+    for k, v in sorted(interp.items()):
+        out.append(f"{v} {k} sampler(s) (sampled per frame)")
+    if g.extensionsUsed:
+        out.append(f"extension(s) {', '.join(g.extensionsUsed)}")
+    return tuple(out)
 
 
 def recorded_provenance(doc: GltfFile, anim_index: int) -> dict | None:

@@ -10,6 +10,7 @@ answers ``GetSkelQuery`` for them, with the animation their own
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
@@ -36,6 +37,7 @@ from usdhands.model.skeleton import Skeleton
 __all__ = ["read_usd", "read_skeleton", "frame_times"]
 
 _PREDICATE = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+_log = logging.getLogger(__name__)
 
 
 def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
@@ -154,13 +156,40 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
             for sq in binding.GetSkinningTargets():
                 if sq.GetPrim().IsA(UsdGeom.Mesh):
                     meshes.append(_read_mesh(sq, k, tokens_of[k], path, worlds[k]))
+    left_out = _left_out(stage, meshes)
+    for thing in left_out:
+        _log.info("%s: not read: %s", path, thing)
     provenance = {}
     for clip in clips:
         record = read_finger_motion(stage.GetPrimAtPath(clip.name))
         if record is not None:
             provenance[clip.name] = record
     return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes),
-                 provenance=provenance)
+                 provenance=provenance, left_out=left_out)
+
+
+def _left_out(stage: Usd.Stage, meshes: list[SkinnedMesh]) -> tuple[str, ...]:
+    """What the stage holds that the model does not, one short phrase each."""
+    counts = {"mesh": 0, "mesh_points": 0, "Material": 0, "BlendShape": 0, "Camera": 0, "light": 0}
+    for prim in stage.Traverse(_PREDICATE):
+        if prim.IsA(UsdGeom.Mesh) and not prim.HasAPI(UsdSkel.BindingAPI):
+            counts["mesh"] += 1
+            pts = UsdGeom.Mesh(prim).GetPointsAttr().Get()
+            counts["mesh_points"] += len(pts) if pts is not None else 0
+        elif prim.GetTypeName() in ("Material", "BlendShape", "Camera"):
+            counts[str(prim.GetTypeName())] += 1
+        elif str(prim.GetTypeName()).endswith("Light"):
+            counts["light"] += 1
+    out = []
+    if counts["mesh"]:
+        read = sum(int(np.asarray(m.points).shape[0]) for m in meshes)
+        out.append(f"{counts['mesh']} mesh(es) not skinned ({counts['mesh_points']} vertices; "
+                   f"{read} skinned vertices read)")
+    for key, what in (("BlendShape", "blend shape(s)"), ("Material", "material(s)"), ("Camera", "camera(s)"),
+                      ("light", "light(s)")):
+        if counts[key]:
+            out.append(f"{counts[key]} {what}")
+    return tuple(out)
 
 
 def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_unit: float = 1.0,

@@ -67,6 +67,9 @@ class Asset:
         Clip name -> how its finger motion was made (a record of
         :func:`usdhands.model.provenance.provenance_record`), for the clips whose file
         recorded one; writers record it again.
+    left_out : tuple of str
+        What the file holds that the reader did not read (``"3 material(s)"``, ...),
+        so a conversion can say what it does not carry.
     """
 
     path: str
@@ -74,6 +77,7 @@ class Asset:
     clips: tuple[Clip, ...] = ()
     meshes: tuple[SkinnedMesh, ...] = ()
     provenance: dict[str, dict] = field(default_factory=dict)
+    left_out: tuple[str, ...] = ()
 
     def clip(self, animation: str | int | None = None) -> Clip:
         """One clip by name or index; the first when ``animation`` is None.

@@ -55,6 +55,7 @@ has.
 from __future__ import annotations
 
 import json
+import logging
 import os
 import re
 from dataclasses import dataclass
@@ -64,6 +65,8 @@ from usdhands.errors import ConfigError, NoHandsError
 from usdhands.json_schemas import first_schema_error, load_schema
 from usdhands.model.handmap import FINGERS, SIDES, HandMap, HandSide
 from usdhands.model.skeleton import Skeleton
+
+_log = logging.getLogger(__name__)
 
 __all__ = ["detect_hands", "load_handmap", "resolve_handmap", "NoHandsError", "joint_tokens",
            "handmap_schema", "side_from_name"]
@@ -297,6 +300,13 @@ def detect_hands(skeleton: Skeleton, side_hint: str | None = None) -> HandMap:
                      "'left' or 'right' (usdhands handmap --side)")
         raise NoHandsError(f"no hand found in skeleton {skeleton.name!r}{extra}; {_looked_for()}; "
                            f"{_seen(skeleton)}")
+    for s in SIDES:
+        h = hands[s]
+        if h is None:
+            _log.info("skeleton %r: no %s hand found", skeleton.name, s)
+        else:
+            _log.info("skeleton %r: %s hand at %r, fingers %s", skeleton.name, s, h.wrist,
+                      ", ".join(f"{f} {len(h.fingers.get(f, ()))}" for f in FINGERS))
     return HandMap(left=hands["left"], right=hands["right"])
 
 

@@ -39,6 +39,7 @@ Subtracting the forearm instead would erase the arm motion the first pass relies
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from typing import Sequence
 
@@ -56,6 +57,8 @@ from usdhands.algorithms.splicing.costs import (
     sign_features, FirstPassInput, first_pass_cost, forearm_hand_vectors,
     hand_directions, forearm_rest_basis, fit_rotation, direction_angle_cost, hand_angle_cost,
 )
+
+_log = logging.getLogger(__name__)
 
 __all__ = [
     "SpliceOptions", "SideAlignment", "median_alignment", "phase_boundaries", "align_hands", "pair_finger_joints", "FingerTransfer", "transfer_fingers", "SpliceResult", "splice_clips", "partial_world_xforms",
@@ -552,6 +555,8 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         if tr.joints:
             out = out.with_joint_rotations(tr.joints, tr.rotations)
         transfers[s], pairs_all[s], bun[s], hun[s] = tr, pairs, bu, hu
+        _log.info("%s hand: timing from the %s hand, %d finger joint pair(s), transfer %r, %d body / %d hand "
+                  "finger joint(s) unpaired", s, timing[s], len(pairs), mode, len(bu), len(hu))
     sides = {s: sides[timing[s]] for s in order}
     if progress is not None:
         progress(len(order) + 1, len(order) + 1, "fingers")

@@ -19,6 +19,7 @@ changing nothing but the finger joints' rotations.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,6 +34,8 @@ from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.algorithms.synthesis.wrist_features import reach_cm, world_xforms_for, wrist_features
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
+
+_log = logging.getLogger(__name__)
 
 __all__ = ["HandSynthesis", "ClipSynthesis", "synthesize_hand", "synthesize_clip", "db_side_segments",
            "resample_rows"]
@@ -214,6 +217,8 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         if len(warp) == 0:  # only for widened candidates that cannot be warped: stretch linearly
             warp = np.round(np.linspace(0, b - a - 1, q1 - q0)).astype(np.int64)
         fragments.append(np.asarray(db.fingers[a + warp], dtype=np.float64))
+    _log.info("%s hand: %d segment(s) of the wrist motion; chose database segments %s (path cost %.3g)", side, N,
+              " ".join(str(int(c)) for c in chosen), float(sum(costs[i, path[i]] for i in range(N))))
     st = cfg.stitching
     compact, seams = stitch_fragments(fragments, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s)
     curves = np.zeros((len(feats), NUM_DOFS))

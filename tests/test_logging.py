@@ -1,0 +1,57 @@
+"""The library logs what it decided through ``logging.getLogger("usdhands.<module>")``; ``-v`` shows it.
+
+The library itself never configures logging (only the CLI does).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from usdhands.cli import main
+from usdhands.formats.io import read_asset
+from usdhands.model.hand_detection import detect_hands
+
+PACKAGE = Path(__file__).resolve().parents[1] / "usdhands"
+
+
+def test_reader_names_what_it_left_out(shared_assets, caplog):
+    with caplog.at_level("INFO", logger="usdhands"):
+        asset = read_asset(shared_assets / "robot_expressive" / "RobotExpressive.glb")
+    assert "9 morph target(s)" in asset.left_out and "3 material(s)" in asset.left_out
+    assert "12 mesh node(s) not skinned (6106 vertices; 1108 skinned vertices read)" in asset.left_out
+    logged = [r for r in caplog.records if r.name == "usdhands.formats.gltf_read"]
+    assert {r.getMessage().split("not read: ")[1] for r in logged} == set(asset.left_out)
+
+
+def test_hands_found_are_logged(shared_assets, caplog):
+    sk = read_asset(shared_assets / "robot_expressive" / "RobotExpressive.glb").skeletons[0]
+    with caplog.at_level("INFO", logger="usdhands.model.hand_detection"):
+        hm = detect_hands(sk)
+    text = caplog.text
+    for side in ("left", "right"):
+        h = getattr(hm, side)
+        assert f"{side} hand at {h.wrist!r}" in text
+
+
+def test_verbose_flag_shows_decisions_and_convert_warns_once(shared_assets, tmp_path, capsys):
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    assert main(["convert", str(src), str(tmp_path / "a.usda")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    warned = [line for line in err if "not converted" in line]
+    assert len(warned) == 1 and "9 morph target(s)" in warned[0] and "3 material(s)" in warned[0]
+    assert not any("not read:" in line for line in err)  # INFO stays hidden without -v
+    assert main(["-v", "convert", str(src), str(tmp_path / "b.usda")]) == 0
+    err = capsys.readouterr().err
+    assert "not read: 9 morph target(s)" in err
+
+
+def test_library_never_configures_logging():
+    offenders = []
+    for path in PACKAGE.rglob("*.py"):
+        if path.name == "cli.py":
+            continue
+        text = path.read_text(encoding="utf-8")
+        if re.search(r"logging\.basicConfig|\.addHandler\(|\.setLevel\(", text):
+            offenders.append(str(path.relative_to(PACKAGE)))
+    assert offenders == []
