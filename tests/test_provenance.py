@@ -92,3 +92,36 @@ def test_malformed_gltf_record_is_named_and_left_out(tmp_path, caplog):
     with caplog.at_level("WARNING", logger="usdhands"):
         assert read_asset(path).provenance == {}
     assert "ignoring extras.usdhands.provenance" in caplog.text
+
+
+@pytest.mark.parametrize("as_layer", [False, True])
+def test_handmap_write_schema(shared_assets, tmp_path, capsys, as_layer):
+    from usdhands.cli import main
+    from usdhands.formats.usd_schema_data import read_hand_maps
+    from usdhands.formats.usd_validate import usd_compliance_errors
+    from usdhands.model.hand_detection import detect_hands
+
+    src = tmp_path / "robot.usda"
+    convert(shared_assets / "robot_expressive" / "RobotExpressive.glb", src)
+    before = src.read_bytes()
+    out = tmp_path / "with_map.usda"
+    argv = ["handmap", str(src), "--write-schema", str(out)] + (["--as-layer"] if as_layer else [])
+    assert main(argv) == 0
+    assert src.read_bytes() == before
+    asset = read_asset(out)
+    maps = read_hand_maps(out)
+    assert list(maps) == [asset.skeletons[0].name]
+    assert maps[asset.skeletons[0].name] == detect_hands(asset.skeletons[0])
+    assert usd_compliance_errors(out) == []
+    text = out.read_text()
+    assert ("subLayers" in text and "over " in text and "def Mesh" not in text) == as_layer
+
+
+def test_handmap_write_schema_refuses_non_usd(shared_assets, tmp_path, capsys):
+    from usdhands.cli import main
+
+    glb = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    assert main(["handmap", str(glb), "--write-schema", str(tmp_path / "x.usda")]) == 2
+    assert capsys.readouterr().err.strip().endswith("--write-schema needs a USD input (the schema is authored on its "
+                                                    "Skeleton prim)")
+    assert not (tmp_path / "x.usda").exists()

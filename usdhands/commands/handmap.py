@@ -1,4 +1,5 @@
-"""``usdhands handmap FILE [-o MAP.json]``: the detected hands of a skeleton, as a table or JSON."""
+"""``usdhands handmap FILE [-o MAP.json] [--write-schema OUT [--as-layer]]``: the detected hands of a
+skeleton, as a table or JSON, or authored on a USD Skeleton as ``UsdHandsHandMapAPI``."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import print_table
-from usdhands.commands._output import MAIN_INPUT, check_paths
-from usdhands.errors import AssetReadError, NoSkeletonError
+from usdhands.commands._output import MAIN_INPUT, USD_LAYER_SUFFIXES, add_layer_argument, check_paths, layer_options
+from usdhands.errors import AssetReadError, NoSkeletonError, UsdHandsError
 from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset
 from usdhands.formats.registry import atomic_output
@@ -31,6 +32,10 @@ def register(sub) -> None:
     p.add_argument("--handmap", type=Path, default=None,
                    help="check this hand map JSON against the skeleton instead of detecting "
                         "(default: the map a USD file records with UsdHandsHandMapAPI, else detection)")
+    p.add_argument("--write-schema", type=Path, default=None, metavar="OUT",
+                   help="USD: write the hands onto the Skeleton prim as UsdHandsHandMapAPI, in a copy of FILE "
+                        "(or, with --as-layer, a sparse layer over it) at OUT (.usd, .usda, .usdc)")
+    add_layer_argument(p, "FILE (with --write-schema)")
     p.set_defaults(func=run)
 
 
@@ -68,7 +73,12 @@ def handmap_rows(hm: HandMap) -> list[tuple]:
 
 
 def run(args) -> int:
-    check_paths({MAIN_INPUT: args.file, "--handmap": args.handmap}, {"-o": args.output})
+    check_paths({MAIN_INPUT: args.file, "--handmap": args.handmap},
+                {"-o": args.output, "--write-schema": args.write_schema})
+    if args.write_schema is not None:
+        _check_schema_output(args)
+    elif args.layer:
+        raise UsdHandsError("--as-layer goes with --write-schema OUT", path=args.file)
     asset = read_asset(args.file)
     sk = _pick_skeleton(asset, args.file, args.animation, args.skeleton)
     hm, source = hands_for(args.file, sk, args.handmap, side_hint=args.side)
@@ -81,4 +91,21 @@ def run(args) -> int:
         with atomic_output(args.output) as tmp:
             tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
         print(f"wrote {args.output}", file=sys.stderr)
+    if args.write_schema is not None:
+        from usdhands.formats.usd_write import write_usd_hand_map
+
+        with atomic_output(args.write_schema) as tmp:
+            write_usd_hand_map(args.file, sk.name, hm, tmp, final_path=args.write_schema, as_layer=args.layer)
+        print(f"wrote {args.write_schema}: UsdHandsHandMapAPI on {sk.name}"
+              f"{' (a layer over ' + str(args.file) + ')' if args.layer else ''}", file=sys.stderr)
     return 0
+
+
+def _check_schema_output(args) -> None:
+    """``--write-schema`` needs USD in and out (checked before any work)."""
+    if args.file.suffix.lower() not in USD_LAYER_SUFFIXES + (".usdz",):
+        raise UsdHandsError("--write-schema needs a USD input (the schema is authored on its Skeleton prim)",
+                            path=args.file)
+    if args.write_schema.suffix.lower() not in USD_LAYER_SUFFIXES:
+        raise UsdHandsError("--write-schema needs a USD output (.usd, .usda, .usdc)", path=args.write_schema)
+    layer_options(args.layer, args.file, args.write_schema)

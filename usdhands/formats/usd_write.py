@@ -38,7 +38,7 @@ from usdhands.model.provenance import provenance_record
 from usdhands.model.rotations import quat_angle_deg
 from usdhands.model.skeleton import Skeleton
 
-__all__ = ["write_usd", "write_usd_clip", "author_animation", "frame_time_codes"]
+__all__ = ["write_usd", "write_usd_clip", "write_usd_hand_map", "author_animation", "frame_time_codes"]
 
 # a joint absent from an animation's `joints` is added when the clip moves it this much
 _ROT_TOL_DEG = 1e-3
@@ -349,34 +349,81 @@ def write_usd_clip(source: str | os.PathLike, clip: Clip, path: str | os.PathLik
     source = Path(source)
     path = Path(path)
     final_path = Path(final_path) if final_path is not None else path
-    src_stage = open_stage(source)
     with quiet_diagnostics():
-        if as_layer:
-            layer = Sdf.Layer.CreateAnonymous(".usda")
-            src_root = src_stage.GetRootLayer()
-            for key in ("timeCodesPerSecond", "framesPerSecond", "metersPerUnit", "upAxis", "defaultPrim",
-                        "startTimeCode", "endTimeCode"):
-                if src_root.pseudoRoot.HasInfo(key):
-                    layer.pseudoRoot.SetInfo(key, src_root.pseudoRoot.GetInfo(key))
-            layer.subLayerPaths.append(os.path.abspath(source))
-            stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
-        else:
-            layer = _copy_self_contained_root(src_stage, source, final_path.parent)
-            if layer is None:
-                layer = src_stage.Flatten()
-            stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
-        stage.SetEditTarget(Usd.EditTarget(layer))
+        layer, stage = _output_stage(source, final_path, as_layer)
         codes, skel_prim, anim_prim = _put_clip(stage, clip, animation, source, only_changed=as_layer)
         if hand_map is not None:
             write_hand_map(skel_prim, hand_map)
         if finger_motion is not None:
             write_finger_motion(anim_prim, **provenance_record(finger_motion))
         _set_time_range(layer, codes, extend=True)
-        if as_layer:
-            rel = _relative_asset_path(source, final_path.parent)
-            layer.subLayerPaths.clear()
-            layer.subLayerPaths.append(rel)
-        layer.Export(str(path))
+        _export_output(layer, source, path, final_path, as_layer)
+
+
+def write_usd_hand_map(source: str | os.PathLike, skeleton: str, hand_map: HandMap, path: str | os.PathLike, *,
+                       final_path: str | os.PathLike | None = None, as_layer: bool = False) -> None:
+    """Write ``source`` with ``UsdHandsHandMapAPI`` authored on one Skeleton prim.
+
+    Parameters
+    ----------
+    source : path-like
+        A USD file (never modified).
+    skeleton : str
+        Prim path of the Skeleton (``Skeleton.name`` as :func:`read_usd` gives it).
+    hand_map : HandMap
+        Joint names as the reader gives them for that skeleton.
+    path, final_path, as_layer
+        As :func:`write_usd_clip`: a copy of the source, or a sparse layer sublayering it.
+
+    Raises
+    ------
+    AssetReadError
+        No Skeleton prim at ``skeleton``.
+    """
+    source = Path(source)
+    path = Path(path)
+    final_path = Path(final_path) if final_path is not None else path
+    with quiet_diagnostics():
+        layer, stage = _output_stage(source, final_path, as_layer)
+        prim = stage.GetPrimAtPath(skeleton) if Sdf.Path.IsValidPathString(skeleton) else None
+        if not prim or not prim.IsA(UsdSkel.Skeleton):
+            raise AssetReadError(f"no Skeleton prim at {skeleton!r}", path=source)
+        write_hand_map(prim, hand_map)
+        _export_output(layer, source, path, final_path, as_layer)
+
+
+def _output_stage(source: Path, final_path: Path, as_layer: bool) -> tuple[Sdf.Layer, Usd.Stage]:
+    """The layer an edited copy of ``source`` is authored in, and a stage editing it.
+
+    ``as_layer``: an anonymous layer sublayering the source (its stage metadata copied);
+    else a copy of the source's root layer when it alone is the asset, or the
+    flattened stage.
+    """
+    src_stage = open_stage(source)
+    if as_layer:
+        layer = Sdf.Layer.CreateAnonymous(".usda")
+        src_root = src_stage.GetRootLayer()
+        for key in ("timeCodesPerSecond", "framesPerSecond", "metersPerUnit", "upAxis", "defaultPrim",
+                    "startTimeCode", "endTimeCode"):
+            if src_root.pseudoRoot.HasInfo(key):
+                layer.pseudoRoot.SetInfo(key, src_root.pseudoRoot.GetInfo(key))
+        layer.subLayerPaths.append(os.path.abspath(source))
+    else:
+        layer = _copy_self_contained_root(src_stage, source, final_path.parent)
+        if layer is None:
+            layer = src_stage.Flatten()
+    stage = Usd.Stage.Open(layer, Usd.Stage.LoadAll)
+    stage.SetEditTarget(Usd.EditTarget(layer))
+    return layer, stage
+
+
+def _export_output(layer: Sdf.Layer, source: Path, path: Path, final_path: Path, as_layer: bool) -> None:
+    """Save ``layer`` to ``path``; a layer's sublayer path becomes relative to ``final_path``'s folder."""
+    if as_layer:
+        rel = _relative_asset_path(source, final_path.parent)
+        layer.subLayerPaths.clear()
+        layer.subLayerPaths.append(rel)
+    layer.Export(str(path))
 
 
 def _copy_self_contained_root(stage: Usd.Stage, source: Path, out_folder: Path) -> Sdf.Layer | None:
