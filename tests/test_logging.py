@@ -55,3 +55,18 @@ def test_library_never_configures_logging():
         if re.search(r"logging\.basicConfig|\.addHandler\(|\.setLevel\(", text):
             offenders.append(str(path.relative_to(PACKAGE)))
     assert offenders == []
+
+
+def test_plot_without_matplotlib_is_one_line(shared_assets, tmp_path, capsys, monkeypatch):
+    """matplotlib is the ``plot`` extra: without it, --plot is refused in one line before any work."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib raises ImportError
+    src = shared_assets / "leap_hands" / "fingers-ok.bvh"
+    out = tmp_path / "out.bvh"
+    code = main(["reduce", str(src), "-o", str(out), "--plot", str(tmp_path / "plots")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert err == [f'usdhands: error: {tmp_path / "plots"}: --plot needs matplotlib, which is not installed: '
+                   'pip install "usdhands[plot]"']
+    assert not out.exists() and not (tmp_path / "plots").exists()

@@ -8,6 +8,7 @@ from importlib import resources
 from pathlib import Path
 
 from usdhands.errors import ConfigError, UsdHandsError
+from usdhands.optional import require_matplotlib
 
 EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz", ".gltf", ".glb", ".bvh")
 BUNDLED_NAME = "gesture_db"
@@ -22,6 +23,7 @@ def check_plot_folder(folder: Path | None) -> None:
     """Refuse a ``--plot DIR`` that cannot be a folder, before any work."""
     if folder is None:
         return
+    require_matplotlib(folder)
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise UsdHandsError("--plot needs a folder; this is a file", path=folder)
