@@ -564,7 +564,7 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     if rate is None:
         rate = recorded_fps(doc, anim_index)
         if rate is not None and not _keys_on_frames(inputs, rate):
-            _log.warning("%s: animations[%d]: key times are not on the frames of the recorded %g fps; "
+            _log.info("%s: animations[%d]: key times are not on the frames of the recorded %g fps; "
                          "rate from key times", doc.path, anim_index, rate)
             rate = None
         rate = rate or detect_fps(inputs)
