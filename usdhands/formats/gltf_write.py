@@ -207,11 +207,13 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
         si = mesh.skeleton_index
         if not 0 <= si < len(asset.skeletons):
             raise ValueError(f"mesh {mesh.name!r} has skeleton_index {si}, the asset has {len(asset.skeletons)}")
-        mi = _add_mesh(gltf, app, mesh, asset.skeletons[si].num_joints)
-        gltf.nodes.append(pygltflib.Node(name=mesh.name, mesh=mi, skin=skel_skins[si]))
+        name = asset.source_names.get(mesh.name) or mesh.name.rsplit("/", 1)[-1]  # as for animations below
+        mi = _add_mesh(gltf, app, mesh, asset.skeletons[si].num_joints, name)
+        gltf.nodes.append(pygltflib.Node(name=name, mesh=mi, skin=skel_skins[si]))
         scene_nodes.append(len(gltf.nodes) - 1)
 
-    shorts = [c.name.rsplit("/", 1)[-1] for c in asset.clips]  # USD prim paths -> their last element
+    # the name recorded where the source could not hold it, else a USD prim path's last element
+    shorts = [asset.source_names.get(c.name) or c.name.rsplit("/", 1)[-1] for c in asset.clips]
     for clip, short in zip(asset.clips, shorts):
         si = index_of.get(id(clip.skeleton))
         if si is None:
@@ -300,7 +302,7 @@ def _clean_influences(ji: np.ndarray, jw: np.ndarray, num_joints: int) -> tuple[
     return ji, w32
 
 
-def _add_mesh(gltf: pygltflib.GLTF2, app: BinaryAppender, mesh: SkinnedMesh, num_joints: int) -> int:
+def _add_mesh(gltf: pygltflib.GLTF2, app: BinaryAppender, mesh: SkinnedMesh, num_joints: int, name: str) -> int:
     """Append one skinned mesh (points moved by its geom bind transform); returns the mesh index."""
     xf = np.asarray(mesh.geom_bind_xform, dtype=np.float64)
     pts = np.asarray(mesh.points, dtype=np.float64)
@@ -328,7 +330,7 @@ def _add_mesh(gltf: pygltflib.GLTF2, app: BinaryAppender, mesh: SkinnedMesh, num
     idtype = np.uint16 if pts.shape[0] <= 65535 else np.uint32
     indices = app.add_accessor(tri.reshape(-1, 1).astype(idtype), "SCALAR", target=ELEMENT_ARRAY_BUFFER)
     prim = pygltflib.Primitive(attributes=pygltflib.Attributes(**attrs), indices=indices, mode=4)
-    gltf.meshes.append(pygltflib.Mesh(name=mesh.name, primitives=[prim]))
+    gltf.meshes.append(pygltflib.Mesh(name=name, primitives=[prim]))
     return len(gltf.meshes) - 1
 
 

@@ -29,6 +29,9 @@ __all__ = [
 SOURCE_JOINT_NAMES_KEY = "usdhands:sourceJointNames"
 #: customData key on a SkelAnimation prim: the Skeleton prim it animates (for animations not bound)
 SOURCE_SKELETON_KEY = "usdhands:skeleton"
+#: customData of a SkelAnimation: the animation's name in the file it was converted from, when
+#: the prim name had to differ (``dance-01`` -> prim ``dance_01``); readers restore it.
+SOURCE_NAME_KEY = "usdhands:sourceName"
 
 
 @contextlib.contextmanager

@@ -19,6 +19,7 @@ from pxr import Gf, Usd, UsdGeom, UsdSkel
 
 from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatchError
 from usdhands.formats.usd_common import (
+    SOURCE_NAME_KEY,
     SOURCE_SKELETON_KEY,
     bound_animation_path,
     fold_into_roots,
@@ -159,13 +160,21 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
     left_out = _left_out(stage, meshes)
     for thing in left_out:
         _log.info("%s: not read: %s", path, thing)
-    provenance = {}
+    provenance, source_names = {}, {}
+    for m in meshes:
+        original = stage.GetPrimAtPath(m.name).GetCustomDataByKey(SOURCE_NAME_KEY)
+        if isinstance(original, str) and original:
+            source_names[m.name] = original
     for clip in clips:
-        record = read_finger_motion(stage.GetPrimAtPath(clip.name))
+        prim = stage.GetPrimAtPath(clip.name)
+        record = read_finger_motion(prim)
         if record is not None:
             provenance[clip.name] = record
+        original = prim.GetCustomDataByKey(SOURCE_NAME_KEY)
+        if isinstance(original, str) and original:
+            source_names[clip.name] = original
     return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes),
-                 provenance=provenance, left_out=left_out)
+                 provenance=provenance, source_names=source_names, left_out=left_out)
 
 
 def _left_out(stage: Usd.Stage, meshes: list[SkinnedMesh]) -> tuple[str, ...]:

@@ -17,6 +17,7 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
 from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats.usd_common import (
     SOURCE_JOINT_NAMES_KEY,
+    SOURCE_NAME_KEY,
     SOURCE_SKELETON_KEY,
     bound_animation_path,
     fold_into_roots,
@@ -231,8 +232,11 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                     continue
                 if abs(clip.skeleton.meters_per_unit - mpu) > 1e-12:
                     clip = clip.with_meters_per_unit(mpu)
-                anim_name = unique_name(valid_identifier(clip.name.rsplit("/", 1)[-1] or "Animation"), used)
+                original = asset.source_names.get(clip.name) or clip.name.rsplit("/", 1)[-1] or "Animation"
+                anim_name = unique_name(valid_identifier(original), used)
                 anim = UsdSkel.Animation.Define(stage, parent.AppendChild(anim_name))
+                if anim_name != original:
+                    anim.GetPrim().SetCustomDataByKey(SOURCE_NAME_KEY, original)
                 codes = frame_time_codes(clip, tcps)
                 all_codes.append(codes)
                 author_animation(anim, clip, np.arange(sk.num_joints), tokens, codes)
@@ -245,7 +249,7 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                     anim.GetPrim().SetCustomDataByKey(SOURCE_SKELETON_KEY, str(skel_path))
             for m in asset.meshes:
                 if m.skeleton_index == k:
-                    _write_mesh(stage, parent, used, m, skel_path, sk.num_joints)
+                    _write_mesh(stage, parent, used, m, skel_path, sk.num_joints, asset.source_names.get(m.name))
         if all_codes:
             _set_time_range(layer, np.concatenate(all_codes), extend=False)
         layer.Export(str(path))
@@ -264,9 +268,12 @@ def _owner(skeletons: Sequence[Skeleton], clip: Clip) -> int:
 
 
 def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMesh, skel_path: Sdf.Path,
-                num_joints: int) -> None:
-    name = unique_name(valid_identifier(m.name.rsplit("/", 1)[-1] or "Mesh"), used)
+                num_joints: int, source_name: str | None = None) -> None:
+    original = source_name or m.name.rsplit("/", 1)[-1] or "Mesh"
+    name = unique_name(valid_identifier(original), used)
     mesh = UsdGeom.Mesh.Define(stage, parent.AppendChild(name))
+    if name != original:
+        mesh.GetPrim().SetCustomDataByKey(SOURCE_NAME_KEY, original)
     pts = _f32(m.points).reshape(-1, 3)
     mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts))
     mesh.CreateFaceVertexCountsAttr().Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(m.face_vertex_counts,

@@ -67,6 +67,10 @@ class Asset:
         Clip name -> how its finger motion was made (a record of
         :func:`usdhands.model.provenance.provenance_record`), for the clips whose file
         recorded one; writers record it again.
+    source_names : dict str -> str
+        Clip name -> the animation's name where the file could not hold it as it was
+        (a USD prim name is an identifier: ``dance-01`` is the prim ``dance_01``);
+        writers use it to restore the name.
     left_out : tuple of str
         What the file holds that the reader did not read (``"3 material(s)"``, ...),
         so a conversion can say what it does not carry.
@@ -77,6 +81,7 @@ class Asset:
     clips: tuple[Clip, ...] = ()
     meshes: tuple[SkinnedMesh, ...] = ()
     provenance: dict[str, dict] = field(default_factory=dict)
+    source_names: dict[str, str] = field(default_factory=dict)
     left_out: tuple[str, ...] = ()
 
     def clip(self, animation: str | int | None = None) -> Clip:
