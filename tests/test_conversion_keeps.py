@@ -55,3 +55,49 @@ def test_names_usd_cannot_hold_come_back(tmp_path):
     assert [a["name"] for a in json.loads(back.read_text())["animations"]] == names
     assert [n.rsplit("/", 1)[-1] for n in read_asset(back).skeletons[0].joint_names] == \
         ["mixamorig:Hips", "mixamorig:Spine"]
+
+
+@pytest.mark.parametrize("name", ["robot_expressive/RobotExpressive.glb", "usd_cesiumman/CesiumMan.usdz"])
+def test_skinned_mesh_bbox_usdskel_bake_matches_numpy_lbs(shared_assets, tmp_path, name):
+    """The converted USD deformed by UsdSkel's own BakeSkinning has the bounding box that linear
+    blend skinning of the glTF's meshes (numpy, from the glTF side) gives, within 0.1 cm, at several
+    frames of the bound animation."""
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    src = shared_assets / name
+    gltf = src if src.suffix == ".glb" else tmp_path / "src.glb"
+    if gltf != src:
+        convert(src, gltf)
+    usd = tmp_path / "conv.usda"
+    convert(gltf, usd)
+    asset = read_asset(gltf)
+    clip = asset.clips[0]
+    sk = clip.skeleton
+    world = clip.world_xforms()                                       # (T, J, 4, 4)
+    inv_bind = np.linalg.inv(sk.bind_xforms)                          # (J, 4, 4)
+    frames = np.unique(np.linspace(0, clip.num_frames - 1, 5).round().astype(int))
+
+    stage = Usd.Stage.Open(str(usd))
+    tcps = stage.GetTimeCodesPerSecond()
+    assert UsdSkel.BakeSkinning(stage.Traverse())
+    baked = [UsdGeom.Mesh(p) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    assert len(baked) == len(asset.meshes)
+    for f in frames:
+        lbs = []
+        for m in asset.meshes:
+            p = np.c_[m.points, np.ones(len(m.points))] @ m.geom_bind_xform.T  # skeleton (bind) space
+            skin = world[f] @ inv_bind                                     # (J, 4, 4)
+            out = np.zeros((len(p), 4))
+            for k in range(m.joint_indices.shape[1]):
+                out += m.joint_weights[:, k, None] * np.einsum("vij,vj->vi", skin[m.joint_indices[:, k]], p)
+            lbs.append(out[:, :3])
+        lbs = np.concatenate(lbs)
+        code = Usd.TimeCode(clip.start_time * tcps + f * tcps / clip.fps)
+        pts = []
+        for mesh in baked:
+            x = np.array(mesh.ComputeLocalToWorldTransform(code)).T
+            q = np.asarray(mesh.GetPointsAttr().Get(code), dtype=np.float64)
+            pts.append(q @ x[:3, :3].T + x[:3, 3])
+        pts = np.concatenate(pts)
+        np.testing.assert_allclose(pts.min(axis=0), lbs.min(axis=0), atol=1e-3)  # metres: 0.1 cm
+        np.testing.assert_allclose(pts.max(axis=0), lbs.max(axis=0), atol=1e-3)
