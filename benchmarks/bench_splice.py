@@ -4,10 +4,14 @@
 Matlab implementation took 10.95 s to match it). The inputs are the synthetic
 performance of ``tests/splice_synth.py`` (known warp, arm amplitude 0.5-0.8, noise).
 
-Measured in the same run:
+Measured in the same run (medians of ``--repeat``; wall time, and CPU time of this
+process, which a shared machine disturbs less):
 
-- ``usdhands``: the banded numba implementation, end to end for one hand (markers,
-  derivatives, both passes, merge), then for both hands with the finger transfer;
+- ``usdhands``: one hand end to end (FK, markers, derivatives, both passes, merge;
+  goal: under 10 ms), then both hands with the finger transfer;
+- the first pass's cost kernel against the previous one (cell by cell,
+  ``previous_first_pass.py``) on the same band cells, with a check that the costs are
+  the same to the bit;
 - baseline: the same two passes as plain full-matrix DTW, the way a first
   implementation would write them: every cell's cost in NumPy (row by row), the
   cumulative matrix in Python (``dtw_naive``), no band.
@@ -26,12 +30,15 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from splice_synth import body_handside, make_case  # noqa: E402
 
 from usdhands.algorithms.dtw import dtw, dtw_naive  # noqa: E402
 from usdhands.algorithms.splicing.markers import markers_from_joints, yup_cm_positions  # noqa: E402
-from usdhands.algorithms.splicing.costs import hand_directions, sign_features  # noqa: E402
+from previous_first_pass import previous_first_pass_kernel  # noqa: E402
+
+from usdhands.algorithms.splicing.costs import _first_pass_kernel, hand_directions, sign_features  # noqa: E402
 from usdhands.algorithms.splicing.splice import (  # noqa: E402
     SpliceOptions, align_hands, median_alignment, partial_world_xforms, splice_clips,
 )
@@ -90,14 +97,16 @@ def baseline(bm, hm, bref, href, ub, uh, fps):
     return median_alignment(path2, len(P)), median_alignment(path1, len(P))
 
 
-def best_of(fn, repeat):
-    times = []
+def median_of(fn, repeat):
+    """Median wall and CPU seconds of ``repeat`` calls, and the last result."""
+    wall, cpu = [], []
     out = None
     for _ in range(repeat):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         out = fn()
-        times.append(time.perf_counter() - t)
-    return min(times), out
+        wall.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    return float(np.median(wall)), float(np.median(cpu)), out
 
 
 def main() -> None:
@@ -131,25 +140,43 @@ def main() -> None:
                          options=SpliceOptions())
         return al, (bm, hm, bref, href, ub, uh)
 
-    t_one, (al, inputs) = best_of(one_hand, args.repeat)
-    t_both, res = best_of(lambda: splice_clips(body, hands, bsides, hsides), args.repeat)
-    t_base, (base_align, base_first) = best_of(lambda: baseline(*inputs, body.fps), 1)
+    t_one, c_one, (al, inputs) = median_of(one_hand, args.repeat)
+    t_both, c_both, res = median_of(lambda: splice_clips(body, hands, bsides, hsides), args.repeat)
+    t_base, _, (base_align, base_first) = median_of(lambda: baseline(*inputs, body.fps), 1)
+
+    # the first pass's cost kernel, against the previous one, on the same cells
+    bm, hm, bref, href = inputs[:4]
+    P, Q = bm - bref[:, None], hm - href[:, None]
+    vb, ab, evb, eab = sign_features(P, body.fps)
+    vh, ah, evh, eah = sign_features(Q, body.fps)
+    rows, cols = al.first.band.cells()
+    kargs = (rows, cols, P, Q, vb, ab, vh, ah, evb, eab, evh, eah, 2, False, np.zeros(1), np.zeros(1))
+    previous_first_pass_kernel(*kargs)  # compile
+    t_k, c_k, cost_now = median_of(lambda: _first_pass_kernel(*kargs), args.repeat)
+    t_kp, c_kp, cost_before = median_of(lambda: previous_first_pass_kernel(*kargs), args.repeat)
 
     # the recurrence alone, on the same first-pass cost matrix
     full_cost = al.first.cost_matrix()
     full_cost = np.where(np.isnan(full_cost), 96.0, full_cost)  # outside the band: the largest eq. 6 cost
-    t_dtw, _ = best_of(lambda: dtw(full_cost, al.first.band), args.repeat)
-    t_dtw_naive, _ = best_of(lambda: dtw_naive(full_cost), 1)
+    t_dtw, _, _ = median_of(lambda: dtw(full_cost, al.first.band), args.repeat)
+    t_dtw_naive, _, _ = median_of(lambda: dtw_naive(full_cost), 1)
 
     err = np.abs(al.alignment - case.truth).mean()
     err_base = np.abs(base_align - case.truth).mean()
     print(f"band cells: first pass {al.first.band.num_cells} of {n * m} ({al.first.band.num_cells / (n * m):.0%}), "
           f"second pass {al.second.band.num_cells} ({al.second.band.num_cells / (n * m):.0%})")
-    print(f"usdhands, one hand end to end (FK, markers, derivatives, two passes, merge): {t_one * 1000:8.1f} ms "
-          f"(target < 100 ms)")
-    print(f"usdhands, both hands with finger transfer (splice_clips):                   {t_both * 1000:8.1f} ms")
-    print(f"baseline, one hand, plain full-matrix DTW (NumPy costs, Python loops):       {t_base * 1000:8.1f} ms")
-    print(f"speed-up over the baseline: {t_base / t_one:.0f}x (one hand)")
+    print(f"medians of {args.repeat}:                                                        wall      CPU")
+    print(f"usdhands, one hand end to end (FK, markers, derivatives, two passes, merge): {t_one * 1000:7.1f} ms "
+          f"{c_one * 1000:6.1f} ms (goal < 10 ms)")
+    print(f"usdhands, both hands with finger transfer (splice_clips):                   {t_both * 1000:7.1f} ms "
+          f"{c_both * 1000:6.1f} ms")
+    print(f"first-pass cost kernel, {len(rows)} cells:                                  {t_k * 1000:7.1f} ms "
+          f"{c_k * 1000:6.1f} ms")
+    print(f"  the previous kernel (cell by cell) on the same cells:                      {t_kp * 1000:7.1f} ms "
+          f"{c_kp * 1000:6.1f} ms  ratio now/previous {c_k / c_kp:.2f} (CPU); same costs to the bit: "
+          f"{np.array_equal(cost_now, cost_before)}")
+    print(f"baseline, one hand, plain full-matrix DTW (NumPy costs, Python loops):      {t_base * 1000:7.1f} ms")
+    print(f"speed-up over the baseline: {t_base / t_one:.0f}x (one hand, wall)")
     print(f"DTW recurrence alone on the {n}x{m} first-pass matrix: banded numba {t_dtw * 1000:.1f} ms, "
           f"full-matrix Python {t_dtw_naive * 1000:.1f} ms ({t_dtw_naive / t_dtw:.0f}x)")
     print(f"mean alignment error vs the known warp: usdhands {err:.2f} frames, baseline {err_base:.2f} frames")

@@ -73,6 +73,24 @@ def test_first_pass_cost_equals_naive_eq6(trunk):
     assert set(np.unique(full)) <= set(range(0, 97))
 
 
+@pytest.mark.parametrize("trunk", [False, True])
+def test_first_pass_cost_is_the_same_whatever_cells_are_asked(trunk):
+    """The kernel works on runs of cells along a row: any order, split or single cells
+    give the same costs, to the bit, as whole rows (which equal the naive twin above)."""
+    rng = np.random.default_rng(3)
+    inp = _random_pass_one(rng, 19, 26, trunk)
+    i, j = np.mgrid[0:19, 0:26]
+    full = first_pass_cost(inp, i.ravel(), j.ravel()).reshape(19, 26)
+    np.testing.assert_allclose(full, first_pass_cost_naive(inp), atol=1e-9)
+    order = rng.permutation(i.size)  # every cell alone or in accidental runs
+    assert np.array_equal(first_pass_cost(inp, i.ravel()[order], j.ravel()[order]), full.ravel()[order])
+    lo = np.array([max(0, r - 6) for r in range(19)])  # a band: runs of different lengths, clipped at the edges
+    hi = np.array([min(25, r + 9) for r in range(19)])
+    rows = np.concatenate([np.full(b - a + 1, r) for r, (a, b) in enumerate(zip(lo, hi))])
+    cols = np.concatenate([np.arange(a, b + 1) for a, b in zip(lo, hi)])
+    assert np.array_equal(first_pass_cost(inp, rows, cols), full[rows, cols])
+
+
 def test_window_yaw_recovers_a_known_turn():
     rng = np.random.default_rng(1)
     P = rng.normal(size=(20, 4, 3)) * 10

@@ -76,47 +76,19 @@ def _sgn(x, eps):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _window_cos_sin(X, Z, Xh, Zh, SX, SZ, SXh, SZh, i, j, half):  # pragma: no cover - compiled
-    """cos and sin of eq. 7's angle (num and den normalised, no atan2).
-
-    ``X, Z`` ``(n, K)`` are the body markers' horizontal coordinates, ``SX, SZ`` ``(n,)``
-    their sums over the markers; ``Xh, Zh, SXh, SZh`` the same for the hand.
-    """
-    n = X.shape[0]
-    m = Xh.shape[0]
-    K = X.shape[1]
-    sxz = 0.0
-    sxx = 0.0
-    bx = 0.0
-    bz = 0.0
-    hx = 0.0
-    hz = 0.0
-    cnt = 0
-    for k in range(-half, half + 1):
-        a = i + k
-        b = j + k
-        if a < 0 or b < 0 or a >= n or b >= m:
-            continue
-        for mk in range(K):
-            sxz += X[a, mk] * Zh[b, mk] - Xh[b, mk] * Z[a, mk]
-            sxx += X[a, mk] * Xh[b, mk] + Z[a, mk] * Zh[b, mk]
-        bx += SX[a]
-        bz += SZ[a]
-        hx += SXh[b]
-        hz += SZh[b]
-        cnt += K
-    num = sxz - (bx * hz - hx * bz) / cnt
-    den = sxx - (bx * hx + bz * hz) / cnt
-    r = np.sqrt(num * num + den * den)
-    if r == 0.0:
-        return 1.0, 0.0  # atan2(0, 0) = 0
-    return den / r, num / r
-
-
-@njit(cache=True)
 def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh, eps_ah,
                        half, use_trunk, yaw_b, yaw_h):  # pragma: no cover - compiled
+    """Eq. 6 (with eq. 7's angle, or the trunk angles) on the cells ``rows, cols``.
+
+    The cells are taken in runs along a row (a band row is one run), and every sum of
+    a run is accumulated column by column in contiguous slices, which the compiler
+    vectorises: each cell's sums still add the same terms in the same order as a
+    cell-by-cell loop (window frames, then markers), so the costs are the same to the
+    bit. Windows hold the frames ``i + k, j + k`` (``|k| <= half``) inside both clips.
+    """
     N = rows.shape[0]
+    n = P.shape[0]
+    m = Q.shape[0]
     K = P.shape[1]
     out = np.empty(N)
     X = np.ascontiguousarray(P[:, :, 0])
@@ -127,48 +99,150 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
     SZ = Z.sum(axis=1)
     SXh = Xh.sum(axis=1)
     SZh = Zh.sum(axis=1)
-    n = vb.shape[0]
-    m = vh.shape[0]
+    # hand arrays marker-major, so a run of cells along a row reads them contiguously
+    XhT = np.ascontiguousarray(Xh.T)
+    ZhT = np.ascontiguousarray(Zh.T)
+    VX = np.empty((K, m))
+    VZ = np.empty((K, m))
+    AX = np.empty((K, m))
+    AZ = np.empty((K, m))
+    SV = np.empty((K, m))  # hand signs of the vertical components
+    SA = np.empty((K, m))
+    for j in range(m):
+        for mk in range(K):
+            VX[mk, j] = vh[j, mk, 0]
+            VZ[mk, j] = vh[j, mk, 2]
+            AX[mk, j] = ah[j, mk, 0]
+            AZ[mk, j] = ah[j, mk, 2]
+            SV[mk, j] = _sgn(vh[j, mk, 1], eps_vh)
+            SA[mk, j] = _sgn(ah[j, mk, 1], eps_ah)
     SB = np.empty((n, K, 6))  # body signs: v then a, x y z
     for i in range(n):
         for mk in range(K):
             for ax in range(3):
                 SB[i, mk, ax] = _sgn(vb[i, mk, ax], eps_vb)
                 SB[i, mk, 3 + ax] = _sgn(ab[i, mk, ax], eps_ab)
-    SH = np.empty((m, K, 2))  # hand signs of the vertical components
-    for j in range(m):
-        for mk in range(K):
-            SH[j, mk, 0] = _sgn(vh[j, mk, 1], eps_vh)
-            SH[j, mk, 1] = _sgn(ah[j, mk, 1], eps_ah)
-    for c in range(N):
+    sxz = np.empty(m)
+    sxx = np.empty(m)
+    bx = np.empty(m)
+    bz = np.empty(m)
+    hx = np.empty(m)
+    hz = np.empty(m)
+    cnt = np.empty(m, dtype=np.int64)
+    co = np.empty(m)
+    si = np.empty(m)
+    d = np.empty(m)
+    c = 0
+    while c < N:
+        # a run of cells: row i, columns j0 .. j0 + L - 1
         i = rows[c]
-        j = cols[c]
+        j0 = cols[c]
+        e = c + 1
+        while e < N and rows[e] == i and cols[e] == cols[e - 1] + 1:
+            e += 1
+        L = e - c
         if use_trunk:
-            th = yaw_b[i] - yaw_h[j]
-            co = np.cos(th)
-            si = np.sin(th)
+            for t in range(L):
+                th = yaw_b[i] - yaw_h[j0 + t]
+                co[t] = np.cos(th)
+                si[t] = np.sin(th)
         else:
-            co, si = _window_cos_sin(X, Z, Xh, Zh, SX, SZ, SXh, SZh, i, j, half)
-        d = 0.0
+            # eq. 7 over the window, accumulated in the same order as cell by cell
+            for t in range(L):
+                sxz[t] = 0.0
+                sxx[t] = 0.0
+                bx[t] = 0.0
+                bz[t] = 0.0
+                hx[t] = 0.0
+                hz[t] = 0.0
+                cnt[t] = 0
+            for k in range(-half, half + 1):
+                a = i + k
+                if a < 0 or a >= n:
+                    continue
+                t_lo = max(0, -(j0 + k))
+                t_hi = min(L, m - (j0 + k))
+                if t_lo >= t_hi:
+                    continue
+                o = j0 + k
+                w = t_hi - t_lo
+                s_xz = sxz[t_lo:t_hi]
+                s_xx = sxx[t_lo:t_hi]
+                for mk in range(K):
+                    xa = X[a, mk]
+                    za = Z[a, mk]
+                    xs = XhT[mk, o + t_lo:o + t_hi]
+                    zs = ZhT[mk, o + t_lo:o + t_hi]
+                    for u in range(w):
+                        s_xz[u] += xa * zs[u] - xs[u] * za
+                        s_xx[u] += xa * xs[u] + za * zs[u]
+                sa = SX[a]
+                za_ = SZ[a]
+                b_x = bx[t_lo:t_hi]
+                b_z = bz[t_lo:t_hi]
+                h_x = hx[t_lo:t_hi]
+                h_z = hz[t_lo:t_hi]
+                cn = cnt[t_lo:t_hi]
+                sh_x = SXh[o + t_lo:o + t_hi]
+                sh_z = SZh[o + t_lo:o + t_hi]
+                for u in range(w):
+                    b_x[u] += sa
+                    b_z[u] += za_
+                    h_x[u] += sh_x[u]
+                    h_z[u] += sh_z[u]
+                    cn[u] += K
+            for t in range(L):
+                num = sxz[t] - (bx[t] * hz[t] - hx[t] * bz[t]) / cnt[t]
+                den = sxx[t] - (bx[t] * hx[t] + bz[t] * hz[t]) / cnt[t]
+                r = np.sqrt(num * num + den * den)
+                r0 = r == 0.0
+                rr = 1.0 if r0 else r
+                co[t] = 1.0 if r0 else den / rr
+                si[t] = 0.0 if r0 else num / rr
+        for t in range(L):
+            d[t] = 0.0
+        cs = co[:L]
+        sn = si[:L]
+        dl = d[:L]
         for mk in range(K):
-            # R_y(θ) applied to the hand's derivatives: x' = c x + s z, z' = -s x + c z
-            x = vh[j, mk, 0]
-            z = vh[j, mk, 2]
-            e = SB[i, mk, 0] - _sgn(co * x + si * z, eps_vh)
-            d += e * e
-            e = SB[i, mk, 2] - _sgn(-si * x + co * z, eps_vh)
-            d += e * e
-            x = ah[j, mk, 0]
-            z = ah[j, mk, 2]
-            e = SB[i, mk, 3] - _sgn(co * x + si * z, eps_ah)
-            d += e * e
-            e = SB[i, mk, 5] - _sgn(-si * x + co * z, eps_ah)
-            d += e * e
-            e = SB[i, mk, 1] - SH[j, mk, 0]  # vertical components do not turn
-            d += e * e
-            e = SB[i, mk, 4] - SH[j, mk, 1]
-            d += e * e
-        out[c] = d
+            b0 = SB[i, mk, 0]
+            b1 = SB[i, mk, 1]
+            b2 = SB[i, mk, 2]
+            b3 = SB[i, mk, 3]
+            b4 = SB[i, mk, 4]
+            b5 = SB[i, mk, 5]
+            vx = VX[mk, j0:j0 + L]
+            vz = VZ[mk, j0:j0 + L]
+            axs = AX[mk, j0:j0 + L]
+            azs = AZ[mk, j0:j0 + L]
+            sv = SV[mk, j0:j0 + L]
+            sa_ = SA[mk, j0:j0 + L]
+            for t in range(L):
+                x = vx[t]
+                z = vz[t]
+                u = cs[t] * x + sn[t] * z
+                w = -sn[t] * x + cs[t] * z
+                ev = b0 - ((u > eps_vh) * 1.0 - (u < -eps_vh) * 1.0)
+                ew = b2 - ((w > eps_vh) * 1.0 - (w < -eps_vh) * 1.0)
+                x = axs[t]
+                z = azs[t]
+                u = cs[t] * x + sn[t] * z
+                w = -sn[t] * x + cs[t] * z
+                ea = b3 - ((u > eps_ah) * 1.0 - (u < -eps_ah) * 1.0)
+                eb = b5 - ((w > eps_ah) * 1.0 - (w < -eps_ah) * 1.0)
+                e1 = b1 - sv[t]
+                e4 = b4 - sa_[t]
+                dd = dl[t]
+                dd += ev * ev
+                dd += ew * ew
+                dd += ea * ea
+                dd += eb * eb
+                dd += e1 * e1
+                dd += e4 * e4
+                dl[t] = dd
+        for t in range(L):
+            out[c + t] = d[t]
+        c = e
     return out
 
 
