@@ -11,7 +11,7 @@ from usdhands.errors import AssetReadError
 from usdhands.formats.usd_common import matrices_to_numpy, open_stage, quiet_diagnostics
 from usdhands.model.prop import PropMesh
 
-__all__ = ["read_usd_props"]
+__all__ = ["read_usd_props", "stage_meters_per_unit"]
 
 _PREDICATE = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
 
@@ -44,6 +44,11 @@ def _time_varying(prim: Usd.Prim) -> list[float]:
                 break
         p = p.GetParent()
     return sorted(times) if len(times) > 1 else []
+
+
+def stage_meters_per_unit(path) -> float:
+    """The ``metersPerUnit`` a USD file claims (1 cm = 0.01 when it says nothing, as USD defines)."""
+    return float(UsdGeom.GetStageMetersPerUnit(open_stage(path)))
 
 
 def read_usd_props(path: Path, *, meters_per_unit: float, up_axis: str,

@@ -1,0 +1,143 @@
+"""Shared by ``correct`` and ``synthesize --props``: the prop options, reading props, the colliders."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from usdhands.errors import UsdHandsError
+
+
+def add_prop_arguments(p, required: bool) -> None:
+    """``--props``, ``--margin``, ``--self``, ``--attach``, ``--prop-units``, ``--prop-up``, ``--interaction-config``."""
+    p.add_argument("--props", type=Path, nargs="+", required=required, default=[], metavar="PROP",
+                   help="props the hands touch: mesh files (.obj .stl .ply .off .glb .gltf) or USD files with Mesh prims")
+    p.add_argument("--margin", type=float, default=0.0, metavar="MM",
+                   help="clearance to keep between fingers and props, millimetres (default 0: touching)")
+    p.add_argument("--self", dest="self_collision", action="store_true",
+                   help="also keep the fingers out of the character's own body (torso, head, upper arms, thighs)")
+    p.add_argument("--attach", action="append", default=[], metavar="PROP=JOINT[:FROM-TO]",
+                   help="the prop moves with JOINT (a hand), from frame FROM to TO inclusive (default all frames); "
+                        "PROP is the prop file's name or stem")
+    p.add_argument("--prop-units", type=float, default=None, metavar="M",
+                   help="metres per unit of the prop files (default: what the file says; OBJ, STL, PLY, OFF: the clip's)")
+    p.add_argument("--prop-up", choices=("Y", "Z"), default=None,
+                   help="up axis of the prop files (default: what the file says; OBJ, STL, PLY, OFF: Y)")
+    p.add_argument("--interaction-config", type=Path, default=None, metavar="JSON",
+                   help="finger radii, joint limits and smoothing (schemas/interaction_config.schema.json)")
+
+
+@dataclass(frozen=True)
+class Attachment:
+    """``--attach PROP=JOINT[:FROM-TO]`` parsed."""
+
+    prop: str
+    joint: str
+    start: int | None
+    stop: int | None
+
+
+_ATTACH = re.compile(r"^(?P<prop>[^=]+)=(?P<joint>[^:]+)(:(?P<a>\d+)-(?P<b>\d+))?$")
+
+
+def parse_attachments(specs: list[str]) -> list[Attachment]:
+    """Parse every ``--attach``; a one-line error for a malformed one."""
+    out = []
+    for s in specs:
+        m = _ATTACH.match(s.strip())
+        if m is None:
+            raise UsdHandsError(f"--attach {s!r}: expected PROP=JOINT or PROP=JOINT:FROM-TO (frames)")
+        a, b = m.group("a"), m.group("b")
+        if a is not None and int(a) > int(b):
+            raise UsdHandsError(f"--attach {s!r}: frame range {a}-{b} runs backwards")
+        out.append(Attachment(m.group("prop").strip(), m.group("joint").strip(),
+                              None if a is None else int(a), None if b is None else int(b)))
+    return out
+
+
+def check_margin(margin: float) -> float:
+    """``--margin`` if usable (0 to 100 mm)."""
+    if not (0.0 <= margin <= 100.0):
+        raise UsdHandsError(f"--margin must be between 0 and 100 mm, got {margin:g}")
+    return float(margin)
+
+
+def check_prop_options(args) -> None:
+    """Refuse bad prop options before any work."""
+    check_margin(args.margin)
+    if args.prop_units is not None and not (1e-6 <= args.prop_units <= 1e6):
+        raise UsdHandsError(f"--prop-units must be metres per unit between 1e-6 and 1e6, got {args.prop_units:g}")
+    for p in args.props:
+        if not Path(p).exists():
+            raise UsdHandsError("no such prop file", path=p)
+    parse_attachments(args.attach)
+
+
+def read_scene_props(args, clip):
+    """Every prop of ``--props`` in the clip's units, checked for unit slips: list of (path, PropMesh)."""
+    from usdhands.formats.props import USD_SUFFIXES, check_prop_units, read_props
+
+    sk = clip.skeleton
+    positions = clip.world_positions()
+    bounds = np.array([positions.reshape(-1, 3).min(axis=0), positions.reshape(-1, 3).max(axis=0)])
+    out = []
+    for path in args.props:
+        props = read_props(path, meters_per_unit=sk.meters_per_unit, up_axis=sk.up_axis,
+                           prop_meters_per_unit=args.prop_units, prop_up_axis=args.prop_up)
+        suffix = Path(path).suffix.lower()
+        claimed = args.prop_units
+        if claimed is None and suffix in USD_SUFFIXES:
+            from usdhands.formats.usd_props import stage_meters_per_unit
+
+            claimed = stage_meters_per_unit(path)
+        elif claimed is None:
+            claimed = 1.0 if suffix in (".glb", ".gltf") else sk.meters_per_unit
+        for prop in props:
+            check_prop_units(prop, bounds, sk.meters_per_unit, claimed)
+        out.extend((Path(path), prop) for prop in props)
+    return out
+
+
+def build_colliders(args, clip, handmap, props):
+    """The colliders of the scene: the props (static, animated or attached) and, with ``--self``, the body.
+
+    Returns ``(Colliders, attachments)``.
+    """
+    from usdhands.algorithms.interaction.body import body_collider
+    from usdhands.algorithms.interaction.colliders import Colliders, attached_xforms, mesh_collider
+
+    T = clip.num_frames
+    attachments = parse_attachments(args.attach)
+    by_prop: dict[int, Attachment] = {}
+    for att in attachments:
+        hits = [i for i, (path, prop) in enumerate(props)
+                if att.prop in (path.name, path.stem, str(path), prop.name)]
+        if not hits:
+            names = ", ".join(sorted({p.name for p, _ in props}))
+            raise UsdHandsError(f"--attach {att.prop}={att.joint}: no prop named {att.prop!r} (the props are {names})")
+        if not clip.skeleton.has_joint(att.joint):
+            raise UsdHandsError(f"--attach {att.prop}={att.joint}: no joint named {att.joint!r} in the animation "
+                                f"(skeleton {clip.skeleton.name!r})", path=args.file)
+        if att.start is not None and att.stop >= T:
+            raise UsdHandsError(f"--attach {att.prop}={att.joint}:{att.start}-{att.stop}: the animation has frames "
+                                f"0 to {T - 1}", path=args.file)
+        for i in hits:
+            by_prop[i] = att
+    items = []
+    world = clip.world_xforms() if by_prop else None
+    for i, (path, prop) in enumerate(props):
+        att = by_prop.get(i)
+        if att is None:
+            items.append(mesh_collider(prop, clip.times))
+            continue
+        start, stop = (0, T - 1) if att.start is None else (att.start, att.stop)
+        xf = attached_xforms(prop.xforms_at(clip.times), world[:, clip.skeleton.index(att.joint)], start, stop)
+        items.append(mesh_collider(prop, clip.times, world=xf))
+    if args.self_collision:
+        body = body_collider(clip, handmap)
+        if body is not None:
+            items.append(body)
+    return Colliders(items), attachments
