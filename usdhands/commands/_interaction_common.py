@@ -101,7 +101,7 @@ def read_scene_props(args, clip):
     return out
 
 
-def build_colliders(args, clip, handmap, props):
+def build_colliders(args, clip, handmap, props, path=None):
     """The colliders of the scene: the props (static, animated or attached) and, with ``--self``, the body.
 
     Returns ``(Colliders, attachments)``.
@@ -110,6 +110,7 @@ def build_colliders(args, clip, handmap, props):
     from usdhands.algorithms.interaction.colliders import Colliders, attached_xforms, mesh_collider
 
     T = clip.num_frames
+    path = path if path is not None else args.file
     attachments = parse_attachments(args.attach)
     by_prop: dict[int, Attachment] = {}
     for att in attachments:
@@ -120,10 +121,10 @@ def build_colliders(args, clip, handmap, props):
             raise UsdHandsError(f"--attach {att.prop}={att.joint}: no prop named {att.prop!r} (the props are {names})")
         if not clip.skeleton.has_joint(att.joint):
             raise UsdHandsError(f"--attach {att.prop}={att.joint}: no joint named {att.joint!r} in the animation "
-                                f"(skeleton {clip.skeleton.name!r})", path=args.file)
+                                f"(skeleton {clip.skeleton.name!r})", path=path)
         if att.start is not None and att.stop >= T:
             raise UsdHandsError(f"--attach {att.prop}={att.joint}:{att.start}-{att.stop}: the animation has frames "
-                                f"0 to {T - 1}", path=args.file)
+                                f"0 to {T - 1}", path=path)
         for i in hits:
             by_prop[i] = att
     items = []
@@ -141,3 +142,43 @@ def build_colliders(args, clip, handmap, props):
         if body is not None:
             items.append(body)
     return Colliders(items), attachments
+
+
+def corrected_for_props(args, path, clip, handmap):
+    """``clip`` corrected against ``--props`` (``db build --props``): the report's dict and the clip."""
+    from usdhands.algorithms.interaction.correction import correct_clip
+    from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
+
+    config = load_interaction_config(args.interaction_config) if args.interaction_config else InteractionConfig()
+    props = read_scene_props(args, clip)
+    colliders, _ = build_colliders(args, clip, handmap, props, path=path)
+    fixed, report = correct_clip(clip, handmap, colliders, margin_mm=args.margin, config=config)
+    return fixed, report.to_dict()
+
+
+def synthesis_interaction(args, clip, handmap, db, cfg, props, config):
+    """The ``interaction`` factory for ``synthesize_clip`` (proximity cuts, collision term) and the
+    colliders at the clip's own rate for the correction run on the result."""
+    from usdhands.algorithms.interaction.synthesis_terms import InteractionTerms
+    from usdhands.algorithms.synthesis.database import same_rate
+    from usdhands.algorithms.synthesis.finger_transfer import apply_canonical_curves, canonical_curves
+
+    colliders, _ = build_colliders(args, clip, handmap, props)
+    at_db = clip if same_rate(clip.fps, db.fps) else clip.resample(db.fps)
+    db_colliders = colliders if at_db is clip else build_colliders(args, at_db, handmap, props)[0]
+    rest = clip.skeleton.rest_world_positions()
+
+    def fingers(segment: int):
+        a, b = int(db.segments[segment, 0]), int(db.segments[segment, 1])
+        return db.full_curves(slice(a, b))
+
+    def factory(side, hand, rig):
+        wrist = rest[clip.skeleton.index(hand.wrist)]
+        tips = rest[[clip.skeleton.index(j) for j in hand.finger_joints]]
+        reach = 1.5 * float(np.linalg.norm(tips - wrist, axis=1).max(initial=0.0)) + 0.05 / clip.skeleton.meters_per_unit
+        return InteractionTerms(at_db, hand, rig, apply_canonical_curves, canonical_curves, fingers, db_colliders,
+                                weight=args.collision_weight, reach=reach,
+                                min_frames=max(int(round(cfg.segmentation.min_segment_s * db.fps)), 1),
+                                margin_mm=args.margin, config=config)
+
+    return factory, colliders

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import Progress, check_fps, print_json, print_table
+from usdhands.commands._interaction_common import add_prop_arguments, check_prop_options
 from usdhands.commands._output import MAIN_INPUT, check_paths
 from usdhands.errors import UsdHandsError
 
@@ -39,6 +40,7 @@ def register(sub) -> None:
     b.add_argument("--samples", action="store_true",
                    help="build from the generated gesture set (usdhands.samples) instead of files")
     b.add_argument("--json", action="store_true", help="print the manifest's counts as JSON")
+    add_prop_arguments(b, required=False)
     b.set_defaults(func=run_build)
     i = dsub.add_parser("info", help="print what a database holds")
     i.add_argument("database", type=Path, nargs="?", default=None, help="database folder (default: the bundled one)")
@@ -60,8 +62,13 @@ def run_build(args) -> int:
         raise UsdHandsError("no input files given (or use --samples)")
     paths = [] if args.samples else expand_inputs(args.inputs)
     check_paths({MAIN_INPUT: [*args.inputs, *paths], "--labels-file": args.labels_file, "--config": args.config,
-                 "--handmap": args.handmap}, replaced_folders={"-o": args.output})
+                 "--handmap": args.handmap, "--props": args.props, "--interaction-config": args.interaction_config},
+                replaced_folders={"-o": args.output})
     cfg = load_config(args.config)
+    if args.props:
+        check_prop_options(args)
+    if args.props and args.samples:
+        raise UsdHandsError("--props corrects input files; --samples has none")
     if args.samples:
         items = sample_database_items()
     else:
@@ -74,6 +81,14 @@ def run_build(args) -> int:
         for p, label, clip, handmap in read:
             if not any(h.finger_joints for h in handmap.sides):
                 raise UsdHandsError("no finger joints found: a database needs clips with finger animation", path=p)
+            if args.props:  # interaction clips: the database holds their corrected fingers
+                from usdhands.commands._interaction_common import corrected_for_props
+
+                clip, summary = corrected_for_props(args, p, clip, handmap)
+                after = summary["penetration_after_mm"]
+                print(f"usdhands: note: {p}: corrected against the props, {summary['frames_corrected']} frames "
+                      f"(penetration {summary['penetration_before_mm']['max']:.2f} -> {after['max']:.2f} mm)",
+                      file=sys.stderr)
             items.append(DatabaseClip(clip, handmap, label, str(p)))
             still = _still_hands(clip, handmap)
             if still and len(still) == sum(1 for h in handmap.sides if h.finger_joints):  # one idle hand is normal

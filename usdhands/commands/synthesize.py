@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.commands._interaction_common import add_prop_arguments, check_prop_options
 from usdhands.commands._output import MAIN_INPUT, check_paths, layer_options
 from usdhands.commands._synthesis_common import check_plot_folder
 from usdhands.errors import UsdHandsError
@@ -41,6 +42,9 @@ def register(sub) -> None:
     p.add_argument("--plot", type=Path, default=None, metavar="DIR",
                    help="write PNGs: wrist speed with segments, the graph with the chosen path, finger curves")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
+    add_prop_arguments(p, required=False)
+    p.add_argument("--collision-weight", type=float, default=1.0, metavar="WC",
+                   help="with --props: weight wc of the collision term wc*sum|D-D*|^2/(n*m) in the segment cost")
     p.set_defaults(func=run)
 
 
@@ -53,6 +57,12 @@ def run(args) -> int:
     from usdhands.model.asset import Asset
 
     _check_output(args)
+    if args.props:
+        check_prop_options(args)
+        if args.animation == "all":
+            raise UsdHandsError("--props works on one animation; give --animation NAME")
+        if not (args.collision_weight >= 0):
+            raise UsdHandsError(f"--collision-weight must be 0 or more, got {args.collision_weight:g}")
     cfg = load_config(args.config)
     if args.k is not None:
         if args.k < 1:
@@ -70,7 +80,27 @@ def run(args) -> int:
         raise UsdHandsError(str(e.args[0]).split(": ", 1)[-1], path=args.file) from None
     clip, handmap, with_fingers, added = _prepare(args, asset, clip, db, cfg)
     progress(1, 4, "synthesizing")
-    result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers), finger_reference=args.finger_reference)
+    interaction, colliders, iconfig = None, None, None
+    if args.props:
+        from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
+        from usdhands.commands._interaction_common import read_scene_props, synthesis_interaction
+
+        iconfig = load_interaction_config(args.interaction_config) if args.interaction_config else InteractionConfig()
+        props = read_scene_props(args, clip)
+        interaction, colliders = synthesis_interaction(args, clip, handmap, db, cfg, props, iconfig)
+    result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers), finger_reference=args.finger_reference,
+                             interaction=interaction)
+    correction = None
+    if args.props:
+        from dataclasses import replace
+
+        from usdhands.algorithms.interaction.correction import correct_clip
+        from usdhands.model.handmap import HandMap
+
+        corrected_hands = HandMap(**{s: handmap[s] for s in with_fingers})
+        fixed, correction = correct_clip(result.clip, corrected_hands, colliders, margin_mm=args.margin,
+                                         config=iconfig)
+        result = replace(result, clip=fixed)
     progress(2, 4, "writing")
     if added:
         out = write_asset(Asset(str(args.file), (result.clip.skeleton,), (result.clip,), ()), args.output,
@@ -79,6 +109,8 @@ def run(args) -> int:
         out = write_clip(args.file, result.clip, args.output, **layer_options(args.layer, args.file, args.output))
     report = _report(result, db, cfg)
     report["grafted_joints"] = added
+    if correction is not None:
+        report["interaction"] = {**correction.to_dict(), "chains_corrected": correction.chains_corrected}
     report["output"] = str(out)
     report["animation"] = clip.name
     report["animations_in_file"] = len(asset.clips)
@@ -160,6 +192,12 @@ def _print_report(report) -> None:
             print(f"{side}: no database counterpart, left as they were: {', '.join(m['no_source'])}")
         if m["dropped"]:
             print(f"{side}: database slots with no joint in this rig: {', '.join(m['dropped'])}")
+    if "interaction" in report:
+        i = report["interaction"]
+        b, a = i["penetration_before_mm"], i["penetration_after_mm"]
+        print(f"props: penetration before correction max {b['max']:.2f} mm ({b['frames']} frames), after "
+              f"{a['max']:.3f} mm ({a['frames']} frames); jitter {i['jitter_before']:.0f} -> {i['jitter_after']:.0f} "
+              f"deg/s^2; {i['frames_corrected']} frames corrected")
 
 
 def _run_all(args, asset, db, cfg, progress) -> int:
@@ -233,7 +271,8 @@ def _check_output(args) -> None:
     which writes a new file in any format)."""
     from usdhands.formats.registry import handler_for
 
-    check_paths({MAIN_INPUT: args.file, "--db": args.db, "--config": args.config, "--handmap": args.handmap},
+    check_paths({MAIN_INPUT: args.file, "--db": args.db, "--config": args.config, "--handmap": args.handmap,
+                 "--props": args.props, "--interaction-config": args.interaction_config},
                 {"-o": args.output})
     layer_options(args.layer, args.file, args.output)
     check_plot_folder(args.plot)

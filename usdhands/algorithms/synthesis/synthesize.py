@@ -148,7 +148,7 @@ def _uniform_knn(query: np.ndarray, db_weighted: np.ndarray, segments: np.ndarra
 
 
 def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config: SynthesisConfig | None = None,
-                    exclude_clips=(), db_weighted: np.ndarray | None = None) -> HandSynthesis:
+                    exclude_clips=(), db_weighted: np.ndarray | None = None, hooks=None) -> HandSynthesis:
     """Synthesize one hand's canonical finger curves from its wrist features.
 
     Parameters
@@ -164,6 +164,11 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         Database clips not to use (leave-one-out).
     db_weighted : (F, 6) float, optional
         ``weight_features(db.features, ...)`` when already computed.
+    hooks : object, optional
+        Interactions (seed 002): ``hooks.cuts(bounds) -> bounds`` adds segment boundaries
+        (proximity to props), ``hooks.penalty(bounds, candidates) -> (N, k)`` adds a
+        collision term to the segment costs
+        (:class:`~usdhands.algorithms.interaction.synthesis_terms.InteractionTerms`).
 
     Raises
     ------
@@ -183,6 +188,8 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         raise ValueError(f"The database has no {side}-hand segments to choose from")
     k = min(sc.k, len(seg_idx))  # more candidates than segments: (k, k) transition arrays for nothing
     bounds = segment_track(feats, db.fps, cfg.segmentation)
+    if hooks is not None:
+        bounds = hooks.cuts(bounds)
     speed = wrist_speed(feats[:, :3], db.fps, cfg.segmentation.speed_smoothing_s)
     qb = np.stack([bounds[:-1], bounds[1:]], axis=1)
     dsegs = db.segments[seg_idx, :2]
@@ -201,6 +208,8 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         # with steps of at most 2 fits, so compare with each segment sampled uniformly
         cand_local[i], costs[i] = _uniform_knn(qw[qb[i, 0]:qb[i, 1]], dw, dsegs, k)
     cand = np.where(cand_local >= 0, seg_idx[np.maximum(cand_local, 0)], -1)
+    if hooks is not None:
+        costs = costs + hooks.penalty(bounds, cand)
     N = len(cand)
     starts, ends, vstart, vend = _candidate_ends(db, cand)
     tc = cfg.transition
@@ -256,7 +265,8 @@ def _mapping(rig: HandRig, db: FingerDatabase, skeleton) -> tuple[HandRig, dict]
 
 
 def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: SynthesisConfig | None = None,
-                    hands: tuple[str, ...] = SIDES, exclude_clips=(), finger_reference: str = "rest") -> ClipSynthesis:
+                    hands: tuple[str, ...] = SIDES, exclude_clips=(), finger_reference: str = "rest",
+                    interaction=None) -> ClipSynthesis:
     """Give a clip finger motion from the database; every other joint is left as it was.
 
     Parameters
@@ -274,6 +284,8 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
         the pose the input's fingers hold at its first frame (for body-only clips whose
         frozen fingers show the rig's natural pose while its rest pose does not, such
         as a BVH whose zero pose is not the bind pose).
+    interaction : callable, optional
+        ``interaction(side, hand, rig) -> hooks`` for :func:`synthesize_hand` (props).
 
     Returns
     -------
@@ -306,7 +318,8 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
         if resampled:
             n = int(np.floor(clip.duration * db.fps + 1e-6)) + 1
             feats = resample_rows(feats, clip.fps, db.fps, n)
-        res = synthesize_hand(feats, db, side, cfg, exclude_clips, dw)
+        hooks = interaction(side, hand, rig) if interaction is not None else None
+        res = synthesize_hand(feats, db, side, cfg, exclude_clips, dw, hooks=hooks)
         curves = res.curves
         if resampled:
             curves = resample_rows(curves, db.fps, clip.fps, clip.num_frames)
