@@ -9,7 +9,11 @@ Measured in the same run:
   finger capsule, points every 1 mm along the axis, ``trimesh.proximity.signed_distance``
   on each (timed on a sample of frames, scaled to the clip). It only detects; it corrects nothing.
 
-Run: ``python benchmarks/bench_interaction.py [--seconds S] [--naive-frames N]``.
+And ``synthesize --props`` against plain synthesis of the same 60 s clip (the bundled
+database; library calls: synthesis with the proximity cuts and the collision term, then the
+correction of the result), target within 2x.
+
+Run: ``python benchmarks/bench_interaction.py [--seconds S] [--naive-frames N] [--no-synthesis]``.
 """
 
 from __future__ import annotations
@@ -59,6 +63,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--naive-frames", type=int, default=30, help="frames the naive baseline is timed on")
+    ap.add_argument("--no-synthesis", action="store_true", help="skip the synthesize --props comparison")
     args = ap.parse_args()
     import trimesh
 
@@ -94,6 +99,34 @@ def main() -> None:
     print(f"naive trimesh signed_distance detection, 1 mm axis samples, scaled from {len(sample)} frames: "
           f"{naive_s:.1f} s")
     print(f"ratio naive / usdhands: {naive_s / correct_s:.0f}x  (target >= 100x)")
+    if not args.no_synthesis:
+        plain_s, props_s = synthesis_times(clip, hm, mug)
+        print(f"synthesize: plain {plain_s:.2f} s, with props (cuts, collision term, correction) {props_s:.2f} s, "
+              f"ratio {props_s / plain_s:.2f}x  (target <= 2x)")
+
+
+def synthesis_times(clip, hm, mug) -> tuple[float, float]:
+    """Seconds of plain synthesis and of synthesis with the mug (hooks and the final correction)."""
+    from types import SimpleNamespace
+
+    from usdhands.algorithms.synthesis.config import SynthesisConfig
+    from usdhands.algorithms.synthesis.database import load_database
+    from usdhands.algorithms.synthesis.synthesize import synthesize_clip
+    from usdhands.commands._interaction_common import synthesis_interaction
+    from usdhands.commands._synthesis_common import bundled_database_path
+
+    db = load_database(bundled_database_path())
+    cfg = SynthesisConfig()
+    synthesize_clip(clip.slice(0, 60), hm, db, cfg)  # compile the kernels outside the timing
+    t0 = time.perf_counter()
+    synthesize_clip(clip, hm, db, cfg)
+    plain = time.perf_counter() - t0
+    args = SimpleNamespace(attach=[], self_collision=False, margin=0.0, collision_weight=1.0, file="bench")
+    t0 = time.perf_counter()
+    factory, cols = synthesis_interaction(args, clip, hm, db, cfg, [(Path("mug.obj"), mug)], InteractionConfig())
+    result = synthesize_clip(clip, hm, db, cfg, interaction=factory)
+    correct_clip(result.clip, hm, cols, measure=False)
+    return plain, time.perf_counter() - t0
 
 
 if __name__ == "__main__":

@@ -378,12 +378,12 @@ def test_byte_identical_to_committed(tmp_path):
     if not (committed / "humanoid.usda").is_file():
         pytest.skip("sample_assets/ not generated")
     pats = ["props/*", "humanoid.*", "gestures/labels.csv", "gestures/wipe_07.glb", "conversation.labels.csv",
-            "gestures_bodyonly/turn_05_bodyonly.bvh"]
+            "gestures_bodyonly/turn_05_bodyonly.bvh", "interaction/table_rest.glb"]
     code = ("import sys; from usdhands.samples.generate import generate_samples; "
             "generate_samples(sys.argv[1], only=tuple(sys.argv[2:]))")
     subprocess.run([sys.executable, "-c", code, str(tmp_path), *pats], check=True)
     files = sorted(p for p in tmp_path.rglob("*") if p.is_file())
-    assert len(files) == 9
+    assert len(files) == 12
     for p in files:
         rel = p.relative_to(tmp_path)
         assert p.read_bytes() == (committed / rel).read_bytes(), rel

@@ -39,37 +39,48 @@ def plot_correction(folder: Path, before, after, handmap, colliders, report, con
 
     worst = int(np.argmax(report.penetration_before_mm))
     fig = plt.figure(figsize=(9, 4.5))
-    up = 1 if before.skeleton.up_axis == "Y" else 2
-    side_axis = 0
+    span = 12.0 * 0.01 / before.skeleton.meters_per_unit
+    focus = [p for p in chain_posers(before, handmap, config) if p.chain.name in report.chains_corrected]
+    focus = focus or chain_posers(before, handmap, config)
+    pts = np.concatenate([p.given_points[worst] for p in focus])
+    centre = pts.mean(axis=0)
+    normal = np.zeros(3)  # look along the fingers' flexion axis: the normal of each finger's curl plane
+    for p in focus:
+        q = p.given_points[worst] - p.given_points[worst].mean(axis=0)
+        n = np.linalg.svd(q)[2][-1]
+        normal += n * np.sign(n[np.argmax(np.abs(n))])
+    flat_axis = int(np.argmax(np.abs(normal)))
+    u, v = [a for a in range(3) if a != flat_axis]
+    names = "XYZ"
     for col, (clip, title) in enumerate(((before, "before"), (after, "after"))):
         ax = fig.add_subplot(1, 2, col + 1)
-        posers = chain_posers(clip, handmap, config)
-        centre = None
-        for poser in posers:
-            pts = poser.given_points[worst]
-            r = float(poser.chain.radii.mean())
-            if centre is None:
-                centre = pts.mean(axis=0)
-            ax.plot(pts[:, side_axis], pts[:, up], "-o", color="tab:blue", lw=r * 72 * 0.9 / _scale(clip), ms=2,
-                    alpha=0.7, solid_capstyle="round")
         for c in colliders.items:
-            if isinstance(c, MeshCollider):
-                v = c.proximity.vertices @ c.world[worst, :3, :3].T + c.world[worst, :3, 3]
-                flat = v[:, [side_axis, up]]
-                try:
-                    hull = ConvexHull(flat)
-                    ax.fill(flat[hull.vertices, 0], flat[hull.vertices, 1], color="tab:brown", alpha=0.3, lw=0)
-                except QhullError:  # a flat prop seen edge-on
-                    ax.plot(flat[:, 0], flat[:, 1], ",", color="tab:brown")
+            if not isinstance(c, MeshCollider):
+                continue
+            verts = c.proximity.vertices @ c.world[worst, :3, :3].T + c.world[worst, :3, 3]
+            near = np.all(np.abs(verts - centre) < 2 * span, axis=1)
+            if near.sum() < 3:
+                continue
+            flat = verts[near][:, [u, v]]
+            try:
+                hull = ConvexHull(flat)
+                ax.fill(flat[hull.vertices, 0], flat[hull.vertices, 1], color="tab:brown", alpha=0.25, lw=0)
+            except QhullError:  # a flat prop seen edge-on
+                ax.plot(flat[:, 0], flat[:, 1], ",", color="tab:brown")
+        for poser in chain_posers(clip, handmap, config):
+            if poser.chain.name not in [p.chain.name for p in focus]:
+                continue
+            q = poser.given_points[worst]
+            r = float(poser.chain.radii.mean())
+            ax.plot(q[:, u], q[:, v], "-o", color="tab:blue", lw=2 * r / span * 4.0 * 72 / 2, ms=2,
+                    alpha=0.6, solid_capstyle="round")
         depth = (report.penetration_before_mm if col == 0 else report.penetration_after_mm)[worst]
         ax.set_title(f"{title}: frame {worst}, {depth:.2f} mm deep")
         ax.set_aspect("equal")
-        if centre is not None:
-            span = 12.0 * 0.01 / clip.skeleton.meters_per_unit
-            ax.set_xlim(centre[side_axis] - span, centre[side_axis] + span)
-            ax.set_ylim(centre[up] - span, centre[up] + span)
-        ax.set_xlabel("x (clip units)")
-        ax.set_ylabel("up (clip units)")
+        ax.set_xlim(centre[u] - span, centre[u] + span)
+        ax.set_ylim(centre[v] - span, centre[v] + span)
+        ax.set_xlabel(f"{names[u]} (clip units)")
+        ax.set_ylabel(f"{names[v]} (clip units)")
     fig.tight_layout()
     out = folder / "worst_frame.png"
     with atomic_output(out) as tmp:
@@ -77,8 +88,3 @@ def plot_correction(folder: Path, before, after, handmap, colliders, report, con
     plt.close(fig)
     paths.append(out)
     return paths
-
-
-def _scale(clip) -> float:
-    """Data units per inch of the worst-frame panels (24 cm over about 4 inches)."""
-    return 24.0 * 0.01 / clip.skeleton.meters_per_unit / 4.0

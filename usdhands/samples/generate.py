@@ -21,7 +21,11 @@ Files (``<ext>`` is ``.usda``/``.usdc`` for USD, ``.glb`` for glTF, ``.bvh``):
 - ``conversation.<ext>``: about 29 s of chained gestures with ground-truth fingers, and
   ``conversation.labels.csv`` (type, hands, start and end in seconds);
   ``conversation_bodyonly.<ext>``: the same with the fingers frozen at rest;
-- ``props/cup.obj`` and ``props/cup.usda``: the cup prop.
+- ``props/cup.obj`` and ``props/cup.usda``: the cup prop;
+- ``interaction/<name>.glb``: clips with full fingers that touch things (``cup_grasp``,
+  ``scratch_head``, ``table_rest``; :mod:`usdhands.samples.interaction`) and their
+  ``_bodyonly`` versions (the cup's only in the committed layout), with the props they
+  touch in world metres like the glTF clips: ``props/table.obj``, ``props/cup_on_table.obj``.
 
 The same call writes byte-identical files: fixed seeds, no time stamps.
 """
@@ -143,8 +147,33 @@ def plan_samples(formats=FORMATS, layout: str = "committed", seed: int = 0) -> l
         plan.append(SampleFile(f"conversation_bodyonly{_ext(fmt, False)}",
                                lambda: _clip_asset(body_only(conv()), "conversation_bodyonly"), "asset"))
     plan.append(SampleFile("props/cup.obj", lambda: cup_obj_text(cup_mesh()), "text"))
+    plan.extend(_interaction_plan(formats, layout, seed))
     if "usd" in formats:
         plan.append(SampleFile("props/cup.usda", lambda: cup_usda_text(cup_mesh()), "text"))
+    return plan
+
+
+def _interaction_plan(formats, layout: str, seed: int) -> list[SampleFile]:
+    """The interaction clips (glTF, metres like their OBJ props; USD or BVH when glTF is not asked
+    for), their body-only versions (all in the full layout, the cup's only when committed) and the
+    props (in metres)."""
+    from usdhands.samples.interaction import (
+        cup_grasp_clip, cup_on_table_mesh, mesh_obj_text, scratch_head_clip, table_mesh, table_rest_clip,
+    )
+
+    ext = ".glb" if "gltf" in formats else (".usdc" if "usd" in formats else ".bvh")
+    makers = {"cup_grasp": cup_grasp_clip, "scratch_head": scratch_head_clip, "table_rest": table_rest_clip}
+    plan = []
+    for name, make in makers.items():
+        plan.append(SampleFile(f"interaction/{name}{ext}", (lambda make=make, name=name: _clip_asset(make(seed), name)),
+                               "asset"))
+        if layout == "full" or name == "cup_grasp":
+            plan.append(SampleFile(f"interaction/{name}_bodyonly{ext}",
+                                   (lambda make=make, name=name: _clip_asset(body_only(make(seed)), f"{name}_bodyonly")),
+                                   "asset"))
+    plan.append(SampleFile("props/table.obj", lambda: mesh_obj_text(table_mesh(), "Table top", 0.01), "text"))
+    plan.append(SampleFile("props/cup_on_table.obj",
+                           lambda: mesh_obj_text(cup_on_table_mesh(), "Cup on the table", 0.01), "text"))
     return plan
 
 

@@ -4,7 +4,7 @@ arms and thighs, following the skeleton.
 Joints are found from the hand map (hips, shoulders, elbows) and by name (neck, head,
 thighs, knees); a part whose joints cannot be found is left out. Radii are fractions of
 the character's height (its rest pose's extent along the up axis), for an average adult:
-torso 7.5%, head 5.5%, upper arm 2.5%, thigh 4%.
+torso 7.5%, head 5.5%, upper arm 2.5%, thigh 3.5%.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from usdhands.model.handmap import HandMap
 __all__ = ["body_collider", "RADIUS_OF_HEIGHT"]
 
 #: Capsule radius of each body part as a fraction of the character's height.
-RADIUS_OF_HEIGHT = {"torso": 0.075, "head": 0.055, "upper arm": 0.025, "thigh": 0.04}
+RADIUS_OF_HEIGHT = {"torso": 0.075, "head": 0.055, "upper arm": 0.025, "thigh": 0.035}
 
 _NAMES = {
     "neck": re.compile(r"neck", re.I),
