@@ -95,3 +95,10 @@ def test_bad_input_one_line_exit_2(scene, capsys, make, args, message):
         message = "looks like it is in centimetres"
     assert code == 2 and len(lines) == 1 and lines[0].startswith("usdhands: error: ") and message in lines[0]
     assert not out.exists()
+
+
+def test_output_over_a_prop_is_refused(scene, capsys):
+    before = (scene / "cyl.obj").read_bytes()
+    code, lines = run(capsys, "correct", scene / "closing.usda", "--props", scene / "cyl.obj", "-o", scene / "cyl.obj")
+    assert code == 2 and len(lines) == 1 and "--props" in lines[0]
+    assert (scene / "cyl.obj").read_bytes() == before

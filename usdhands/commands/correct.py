@@ -18,7 +18,7 @@ from usdhands.commands._common import print_json, print_table
 from usdhands.commands._interaction_common import (
     add_prop_arguments, build_colliders, check_prop_options, read_scene_props,
 )
-from usdhands.commands._output import add_layer_argument, layer_options
+from usdhands.commands._output import MAIN_INPUT, add_layer_argument, check_paths, layer_options
 
 
 def register(sub) -> None:
@@ -43,10 +43,10 @@ def run(args) -> int:
     from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
     from usdhands.commands._synthesis_common import check_plot_folder, handmap_for
     from usdhands.formats.io import read_clip, write_clip
-    from usdhands.formats.registry import check_output_path
 
+    check_paths({MAIN_INPUT: args.file, "--props": args.props, "--handmap": args.handmap,
+                 "--interaction-config": args.interaction_config}, {"-o": args.output})
     write_opts = layer_options(args.layer, args.file, args.output)
-    check_output_path(args.output, args.file, *args.props, args.handmap, args.interaction_config)
     check_prop_options(args)
     check_plot_folder(args.plot)
     config = load_interaction_config(args.interaction_config) if args.interaction_config else InteractionConfig()
