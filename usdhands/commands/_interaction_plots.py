@@ -17,7 +17,6 @@ def plot_correction(folder: Path, before, after, handmap, colliders, report, con
 
     from usdhands.algorithms.interaction.colliders import MeshCollider
     from usdhands.algorithms.interaction.correction import chain_posers
-    from usdhands.formats.registry import atomic_output
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -30,12 +29,7 @@ def plot_correction(folder: Path, before, after, handmap, colliders, report, con
     ax.set_xlabel("time (s)")
     ax.set_ylabel("deepest finger penetration (mm)")
     ax.legend(loc="upper right")
-    fig.tight_layout()
-    out = folder / "penetration_depth.png"
-    with atomic_output(out) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    paths.append(out)
+    paths.append(_save(fig, folder / "penetration_depth.png"))
 
     worst = int(np.argmax(report.penetration_before_mm))
     fig = plt.figure(figsize=(9, 4.5))
@@ -81,10 +75,18 @@ def plot_correction(folder: Path, before, after, handmap, colliders, report, con
         ax.set_ylim(centre[v] - span, centre[v] + span)
         ax.set_xlabel(f"{names[u]} (clip units)")
         ax.set_ylabel(f"{names[v]} (clip units)")
+    paths.append(_save(fig, folder / "worst_frame.png"))
+    return paths
+
+
+def _save(fig, path: Path) -> Path:
+    """Write ``fig`` as a PNG atomically and close it."""
+    import matplotlib.pyplot as plt
+
+    from usdhands.formats.registry import atomic_output
+
     fig.tight_layout()
-    out = folder / "worst_frame.png"
-    with atomic_output(out) as tmp:
+    with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
     plt.close(fig)
-    paths.append(out)
-    return paths
+    return path
