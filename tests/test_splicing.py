@@ -728,3 +728,20 @@ def test_cli_still_hand_alone_gets_a_note(sample_assets, tmp_path, capsys):
     status, _, err = _run(["splice", str(src), str(hands_path), "-o", str(tmp_path / "o.usda"), "--side", "right"],
                           capsys)
     assert status == 0 and "barely moves" not in err
+
+
+@pytest.mark.parametrize("frames", [5, 6, 7, 30, 569])
+def test_sign_features_derivatives_equal_scipy_savgol_filter(frames):
+    """sign_features caches the Savitzky-Golay operators (coefficients, and the end frames'
+    cubic fits as matrices): the same derivatives as scipy's savgol_filter with mode="interp"."""
+    from scipy.signal import savgol_filter
+
+    x = np.cumsum(np.random.default_rng(frames).normal(size=(frames, 4, 3)), axis=0) * 10
+    vel, acc, eps_v, eps_a = sign_features(x, 30.0)
+    w = min(7, frames if frames % 2 else frames - 1)
+    for got, deriv in ((vel, 1), (acc, 2)):
+        want = savgol_filter(x, w, 3, deriv=deriv, delta=1 / 30, axis=0, mode="interp")
+        h = w // 2
+        assert np.array_equal(got[h:frames - h], want[h:frames - h])  # the same convolution
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())  # the end fits
+    assert eps_v == pytest.approx(0.05 * np.sqrt(np.mean(vel ** 2)), rel=1e-12)

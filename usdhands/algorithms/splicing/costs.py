@@ -9,11 +9,13 @@ Used by :mod:`usdhands.algorithms.splicing.splice`.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 from usdhands.jit import njit
-from scipy.signal import savgol_filter
+from scipy.ndimage import convolve1d
+from scipy.signal import savgol_coeffs
 
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import HandSide
@@ -56,14 +58,52 @@ def sign_features(markers: np.ndarray, fps: float, *, window: int = 7,
         raise ValueError(f"Expected at least 3 frames, got {T}")
     w = _smooth_window(T, window)
     if w >= 5:
-        vel = savgol_filter(x, w, 3, deriv=1, delta=1.0 / fps, axis=0, mode="interp")
-        acc = savgol_filter(x, w, 3, deriv=2, delta=1.0 / fps, axis=0, mode="interp")
+        vel = _savgol(x, w, 1, 1.0 / fps)
+        acc = _savgol(x, w, 2, 1.0 / fps)
     else:
         vel = np.gradient(x, 1.0 / fps, axis=0)
         acc = np.gradient(vel, 1.0 / fps, axis=0)
     eps_v = dead_zone * float(np.sqrt(np.mean(vel ** 2)))
     eps_a = dead_zone * float(np.sqrt(np.mean(acc ** 2)))
     return vel, acc, eps_v, eps_a
+
+
+@functools.lru_cache(maxsize=32)
+def _savgol_operators(window: int, deriv: int, delta: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """scipy's cubic Savitzky-Golay filter with ``mode="interp"`` as three linear maps.
+
+    Returns the convolution coefficients ``(window,)`` for the frames a whole window
+    away from the ends, and ``(window // 2, window)`` matrices giving the first and
+    last ``window // 2`` frames from the first and last ``window`` frames (the
+    derivative of the cubic fitted to them), computed once per window, derivative and
+    frame time instead of fitted on every call.
+    """
+    half = window // 2
+    coeffs = savgol_coeffs(window, 3, deriv=deriv, delta=delta)
+    i = np.arange(window, dtype=np.float64)
+    fit = np.linalg.pinv(np.vander(i, 4, increasing=True))  # (4, window): cubic coefficients c_k of x
+    powers = np.arange(4)
+    falling = np.array([np.prod(np.arange(k - deriv + 1, k + 1)) if k >= deriv else 0.0 for k in powers])
+
+    def at(points):  # (len(points), 4): d^deriv/dt^deriv of t^k at the points, per second
+        p = np.where(powers >= deriv, powers - deriv, 0)
+        return falling[None, :] * points[:, None].astype(np.float64) ** p[None, :] / delta ** deriv
+
+    ops = (coeffs, at(np.arange(half)) @ fit, at(np.arange(window - half, window)) @ fit)
+    for a in ops:
+        a.setflags(write=False)  # shared by every call (lru_cache)
+    return ops
+
+
+def _savgol(x: np.ndarray, window: int, deriv: int, delta: float) -> np.ndarray:
+    """``savgol_filter(x, window, 3, deriv, delta, axis=0, mode="interp")`` with cached operators."""
+    coeffs, first, last = _savgol_operators(window, deriv, delta)
+    y = convolve1d(x, coeffs, axis=0, mode="constant")
+    half = window // 2
+    flat = x.reshape(x.shape[0], -1)
+    y.reshape(y.shape[0], -1)[:half] = first @ flat[:window]
+    y.reshape(y.shape[0], -1)[-half:] = last @ flat[-window:]
+    return y
 
 
 @njit(cache=True)
