@@ -92,7 +92,7 @@ def main() -> None:
 
     from usdhands.algorithms.synthesis.database import DatabaseClip, build_database, segment_track
     from usdhands.algorithms.synthesis.segment_cost import dtw_align, knn_segments, weight_features
-    from usdhands.algorithms.synthesis.synthesize import db_side_segments, synthesize_clip
+    from usdhands.algorithms.synthesis.synthesize import db_side_segments, segment_weights, synthesize_clip
     from usdhands.algorithms.synthesis.config import SynthesisConfig
     from usdhands.algorithms.synthesis.wrist_features import wrist_features
     from usdhands.model.hand_detection import detect_hands
@@ -118,7 +118,7 @@ def main() -> None:
 
     # the search alone, and the candidate pairs it considered
     sc = cfg.segment_cost
-    w = [sc.w_position] * 3 + [sc.w_rotation] * 3
+    w = segment_weights(cfg)
     dw = weight_features(db.features, w)
     world = inp.world_xforms()
     pairs, cand, aligned_full = [], 0, 0

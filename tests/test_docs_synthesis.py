@@ -87,8 +87,8 @@ def folder(tmp_path_factory, sample_assets, shared_assets):
 
 def test_page_has_the_commands():
     firsts = [line.split()[1] for line, _ in examples()]
-    assert firsts == ["evaluate", "synthesize", "db", "'{\"segment_cost\":", "synthesize", "evaluate", "synthesize",
-                      "synthesize"]
+    assert firsts == ["evaluate", "synthesize", "db", "'{\"segment_cost\":", "synthesize", "evaluate", "evaluate",
+                      "synthesize", "synthesize"]
 
 
 def test_every_command_prints_what_the_page_shows(folder):

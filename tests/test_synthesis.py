@@ -376,7 +376,7 @@ def test_arm_features_have_all_roles():
     clip = gesture_clip(sk, "ok", np.random.default_rng(1))
     f = arm_features(clip, hm.left)
     assert sorted(f) == ["elbow_pos", "elbow_rot", "shoulder_pos", "shoulder_rot", "wrist_pos", "wrist_rot"]
-    assert all(v.shape == (clip.num_frames, 3) for v in f.values())
+    assert all(v.shape == (clip.num_frames, 9 if k.endswith("_rot") else 3) for k, v in f.items())
 
 
 # -- database -------------------------------------------------------------------------
@@ -410,11 +410,16 @@ def test_database_rejects_bad_manifest(small_db, tmp_path):
     path = save_database(small_db, tmp_path / "db")
     mf = path / "manifest.json"
     m = json.loads(mf.read_text())
-    m["version"] = 2
+    m["version"] = 3
     mf.write_text(json.dumps(m))
-    with pytest.raises(ConfigError, match=r"database version 2 is not supported \(this usdhands reads 1\)"):
+    with pytest.raises(ConfigError, match=r"database version 3 is not supported \(this usdhands reads 2\)$"):
         load_database(path)
-    m["version"] = 1
+    m["version"] = 1  # rotation-vector features: rebuild
+    mf.write_text(json.dumps(m))
+    with pytest.raises(ConfigError, match=r"database version 1 is not supported \(this usdhands reads 2\); it stores "
+                                          r"rotation-vector wrist features, which wrap: rebuild it .*'usdhands db build'"):
+        load_database(path)
+    m["version"] = 2
     m["arrays"]["fingers"]["shape"] = [1, 2]
     mf.write_text(json.dumps(m))
     with pytest.raises(ConfigError, match=r"array 'fingers' has shape \[\d+, 45\] and dtype float32, the manifest says \[1, 2\]"):

@@ -62,7 +62,17 @@ def test_a_clip_shorter_than_half_of_every_database_segment_gets_the_closest_uni
         assert res.chosen.tolist() == [s] and res.segment_costs[0, 0] == 0.0
         assert (res.candidates[0] >= 0).all() and np.all(np.diff(res.segment_costs[0]) >= 0)
         assert res.curves.shape == (n, NUM_DOFS)
-        assert np.array_equal(res.curves[:, db.dof_index], np.asarray(db.fingers[rows], dtype=np.float64))
+        # the same motion: it starts on the segment's first frame and heads for the frames sampled
+        # uniformly, at most the database's 99.5th-percentile step per frame (a 60-frame segment
+        # played in 3 frames would otherwise pop)
+        got = res.curves[:, db.dof_index]
+        target = np.asarray(db.fingers[rows], dtype=np.float64)
+        limit = db.step_limits(99.5)
+        assert np.allclose(got[0], target[0], atol=1e-5)
+        assert (np.abs(np.diff(got, axis=0)) <= limit + 1e-9).all()
+        assert (np.abs(got[-1] - target[-1]) <= np.abs(got[0] - target[-1]) + 1e-9).all()
+        if n > 1:  # it moves
+            assert np.abs(got[-1] - got[0]).max() > 1.0
 
 
 def test_synthesize_a_clip_of_a_few_frames(sample_assets, capsys, tmp_path):
@@ -452,7 +462,7 @@ def test_db_info_of_the_bundled_database(capsys):
     status, out, _ = _run(capsys, "db", "info", bundled_database_path(), "--json")
     manifest = json.loads(out)
     jsonschema.validate(manifest, database_schema())
-    assert manifest["format"] == "usdhands-finger-database" and manifest["version"] == 1
+    assert manifest["format"] == "usdhands-finger-database" and manifest["version"] == 2
     assert manifest["counts"] == {"clips": 64, "tracks": 128, "segments": 347, "frames": 10560}
 
 
@@ -471,7 +481,11 @@ def test_an_input_segment_with_no_candidate_within_the_length_factor_widens_it()
     res = synthesize_hand(np.asarray(db.features[rows], dtype=np.float64), db, "right")
     assert res.search.candidates[0] == 0  # nothing within the factor
     assert res.chosen.tolist() == [s] and res.segment_costs[0, 0] == pytest.approx(0.0, abs=1e-9)
-    assert np.allclose(res.curves[:, db.dof_index], np.asarray(db.fingers[rows], dtype=np.float64))
+    # the same motion within a tolerance: every other frame of the segment, steps of two frames
+    # limited to the database's 99.5th-percentile step
+    got, target = res.curves[:, db.dof_index], np.asarray(db.fingers[rows], dtype=np.float64)
+    assert np.allclose(got[0], target[0], atol=1e-5)
+    assert np.abs(got - target).mean() < 0.5 and (np.abs(np.diff(got, axis=0)) <= db.step_limits(99.5) + 1e-9).all()
 
 
 def test_hands_right_leaves_the_left_fingers_as_they_were(sample_assets, capsys, tmp_path):
@@ -587,10 +601,10 @@ def test_the_same_motion_from_gltf_bvh_and_usd_gets_the_same_fingers(sample_asse
         first = results[0].hands[side]
         for other in results[1:]:
             assert np.array_equal(first.bounds, other.hands[side].bounds)
-            # rest segments of idle hands cost ~0 alike: which of them is taken may differ, not the fingers
-            same = first.chosen == other.hands[side].chosen
-            assert same.mean() > 0.9, side
-            assert np.abs(first.curves - other.hands[side].curves).mean() < 0.1, side
+            # what matters is the motion, not which of two near-equal candidates is taken (rest
+            # segments of an idle hand cost ~0 alike): the same finger curves within a tolerance
+            diff = np.abs(first.curves - other.hands[side].curves)
+            assert diff.mean() < 0.1 and np.percentile(diff.max(axis=1), 99) < 1.0, side
 
 
 def test_unlabelled_database_says_no_label(shared_assets, capsys, tmp_path):

@@ -146,3 +146,47 @@ def plot_confusion(result: dict, path: Path) -> Path:
     fig.savefig(path)
     plt.close(fig)
     return path
+
+
+def plot_kfold_errors(result: dict, path: Path) -> Path:
+    """K-fold finger error per method, overall and on the most expressive quarter of the frames."""
+    plt = _plt()
+    names = list(result["methods"])
+    overall = [result["methods"][n]["error_deg"] for n in names]
+    expressive = [result["methods"][n]["expressive_error_deg"] for n in names]
+    fig, ax = plt.subplots(figsize=(7, 0.4 * len(names) + 1.4), dpi=90)
+    y = np.arange(len(names))[::-1]
+    ax.barh(y + 0.2, overall, height=0.4, color="tab:blue", label="all frames")
+    ax.barh(y - 0.2, expressive, height=0.4, color="tab:orange", label="most expressive quarter")
+    for yy, a, b in zip(y, overall, expressive):
+        ax.text(a, yy + 0.2, f" {a:.1f}", va="center", fontsize=7)
+        ax.text(b, yy - 0.2, f" {b:.1f}", va="center", fontsize=7)
+    ax.set_yticks(y, names, fontsize=8)
+    ax.set_xlabel("mean finger-joint angle error (deg)")
+    ax.set_title(f"{result['folds']}-fold held-out synthesis, {result['windows']} windows", fontsize=9)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_worst_window(result: dict, path: Path) -> Path:
+    """Real against synthesized curves of the window where synthesis errs most (its three widest DOFs)."""
+    plt = _plt()
+    w = result["worst_window"]
+    truth, syn = np.asarray(w["truth"]), np.asarray(w["synthesis"])
+    fig, ax = plt.subplots(figsize=(7, 3), dpi=90)
+    t = np.arange(truth.shape[1]) if truth.size else np.zeros(0)
+    for i, name in enumerate(w["dofs"]):
+        color = f"C{i}"
+        ax.plot(t, truth[i], color=color, ls="--", lw=1, label=f"{name} real")
+        ax.plot(t, syn[i], color=color, lw=1.2, label=f"{name} synthesized")
+    ax.set_xlabel(f"frame in window (frames {w['frames'][0]}..{w['frames'][1]} of the take)")
+    ax.set_ylabel("degrees")
+    ax.set_title(f"worst window: {w['clip']} {w['side']}, fold {w['fold']}, error {w['error_deg']:.1f} deg", fontsize=9)
+    ax.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path

@@ -5,7 +5,9 @@ clips (body motion is enough): for each predictor, the share of the k closest
 segments (DTW-aligned squared differences) that come from a clip of the same label,
 and the confusion matrix of ``wrist_pos+0.5rot`` (P + 0.5·R). ``--holdout``
 synthesizes every clip's fingers from the others instead and reports the finger-angle
-error next to three baselines.
+error next to three baselines. ``--folds K`` runs k-fold held-out synthesis (windows of
+each take held out against the rest) against five baselines, and compares feature
+sets (``--feature-sets``) on the same folds.
 """
 
 from __future__ import annotations
@@ -34,6 +36,15 @@ def register(sub) -> None:
                         f"(default: {','.join(DEFAULT_PREDICTORS)})")
     p.add_argument("--holdout", action="store_true",
                    help="synthesize each clip's fingers from the others; error against ground truth and baselines")
+    p.add_argument("--folds", type=int, default=None, metavar="K",
+                   help="k-fold held-out synthesis on clips with fingers: windows of each take held out against "
+                        "the rest, against baselines (mean pose, medoid pose, nearest frame, mean of 10 nearest, "
+                        "random segments)")
+    p.add_argument("--feature-sets", default=None, metavar="SETS",
+                   help="with --folds: comma-separated feature sets behind the segment cost to compare, e.g. "
+                        "wrist_pos+0.5rot+0.5elbow_pos,wrist_pos+0.5rot+0.1vel,wrist_pos+0.5rot+0.5other_wrist_pos")
+    p.add_argument("--keep-rest", action="store_true",
+                   help="leave-one-out: keep each hand's rest at both ends of a take (default: trimmed, as sec. 4)")
     p.add_argument("--samples", action="store_true", help="use the generated gesture set instead of files")
     p.add_argument("--fps", type=float, default=None, help="resample clips to this rate (default the first clip's; 30 with --holdout)")
     p.add_argument("--config", type=Path, default=None, help="synthesis configuration JSON")
@@ -55,10 +66,11 @@ def _items(args):
     if not args.inputs:
         raise UsdHandsError("no input files given (or use --samples)")
     paths = expand_inputs(args.inputs)
-    if not args.holdout and not (args.labels or args.labels_file):
-        raise UsdHandsError("evaluate needs --labels REGEX or --labels-file CSV (or --holdout)")
+    synth = args.holdout or args.folds is not None
+    if not synth and not (args.labels or args.labels_file):
+        raise UsdHandsError("evaluate needs --labels REGEX or --labels-file CSV (or --holdout, --folds K)")
     return read_labelled(paths, labeller(args.labels, args.labels_file), args.fps, args.handmap, args.animation,
-                         Progress("reading"), fingerless=not args.holdout)
+                         Progress("reading"), fingerless=not synth)
 
 
 def run(args) -> int:
@@ -74,6 +86,7 @@ def run(args) -> int:
     from usdhands.algorithms.synthesis.evaluation import (
         DEFAULT_PREDICTORS, evaluate_predictors, parse_predictor, prepare_eval_set,
     )
+    from usdhands.algorithms.synthesis.kfold import parse_feature_set
     from usdhands.commands._common import parse_list
 
     from usdhands.commands._synthesis_common import check_plot_folder
@@ -86,7 +99,26 @@ def run(args) -> int:
             parse_predictor(name)
         except ValueError as e:
             raise UsdHandsError(str(e)) from None
+    if args.folds is not None:
+        if args.folds < 2:
+            raise UsdHandsError(f"--folds must be at least 2, got {args.folds}")
+        if args.holdout:
+            raise UsdHandsError("give --holdout or --folds, not both")
+    elif args.feature_sets is not None:
+        raise UsdHandsError("--feature-sets needs --folds K")
+    feature_sets = parse_list(args.feature_sets) or []
+    for name in feature_sets:
+        try:
+            parse_feature_set(name)
+        except ValueError as e:
+            raise UsdHandsError(str(e)) from None
     items = _items(args)
+    if args.folds is not None:
+        if args.k is not None:
+            cfg = cfg.with_values(segment_cost={"k": args.k})
+        from usdhands.commands._evaluate_folds import run_folds
+
+        return run_folds(args, _database_items(args, items, "--folds"), cfg, feature_sets)
     if args.holdout:
         if args.k is not None:
             cfg = cfg.with_values(segment_cost={"k": args.k})
@@ -104,7 +136,7 @@ def run(args) -> int:
         predictors, left_out = _answerable(predictors, items)
     try:
         es = prepare_eval_set([(lab, clip, hm) for _, lab, clip, hm in items], cfg, args.fps,
-                              predictors=predictors)
+                              predictors=predictors, trim_rest=not args.keep_rest)
         result = evaluate_predictors(es, predictors, k, cfg)
     except ValueError as e:
         raise UsdHandsError(str(e)) from None
@@ -125,10 +157,13 @@ def run(args) -> int:
         print_json(out)
         return 0
     print(f"leave-one-out over {result['segments']} segments of {len(items)} clips, k={result['k']} "
-          f"({len(es.idle)} idle hands left out)")
-    rows = [[name, f"{100 * share:.1f}%"] for name, share in result["predictors"].items()]
-    rows.append(["(chance)", f"{100 * result['chance']:.1f}%"])
-    print_table(rows, ["predictor", "correct type"])
+          f"({len(es.idle)} idle hands left out; {'rest kept' if args.keep_rest else 'rest trimmed at both ends'})")
+    per_hand = result["per_hand"]
+    pct = lambda v: "" if v is None else f"{100 * v:.1f}%"  # noqa: E731
+    rows = [[name, pct(share), pct(per_hand[name].get("left")), pct(per_hand[name].get("right"))]
+            for name, share in result["predictors"].items()]
+    rows.append(["(chance)", pct(result["chance"]), "", ""])
+    print_table(rows, ["predictor", "correct type", "left hand", "right hand"])
     if left_out:
         print(f"left out (joints missing from a hand map): {', '.join(left_out)}")
     print(f"best: {result['best']}")
@@ -154,23 +189,23 @@ def _answerable(predictors, items):
     return keep, [p for p in predictors if p not in keep]
 
 
-def _run_holdout(args, items, cfg) -> int:
-    from usdhands.algorithms.synthesis.database import DatabaseClip, build_database
-    from usdhands.algorithms.synthesis.evaluation import holdout_evaluation
+def _database_items(args, items, flag: str) -> list:
+    """The clips as database items, refusing clips without fingers and warning about still ones."""
+    from usdhands.algorithms.synthesis.database import DatabaseClip
 
     dbitems = []
     for p, lab, clip, hm in items:
         if not any(h.finger_joints for h in hm.sides):
-            raise UsdHandsError("no finger joints: --holdout needs clips with finger animation", path=p)
+            raise UsdHandsError(f"no finger joints: {flag} needs clips with finger animation", path=p)
         dbitems.append(DatabaseClip(clip, hm, lab, str(p)))
-    if len(dbitems) < 2:
+    if len(dbitems) < 2 and flag == "--holdout":
         raise UsdHandsError("--holdout needs at least two clips")
     from usdhands.commands.db import _still_hands
 
     still = [str(p) for p, _, clip, hm in items if len(_still_hands(clip, hm)) == len(
         [h for h in hm.sides if h.finger_joints])]
     if len(still) == len(items):
-        raise UsdHandsError("the fingers never move in any of these clips: --holdout needs clips with finger "
+        raise UsdHandsError(f"the fingers never move in any of these clips: {flag} needs clips with finger "
                             "animation (body-only files have no ground truth)")
     if still:
         import sys
@@ -178,6 +213,14 @@ def _run_holdout(args, items, cfg) -> int:
         print(f"usdhands: warning: the fingers never move in {len(still)} of {len(items)} clips "
               f"({', '.join(still[:3])}{', ...' if len(still) > 3 else ''}); they count as ground truth",
               file=sys.stderr)
+    return dbitems
+
+
+def _run_holdout(args, items, cfg) -> int:
+    from usdhands.algorithms.synthesis.database import build_database
+    from usdhands.algorithms.synthesis.evaluation import holdout_evaluation
+
+    dbitems = _database_items(args, items, "--holdout")
     db = build_database(dbitems, fps=args.fps or 30.0, segmentation=cfg.segmentation)
     result = {"k": cfg.segment_cost.k, **holdout_evaluation(db, cfg, seed=args.seed, progress=Progress("holdout"))}
     if args.json:

@@ -4,7 +4,9 @@ The values come from Jörg, Hodgins and Safonova 2012 (seed 000, §3): segments 
 0.33 s to 2 s cut where the wrist speed crosses a threshold near zero, the segment
 cost of eq. 1 (``wP = 1``, ``wR = 0.5``, length within a factor 1.5, ``k = 5``), the
 transition cost of eq. 2 (``wJ = 1``, ``wW = 0.5``), the path cost of eq. 3
-(``wS = 1``, ``wT = 0.5``) and seam blending past 5° mean or 20° maximum difference.
+(``wS = 1``, ``wT = 0.5``, each term divided by its mean over the candidates so the
+weights mean what the paper says: see docs/synthesis.md) and seam blending past 5° mean
+or 20° maximum difference.
 The paper leaves a few values open; ours are marked in the schema
 (``schemas/synthesis_config.schema.json``) and in docs/synthesis.md.
 
@@ -67,6 +69,7 @@ class PathConfig:
 
     w_segment: float = 1.0
     w_transition: float = 0.5
+    normalize_terms: bool = True
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,14 @@ class StitchingConfig:
     blend_mean_deg: float = 5.0
     blend_max_deg: float = 20.0
     blend_duration_s: float = 0.5
+    warp_smoothing_s: float = 0.2
+    step_percentile: float = 99.5
+
+    def __post_init__(self) -> None:
+        if not 0 < self.step_percentile <= 100:
+            raise ValueError(f"Expected 0 < step_percentile <= 100, got {self.step_percentile}")
+        if self.warp_smoothing_s < 0:
+            raise ValueError(f"Expected warp_smoothing_s >= 0, got {self.warp_smoothing_s}")
 
 
 _SECTIONS = {

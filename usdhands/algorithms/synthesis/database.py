@@ -2,16 +2,16 @@
 
 Content. Each clip contributes one **track** per hand that has fingers: per frame, the
 wrist features of eq. 1 (position relative to the root in cm, scaled to the
-database's reference body size, and rotation vector in degrees; see
+database's reference body size, and the wrap-free rotation features; see
 :mod:`usdhands.algorithms.synthesis.wrist_features`) and the canonical finger DOF curves
 (degrees; see :mod:`usdhands.algorithms.synthesis.finger_transfer`), all resampled to one
 frame rate. Tracks are cut into segments by wrist speed (§3.1). With mirroring,
 every track gets a left↔right mirrored twin on the other side.
 
-On disk (format ``usdhands-finger-database``, version 1) a database is a folder::
+On disk (format ``usdhands-finger-database``, version 2) a database is a folder::
 
     DB/manifest.json   metadata, validated by schemas/database.schema.json
-    DB/features.npy    (F, 6) float32   wrist position (cm) and rotation vector (deg)
+    DB/features.npy    (F, 12) float32  wrist position (cm) and rotation matrix entries ("deg")
     DB/fingers.npy     (F, M) float32   finger DOF curves (deg), the M DOFs of dof_index
     DB/tracks.npy      (R, 5) int64     start, stop (frames), clip, side (0 left, 1 right), mirrored
     DB/segments.npy    (N, 3) int64     start, stop (frames), track
@@ -21,7 +21,8 @@ lists the clips (name, source file, animation, label), the labels, the frame rat
 the reference reach, the DOFs stored (``dof_index`` into the canonical layout of 60
 DOFs, names in ``dofs``), the segmentation parameters, and for every array its file,
 shape and dtype. Arrays are loaded memory-mapped, so a large database costs no
-memory until read.
+memory until read. Version 1 stored rotation vectors (which wrap) as features;
+loading one is refused with a message to rebuild it.
 """
 
 from __future__ import annotations
@@ -41,7 +42,9 @@ from usdhands.algorithms.synthesis.finger_transfer import (
 )
 from usdhands.algorithms.synthesis.segmentation import segment_by_speed, wrist_speed
 from usdhands.algorithms.synthesis.config import SegmentationConfig
-from usdhands.algorithms.synthesis.wrist_features import mirror_features, reach_cm, wrist_features
+from usdhands.algorithms.synthesis.wrist_features import (
+    NUM_WRIST_FEATURES, WRIST_FEATURE_NAMES, mirror_features, reach_cm, wrist_features,
+)
 from usdhands.errors import ConfigError
 from usdhands.json_schemas import first_schema_error, load_schema
 from usdhands.model.clip import Clip
@@ -51,7 +54,7 @@ __all__ = ["FORMAT", "VERSION", "same_rate", "DatabaseClip", "FingerDatabase", "
            "save_database", "segment_track", "database_schema"]
 
 FORMAT = "usdhands-finger-database"
-VERSION = 1
+VERSION = 2
 ARRAYS = ("features", "fingers", "tracks", "segments")
 
 
@@ -74,7 +77,8 @@ class FingerDatabase:
     fps : float
     reach_cm : float
         Reference body size the features are scaled to.
-    features : (F, 6) float
+    features : (F, 12) float
+        Wrist features (:data:`~usdhands.algorithms.synthesis.wrist_features.WRIST_FEATURE_NAMES`).
     fingers : (F, M) float
     dof_index : (M,) int
         Canonical DOF (0..59) of each column of ``fingers``.
@@ -117,6 +121,28 @@ class FingerDatabase:
         m[self.dof_index] = True
         return m
 
+    def moving_dofs(self) -> np.ndarray:
+        """``(M,)`` bool: columns of ``fingers`` that move anywhere (range over 1e-3°).
+
+        The transition cost and the seam thresholds average over these only.
+        """
+        cache = self.__dict__.setdefault("_cache", {})
+        if "moving" not in cache:
+            f = np.asarray(self.fingers)
+            cache["moving"] = (f.max(axis=0) - f.min(axis=0)) > 1e-3 if len(f) else np.zeros(f.shape[1], bool)
+        return cache["moving"]
+
+    def step_limits(self, percentile: float) -> np.ndarray:
+        """``(M,)`` float: per column of ``fingers``, the ``percentile`` of its frame steps
+        inside tracks, degrees (:func:`~usdhands.algorithms.synthesis.output_warp.step_limits`)."""
+        from usdhands.algorithms.synthesis.output_warp import step_limits
+
+        cache = self.__dict__.setdefault("_cache", {})
+        key = ("steps", float(percentile))
+        if key not in cache:
+            cache[key] = step_limits(self.fingers, self.tracks, percentile)
+        return cache[key]
+
     def segment_side(self) -> np.ndarray:
         """``(N,)`` int: 0 left, 1 right."""
         return self.tracks[self.segments[:, 2], 3]
@@ -144,7 +170,7 @@ class FingerDatabase:
             "created_by": f"usdhands {__version__}",
             "fps": float(self.fps),
             "reach_cm": float(self.reach_cm),
-            "feature_names": ["pos.x", "pos.y", "pos.z", "rot.x", "rot.y", "rot.z"],
+            "feature_names": list(WRIST_FEATURE_NAMES),
             "dofs": [dof_names()[i] for i in self.dof_index],
             "dof_index": [int(i) for i in self.dof_index],
             "clips": [dict(c) for c in self.clips],
@@ -168,7 +194,7 @@ def same_rate(a: float, b: float) -> bool:
 
 
 def segment_track(features: np.ndarray, fps: float, config: SegmentationConfig) -> np.ndarray:
-    """Segment boundaries ``(N+1,)`` of one track from its wrist features ``(T, 6)``."""
+    """Segment boundaries ``(N+1,)`` of one track from its wrist features ``(T, D)`` (positions first, cm)."""
     speed = wrist_speed(features[:, :3], fps, config.speed_smoothing_s)
     return segment_by_speed(speed, fps, config.speed_threshold_cm_s, config.min_segment_s, config.max_segment_s)
 
@@ -196,7 +222,7 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
     seg_cfg = segmentation or SegmentationConfig()
     from usdhands.algorithms.synthesis.hand_graft import hand_template, mirror_template
 
-    prepared = []  # (clip index, side, features unscaled (T,6) pos in cm, curves, reach, rig mask)
+    prepared = []  # (clip index, side, features unscaled (T,12) pos in cm, curves, reach, rig mask)
     clips_meta = []
     hands: dict = {}
     for ci, item in enumerate(items):
@@ -323,8 +349,11 @@ def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ConfigError(f"manifest is not valid JSON: {e}", path=mf) from None
     if isinstance(manifest, dict) and manifest.get("format") == FORMAT and manifest.get("version") != VERSION:
-        raise ConfigError(f"database version {manifest.get('version')!r} is not supported (this usdhands reads {VERSION})",
-                          path=mf)
+        old = manifest.get("version") == 1
+        why = ("; it stores rotation-vector wrist features, which wrap: rebuild it from its clips with "
+               "'usdhands db build'") if old else ""
+        raise ConfigError(f"database version {manifest.get('version')!r} is not supported (this usdhands reads "
+                          f"{VERSION}){why}", path=mf)
     error = first_schema_error(manifest, "database")
     if error is not None:
         where, message = error
@@ -343,7 +372,7 @@ def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
         arrays[name] = a
     dof_index = np.array(manifest["dof_index"], dtype=np.int64)
     F = arrays["features"].shape[0]
-    if arrays["fingers"].shape != (F, len(dof_index)) or arrays["features"].shape[1] != 6:
+    if arrays["fingers"].shape != (F, len(dof_index)) or arrays["features"].shape[1] != NUM_WRIST_FEATURES:
         raise ConfigError("features and fingers arrays do not match the manifest's DOFs", path=path)
     tr, sg = np.asarray(arrays["tracks"]), np.asarray(arrays["segments"])
     if len(tr) and ((tr[:, 0] < 0).any() or (tr[:, 1] > F).any() or (tr[:, 2] < 0).any()
@@ -359,7 +388,7 @@ def load_database(path: str | os.PathLike, mmap: bool = True) -> FingerDatabase:
         if len(bad):
             raise ConfigError(f"segment {int(bad[0])} ({int(sg[bad[0], 0])}..{int(sg[bad[0], 1])}) is empty or "
                               f"outside its track; {len(bad)} such segments", path=path / _spec_file(manifest, "segments"))
-    # synthesis reads every feature row anyway (F x 6): check them here, not the fingers
+    # synthesis reads every feature row anyway (F x 12): check them here, not the fingers
     finite = np.isfinite(arrays["features"]).all(axis=1)
     if not finite.all():
         raise ConfigError(f"features hold NaN or infinite values (first at frame {int(np.argmin(finite))})",

@@ -9,7 +9,12 @@ paper's figures on its 64 gestures: wrist rotation alone 75%, ``P + 0.5·R`` 80%
 The class confusion matrix gives, per true label, the share of neighbours of each
 label (the paper's figure 8). Hands that hardly move in a clip (range of the wrist
 under ``idle_range_cm``) are left out: a hand hanging at rest says nothing about the
-gesture the other hand makes.
+gesture the other hand makes. **Rest trimming** (on by default, as the paper's §4
+"trimmed the rest poses at the beginning and end of each gesture"): each hand's
+frames before the wrist speed first exceeds the segmentation threshold and after it
+last does are dropped before segmenting, so the rest segments every take shares do
+not count as neighbours of every type. Shares are reported **per hand** (a right
+hand's segments are only ever compared with right hands) and pooled over both.
 
 Predictors are named by terms joined with ``+``; a term is an optional weight and
 ``<joint>_<pos|rot>`` with joint ``shoulder``, ``elbow`` or ``wrist``; a term of only
@@ -36,8 +41,9 @@ import numpy as np
 from usdhands.algorithms.synthesis.database import FingerDatabase, same_rate, segment_track
 from usdhands.algorithms.synthesis.finger_transfer import NUM_SLOTS, ORDER
 from usdhands.algorithms.synthesis.segment_cost import knn_segments, weight_features
+from usdhands.algorithms.synthesis.segmentation import wrist_speed
 from usdhands.algorithms.synthesis.stitching import stitch_fragments
-from usdhands.algorithms.synthesis.synthesize import db_side_segments, synthesize_hand
+from usdhands.algorithms.synthesis.synthesize import db_side_segments, segment_weights, synthesize_hand
 from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.algorithms.synthesis.wrist_features import FEATURE_JOINTS, arm_features
 from usdhands.model.clip import Clip
@@ -47,6 +53,7 @@ from usdhands.model.rotations import euler_deg_to_quat, quat_angle_deg
 __all__ = [
     "DEFAULT_PREDICTORS", "PAPER_PREDICTOR", "parse_predictor", "EvalSet", "prepare_eval_set",
     "leave_one_out", "evaluate_predictors", "holdout_evaluation", "finger_angle_error", "mean_angular_speed",
+    "slot_quats", "shares_by_side",
 ]
 
 PAPER_PREDICTOR = "wrist_pos+0.5rot"
@@ -116,7 +123,7 @@ class EvalSet:
 
 def prepare_eval_set(items: list[tuple[str, Clip, HandMap]], config: SynthesisConfig | None = None,
                      fps: float | None = None, idle_range_cm: float = 5.0,
-                     predictors=DEFAULT_PREDICTORS) -> EvalSet:
+                     predictors=DEFAULT_PREDICTORS, trim_rest: bool = True) -> EvalSet:
     """Segment and featurize labelled clips.
 
     Parameters
@@ -131,6 +138,8 @@ def prepare_eval_set(items: list[tuple[str, Clip, HandMap]], config: SynthesisCo
     predictors : sequence of str
         The predictors to be evaluated: only the joints they name must be in the hand
         maps (the wrist always is).
+    trim_rest : bool
+        Drop each hand's rest at both ends (see the module notes).
     """
     cfg = config or SynthesisConfig()
     if not items:
@@ -157,6 +166,10 @@ def prepare_eval_set(items: list[tuple[str, Clip, HandMap]], config: SynthesisCo
             if np.linalg.norm(wp - wp.mean(axis=0), axis=1).max() < idle_range_cm:
                 idle.append((clip.name, hand.side))
                 continue
+            if trim_rest:
+                first, last = _active_span(wp, fps, cfg.segmentation)
+                f = {key: v[first:last] for key, v in f.items()}
+                wp = f["wrist_pos"]
             bounds = segment_track(np.concatenate([wp, f["wrist_rot"]], axis=1), fps, cfg.segmentation)
             for key in feats:
                 feats[key].append(f[key])
@@ -165,11 +178,44 @@ def prepare_eval_set(items: list[tuple[str, Clip, HandMap]], config: SynthesisCo
                 sclip.append(ci)
                 sside.append(SIDES.index(hand.side))
                 slabel.append(labels.index(label))
-            start += clip.num_frames
+            start += len(wp)
     if not segs:
         raise ValueError("Every hand of every clip is idle; nothing to evaluate")
     return EvalSet({k: np.concatenate(v) for k, v in feats.items()}, np.array(segs, dtype=np.int64),
                    np.array(sclip), np.array(sside), np.array(slabel), labels, names, idle, fps)
+
+
+def _active_span(wrist_pos: np.ndarray, fps: float, seg) -> tuple[int, int]:
+    """``[first, last)`` frames from the first to the last where the wrist speed exceeds the threshold.
+
+    Widened symmetrically to at least the shortest segment; the whole track when the
+    wrist never moves that fast.
+    """
+    speed = wrist_speed(wrist_pos, fps, seg.speed_smoothing_s)
+    fast = np.nonzero(speed > seg.speed_threshold_cm_s)[0]
+    T = len(wrist_pos)
+    if not len(fast):
+        return 0, T
+    first, last = int(fast[0]), int(fast[-1]) + 1
+    need = int(np.ceil(seg.min_segment_s * fps)) - (last - first)
+    if need > 0:
+        first = max(0, first - (need + 1) // 2)
+        last = min(T, first + int(np.ceil(seg.min_segment_s * fps)))
+    return first, last
+
+
+def shares_by_side(es: EvalSet, neighbours: np.ndarray) -> dict:
+    """Leave-one-out shares per hand: ``{"left": share, "right": share}`` (sides with segments only)."""
+    found = neighbours >= 0
+    same = found & (es.seg_label[np.maximum(neighbours, 0)] == es.seg_label[:, None])
+    per = same.sum(axis=1) / np.maximum(found.sum(axis=1), 1)
+    ok = found.any(axis=1)
+    out = {}
+    for s, side in enumerate(SIDES):
+        sel = ok & (es.seg_side == s)
+        if sel.any():
+            out[side] = float(per[sel].mean())
+    return out
 
 
 def leave_one_out(es: EvalSet, predictor: str, k: int = 5, config: SynthesisConfig | None = None):
@@ -185,7 +231,7 @@ def leave_one_out(es: EvalSet, predictor: str, k: int = 5, config: SynthesisConf
     cfg = config or SynthesisConfig()
     terms = parse_predictor(predictor)
     cols = np.concatenate([es.features[key] for key, _ in terms], axis=1)
-    w = np.repeat([wt for _, wt in terms], 3)
+    w = np.concatenate([np.full(es.features[key].shape[1], wt) for key, wt in terms])
     fw = weight_features(cols, w)
     N = len(es.segments)
     neighbours = np.full((N, k), -1, dtype=np.int64)
@@ -231,8 +277,9 @@ def evaluate_predictors(es: EvalSet, predictors=DEFAULT_PREDICTORS, k: int = 5,
     Returns
     -------
     dict
-        ``{"k", "segments", "predictors": {name: share}, "best", "chance",
-        "confusion": {"labels", "matrix", "predictor"}}``; the confusion matrix is that
+        ``{"k", "segments", "predictors": {name: share}, "per_hand": {name: {"left":
+        share, "right": share}}, "best", "chance", "confusion": {"labels", "matrix",
+        "predictor"}}``; ``predictors`` pools both hands; the confusion matrix is that
         of :data:`PAPER_PREDICTOR` when evaluated, else of the best predictor.
     """
     predictors = list(predictors)
@@ -247,6 +294,7 @@ def evaluate_predictors(es: EvalSet, predictors=DEFAULT_PREDICTORS, k: int = 5,
         "k": int(k),
         "segments": int(len(es.segments)),
         "predictors": shares,
+        "per_hand": {p: shares_by_side(es, neigh[p]) for p in predictors},
         "best": best,
         "chance": _chance(es),
         "confusion": {"labels": list(es.labels), "matrix": _confusion(es, neigh[conf_p]).tolist(),
@@ -254,21 +302,22 @@ def evaluate_predictors(es: EvalSet, predictors=DEFAULT_PREDICTORS, k: int = 5,
     }
 
 
-def _slot_quats(curves: np.ndarray, slots: np.ndarray) -> np.ndarray:
+def slot_quats(curves: np.ndarray, slots: np.ndarray) -> np.ndarray:
+    """Quaternions ``(T, S, 4)`` of the given finger slots of canonical curves ``(T, 60)`` (degrees)."""
     T = len(curves)
     return euler_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots], ORDER)
 
 
 def finger_angle_error(a: np.ndarray, b: np.ndarray, slots: np.ndarray) -> float:
     """Mean geodesic angle (deg) between two canonical curve sets ``(T, 60)`` over the given slots."""
-    return float(quat_angle_deg(_slot_quats(a, slots), _slot_quats(b, slots)).mean())
+    return float(quat_angle_deg(slot_quats(a, slots), slot_quats(b, slots)).mean())
 
 
 def mean_angular_speed(curves: np.ndarray, slots: np.ndarray, fps: float) -> float:
     """Mean geodesic angular speed (deg/s) of canonical curves ``(T, 60)`` over the given slots."""
     if len(curves) < 2:
         return 0.0
-    q = _slot_quats(curves, slots)
+    q = slot_quats(curves, slots)
     return float(quat_angle_deg(q[1:], q[:-1]).mean() * fps)
 
 
@@ -291,8 +340,7 @@ def holdout_evaluation(db: FingerDatabase, config: SynthesisConfig | None = None
     cfg = config or SynthesisConfig()
     rng = np.random.default_rng(seed)
     sc = cfg.segment_cost
-    weights = [sc.w_position] * 3 + [sc.w_rotation] * 3
-    dw = weight_features(db.features, weights)
+    dw = weight_features(db.features, segment_weights(cfg))
     slots = np.nonzero(db.dof_mask().reshape(-1, 3).all(axis=1))[0]
     methods = ("synthesis", "mean_pose", "random_segments", "nearest_wrist")
     err = {m: [] for m in methods}

@@ -11,13 +11,31 @@ over the ``m`` finger DOFs (degrees and degrees per second). Entering node ``b``
 ``a`` costs ``wS · cS(b) + wT · cT(a, b)`` (eq. 3). The paper runs Dijkstra's
 algorithm; on a layered graph the dynamic programme below finds the same least-cost
 path in ``O(L k²)``. Ties go to the lower node index, so the path is deterministic.
+
+**Normalised terms** (``normalize=True``, the default of synthesis). The paper's
+weights ``wS = 1, wT = 0.5`` assume both terms have the same influence on average;
+their raw scales differ by an order of magnitude (segment costs in cm² and deg² of
+wrist motion, about 2,000 on real capture, against transition costs of finger
+degrees² of about 200), so the transition term would hardly count. Each term is
+therefore divided by its mean over the graph (all finite ``cS`` of the nodes, all
+finite ``cT`` of the edges) before weighting. Only the DOFs that move anywhere in the
+database count in ``m`` (``mask``): a constant DOF adds nothing but a larger divisor.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["transition_costs", "least_cost_path"]
+__all__ = ["transition_costs", "least_cost_path", "term_scale"]
+
+
+def term_scale(values) -> float:
+    """Mean of the finite entries of some arrays (1 when there are none or it is 0)."""
+    finite = [np.asarray(v, dtype=np.float64)[np.isfinite(v)] for v in values]
+    total = sum(float(f.sum()) for f in finite)
+    count = sum(f.size for f in finite)
+    mean = total / count if count else 0.0
+    return mean if mean > 0 else 1.0
 
 
 def transition_costs(end_pose: np.ndarray, end_velocity: np.ndarray, start_pose: np.ndarray,
@@ -58,7 +76,8 @@ def transition_costs(end_pose: np.ndarray, end_velocity: np.ndarray, start_pose:
 
 
 def least_cost_path(segment_costs: np.ndarray, transitions: list[np.ndarray],
-                    w_segment: float = 1.0, w_transition: float = 0.5) -> tuple[np.ndarray, float]:
+                    w_segment: float = 1.0, w_transition: float = 0.5,
+                    normalize: bool = False) -> tuple[np.ndarray, float]:
     """Least-cost path through the layered graph.
 
     Parameters
@@ -69,6 +88,8 @@ def least_cost_path(segment_costs: np.ndarray, transitions: list[np.ndarray],
         ``cT`` from node a of row i to node b of row i+1.
     w_segment, w_transition : float
         wS and wT.
+    normalize : bool
+        Divide each term by its mean (:func:`term_scale`) first (see the module notes).
 
     Returns
     -------
@@ -85,6 +106,9 @@ def least_cost_path(segment_costs: np.ndarray, transitions: list[np.ndarray],
         raise ValueError(f"Expected {max(L - 1, 0)} transition matrices, got {len(transitions)}")
     if L == 0:
         return np.zeros(0, dtype=np.int64), 0.0
+    if normalize:
+        w_segment = w_segment / term_scale([cs])
+        w_transition = w_transition / term_scale(transitions)
     acc = w_segment * cs[0]
     back = np.zeros((L, K), dtype=np.int64)
     for i in range(1, L):

@@ -8,9 +8,10 @@ For each hand independently:
 3. compute transition costs between the candidates of consecutive segments (eq. 2)
    and take the least-cost path through the layered graph (eq. 3,
    :mod:`~usdhands.algorithms.synthesis.motion_graph`);
-4. time-warp each chosen segment's finger curves onto its input segment along the
-   DTW alignment, and stitch them with offsets and blends
-   (:mod:`~usdhands.algorithms.synthesis.stitching`).
+4. sample each chosen segment's finger curves along a smoothed version of the DTW
+   alignment with interpolation (:mod:`~usdhands.algorithms.synthesis.output_warp`),
+   stitch them with offsets and blends (:mod:`~usdhands.algorithms.synthesis.stitching`)
+   and limit every DOF's frame step to the database's high-percentile step.
 
 :func:`synthesize_hand` runs this on arrays (wrist features in, canonical finger
 curves out); :func:`synthesize_clip` does it on a :class:`~usdhands.model.Clip`,
@@ -27,18 +28,19 @@ import numpy as np
 from usdhands.algorithms.synthesis.database import FingerDatabase, same_rate, segment_track
 from usdhands.algorithms.synthesis.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
 from usdhands.algorithms.synthesis.motion_graph import least_cost_path, transition_costs
+from usdhands.algorithms.synthesis.output_warp import limit_steps, sample_rows, smooth_warp
 from usdhands.algorithms.synthesis.segmentation import wrist_speed
 from usdhands.algorithms.synthesis.segment_cost import SearchResult, dtw_align_fast, knn_segments, weight_features
 from usdhands.algorithms.synthesis.stitching import SeamReport, stitch_fragments
 from usdhands.algorithms.synthesis.config import SynthesisConfig
-from usdhands.algorithms.synthesis.wrist_features import reach_cm, world_xforms_for, wrist_features
+from usdhands.algorithms.synthesis.wrist_features import NUM_WRIST_FEATURES, reach_cm, world_xforms_for, wrist_features
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
 
 _log = logging.getLogger(__name__)
 
 __all__ = ["HandSynthesis", "ClipSynthesis", "synthesize_hand", "synthesize_clip", "db_side_segments",
-           "resample_rows"]
+           "resample_rows", "segment_weights"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,27 +150,35 @@ def _uniform_knn(query: np.ndarray, db_weighted: np.ndarray, segments: np.ndarra
 
 
 def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config: SynthesisConfig | None = None,
-                    exclude_clips=(), db_weighted: np.ndarray | None = None, hooks=None) -> HandSynthesis:
+                    exclude_clips=(), db_weighted: np.ndarray | None = None, hooks=None,
+                    segments: np.ndarray | None = None, query_weighted: np.ndarray | None = None) -> HandSynthesis:
     """Synthesize one hand's canonical finger curves from its wrist features.
 
     Parameters
     ----------
-    features : (T, 6) float
-        Wrist position (cm, scaled to the database's body size) and rotation vector
-        (degrees) at the database's frame rate.
+    features : (T, 12) float
+        Wrist position (cm, scaled to the database's body size) and rotation features
+        (:func:`~usdhands.algorithms.synthesis.wrist_features.wrist_features`) at the
+        database's frame rate.
     db : FingerDatabase
     side : {"left", "right"}
         Which of the database's tracks to search.
     config : SynthesisConfig, optional
     exclude_clips : sequence of int
         Database clips not to use (leave-one-out).
-    db_weighted : (F, 6) float, optional
-        ``weight_features(db.features, ...)`` when already computed.
+    db_weighted : (F, D) float, optional
+        ``weight_features(db.features, segment_weights(config))`` when already computed,
+        or, with ``query_weighted``, other weighted features behind the segment cost.
     hooks : object, optional
         Interactions (seed 002): ``hooks.cuts(bounds) -> bounds`` adds segment boundaries
         (proximity to props), ``hooks.penalty(bounds, candidates) -> (N, k)`` adds a
         collision term to the segment costs
         (:class:`~usdhands.algorithms.interaction.synthesis_terms.InteractionTerms`).
+    segments : (N,) bool, optional
+        Database segments that may be used (k-fold: those outside the held-out windows).
+    query_weighted : (T, D) float, optional
+        Weighted features of the input matching ``db_weighted`` columns (the wrist
+        ``features`` still segment the input).
 
     Raises
     ------
@@ -177,13 +187,20 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     """
     cfg = config or SynthesisConfig()
     feats = np.asarray(features, dtype=np.float64)
-    if feats.ndim != 2 or feats.shape[1] != 6 or len(feats) == 0:
-        raise ValueError(f"Expected features to have shape (T, 6) with T > 0, got {feats.shape}")
+    if feats.ndim != 2 or feats.shape[1] != NUM_WRIST_FEATURES or len(feats) == 0:
+        raise ValueError(f"Expected features to have shape (T, {NUM_WRIST_FEATURES}) with T > 0, got {feats.shape}")
     sc = cfg.segment_cost
-    weights = [sc.w_position] * 3 + [sc.w_rotation] * 3
-    qw = weight_features(feats, weights)
+    weights = segment_weights(cfg)
+    if query_weighted is not None:
+        if db_weighted is None or np.shape(query_weighted) != (len(feats), np.shape(db_weighted)[1]):
+            raise ValueError("Expected query_weighted (T, D) with db_weighted (F, D)")
+        qw = np.ascontiguousarray(query_weighted, dtype=np.float64)
+    else:
+        qw = weight_features(feats, weights)
     dw = weight_features(db.features, weights) if db_weighted is None else db_weighted
     seg_idx = db_side_segments(db, side, exclude_clips)
+    if segments is not None:
+        seg_idx = seg_idx[np.asarray(segments, dtype=bool)[seg_idx]]
     if not len(seg_idx):
         raise ValueError(f"The database has no {side}-hand segments to choose from")
     k = min(sc.k, len(seg_idx))  # more candidates than segments: (k, k) transition arrays for nothing
@@ -213,10 +230,13 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     N = len(cand)
     starts, ends, vstart, vend = _candidate_ends(db, cand)
     tc = cfg.transition
-    transitions = [transition_costs(ends[i], vend[i], starts[i + 1], vstart[i + 1], tc.w_joint, tc.w_velocity)
-                   for i in range(N - 1)]
-    path, _ = least_cost_path(costs, transitions, cfg.path.w_segment, cfg.path.w_transition)
+    moving = db.moving_dofs()
+    transitions = [transition_costs(ends[i], vend[i], starts[i + 1], vstart[i + 1], tc.w_joint, tc.w_velocity,
+                                    moving) for i in range(N - 1)]
+    path, _ = least_cost_path(costs, transitions, cfg.path.w_segment, cfg.path.w_transition,
+                              cfg.path.normalize_terms)
     chosen = cand[np.arange(N), path]
+    st = cfg.stitching
     fragments = []
     for i in range(N):
         a, b = int(db.segments[chosen[i], 0]), int(db.segments[chosen[i], 1])
@@ -224,15 +244,24 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         band = sc.dtw_band if sc.length_factor * (b - a) >= (q1 - q0) and (b - a) <= sc.length_factor * (q1 - q0) else 1.0
         _, warp = dtw_align_fast(qw[q0:q1], dw[a:b], band)
         if len(warp) == 0:  # only for widened candidates that cannot be warped: stretch linearly
-            warp = np.round(np.linspace(0, b - a - 1, q1 - q0)).astype(np.int64)
-        fragments.append(np.asarray(db.fingers[a + warp], dtype=np.float64))
+            at = np.linspace(0, b - a - 1, q1 - q0)
+        else:
+            at = smooth_warp(warp, b - a, db.fps, st.warp_smoothing_s)
+        fragments.append(sample_rows(db.fingers[a:b], at))
     _log.info("%s hand: %d segment(s) of the wrist motion; chose database segments %s (path cost %.3g)", side, N,
               " ".join(str(int(c)) for c in chosen), float(sum(costs[i, path[i]] for i in range(N))))
-    st = cfg.stitching
-    compact, seams = stitch_fragments(fragments, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s)
+    compact, seams = stitch_fragments(fragments, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s,
+                                      moving)
+    compact = limit_steps(compact, db.step_limits(st.step_percentile))
     curves = np.zeros((len(feats), NUM_DOFS))
     curves[:, db.dof_index] = compact
     return HandSynthesis(side, bounds, speed, cand, costs, transitions, path, chosen, curves, seams, res)
+
+
+def segment_weights(config: SynthesisConfig) -> list[float]:
+    """Weights of the wrist feature columns in eq. 1: ``wP`` for the 3 positions, ``wR`` for the rotation entries."""
+    sc = config.segment_cost
+    return [sc.w_position] * 3 + [sc.w_rotation] * (NUM_WRIST_FEATURES - 3)
 
 
 def resample_rows(values: np.ndarray, fps_from: float, fps_to: float, n_to: int) -> np.ndarray:
@@ -303,8 +332,7 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
     world = world_xforms_for(clip, [handmap[s] for s in hands if handmap[s] is not None])
     out = clip
     results, mapping, scales = {}, {}, {}
-    sc = cfg.segment_cost
-    dw = weight_features(db.features, [sc.w_position] * 3 + [sc.w_rotation] * 3)
+    dw = weight_features(db.features, segment_weights(cfg))
     for side in hands:
         hand = handmap[side]
         if hand is None or not hand.finger_joints:

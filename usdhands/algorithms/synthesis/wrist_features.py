@@ -19,10 +19,14 @@ in degrees. Here, for joint ``j`` at frame ``t``:
   joint-axis conventions (a BVH whose zero pose is not the bind pose, a glTF with
   another bone roll still compare). For the elbow and shoulder (used by
   ``evaluate``) it is the joint's world rotation relative to its rest world rotation,
-  ``B(t)⁻¹ R_j(t) R_j_rest⁻¹``. Rotations are rotation vectors in degrees (axis times
-  angle): the paper uses Euler angles and notes any angle representation works;
-  rotation vectors have no order and no gimbal lock and their Euclidean distance is
-  close to the geodesic angle for the differences that matter here.
+  ``B(t)⁻¹ R_j(t) R_j_rest⁻¹``. A rotation is given by the **nine entries of its
+  matrix** (row-major) times ``(180/π)/√2``, "degrees": the paper uses Euler angles
+  and notes any angle representation works. Matrix entries never wrap (a rotation
+  vector relative to a fixed reference jumps by up to 360° where the hand turns past
+  180° from it, which raised hands and guessed hand frames do), have no order and no
+  gimbal lock, and the squared Euclidean distance of two of them is
+  ``(180/π)² · 2(1 − cos θ)`` for a difference of angle ``θ``: ``θ²`` in degrees² for
+  the small differences that matter, growing smoothly to its maximum at 180°.
 
 Characters are assumed to face the same way in their rest poses (glTF and Mixamo:
 +Z, Y up); "left/right" mirroring flips the X axis of this frame.
@@ -44,12 +48,19 @@ import numpy as np
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
 from usdhands.model.skeleton import Skeleton
-from usdhands.model.rotations import matrix_to_quat, quat_to_rotvec_deg
 
 __all__ = [
     "FEATURE_JOINTS", "hand_point", "hand_frame", "guess_hand_frame", "REFERENCE_HAND", "reach_cm", "arm_features", "wrist_features",
-    "mirror_features", "Z_UP_TO_Y_UP", "world_rotations", "world_xforms_for",
+    "mirror_features", "Z_UP_TO_Y_UP", "world_rotations", "world_xforms_for", "ROTATION_SCALE",
+    "rotation_features", "NUM_WRIST_FEATURES", "WRIST_FEATURE_NAMES",
 ]
+
+#: Factor from rotation-matrix entries to "degrees": |ΔM|² ≈ θ² (deg²) for small angles θ.
+ROTATION_SCALE = float(np.degrees(1.0) / np.sqrt(2.0))
+
+#: Columns of :func:`wrist_features`: position (cm), then the rotation matrix entries.
+WRIST_FEATURE_NAMES = ("pos.x", "pos.y", "pos.z") + tuple(f"rot.{a}{b}" for a in "xyz" for b in "xyz")
+NUM_WRIST_FEATURES = len(WRIST_FEATURE_NAMES)
 
 #: Joint roles whose features :func:`arm_features` computes.
 FEATURE_JOINTS = ("shoulder", "elbow", "wrist")
@@ -235,8 +246,13 @@ def world_rotations(xforms: np.ndarray) -> np.ndarray:
     return m / np.linalg.norm(m, axis=-2, keepdims=True)
 
 
-def _rotvec_deg(m: np.ndarray) -> np.ndarray:
-    return quat_to_rotvec_deg(matrix_to_quat(m))
+def rotation_features(m: np.ndarray) -> np.ndarray:
+    """Wrap-free rotation features ``(..., 9)`` of rotation matrices ``(..., 3, 3)``.
+
+    The matrix entries, row-major, times :data:`ROTATION_SCALE` (see the module notes).
+    """
+    m = np.asarray(m, dtype=np.float64)
+    return m.reshape(m.shape[:-2] + (9,)) * ROTATION_SCALE
 
 
 def arm_features(clip: Clip, hand: HandSide, scale: float = 1.0,
@@ -256,9 +272,9 @@ def arm_features(clip: Clip, hand: HandSide, scale: float = 1.0,
 
     Returns
     -------
-    dict of str to (T, 3) float
-        ``"<role>_pos"`` in centimetres (scaled) and ``"<role>_rot"`` rotation
-        vectors in degrees, for each role present.
+    dict of str to (T, 3) or (T, 9) float
+        ``"<role>_pos"`` ``(T, 3)`` in centimetres (scaled) and ``"<role>_rot"``
+        ``(T, 9)`` rotation features (:func:`rotation_features`), for each role present.
     """
     sk = clip.skeleton
     if world is None:
@@ -290,15 +306,16 @@ def arm_features(clip: Clip, hand: HandSide, scale: float = 1.0,
         if role == "wrist":
             # U turns the Z-up body frame Y-up before comparing with the Y-up reference
             q = U @ Binv @ world_rotations(world[:, j]) @ hand_frame(sk, hand) @ REFERENCE_HAND.T
-            out[f"{role}_rot"] = _rotvec_deg(q)
+            out[f"{role}_rot"] = rotation_features(q)
         else:
-            q = Binv @ world_rotations(world[:, j]) @ world_rotations(rest[j]).T
-            out[f"{role}_rot"] = _rotvec_deg(q) @ U.T
+            q = U @ Binv @ world_rotations(world[:, j]) @ world_rotations(rest[j]).T @ U.T
+            out[f"{role}_rot"] = rotation_features(q)
     return out
 
 
 def wrist_features(clip: Clip, hand: HandSide, scale: float = 1.0, world: np.ndarray | None = None) -> np.ndarray:
-    """The wrist features of eq. 1: ``(T, 6)`` float, position (cm, scaled) then rotation vector (deg)."""
+    """The wrist features of eq. 1: ``(T, 12)`` float, position (cm, scaled) then the
+    rotation features (:func:`rotation_features`, "degrees"), see :data:`WRIST_FEATURE_NAMES`."""
     f = arm_features(clip, hand, scale, ("wrist",), world)
     return np.concatenate([f["wrist_pos"], f["wrist_rot"]], axis=1)
 
@@ -308,17 +325,18 @@ def mirror_features(features: np.ndarray) -> np.ndarray:
 
     Parameters
     ----------
-    features : (T, 6) float
-        Position (cm) then rotation vector (deg).
+    features : (T, 12) float
+        Position (cm) then rotation matrix entries (:func:`wrist_features`).
 
     Returns
     -------
-    (T, 6) float
-        Positions ``(−x, y, z)``; rotation vectors, being axial, ``(x, −y, −z)``.
+    (T, 12) float
+        Positions ``(−x, y, z)``; rotations ``M R M`` with ``M = diag(−1, 1, 1)``:
+        the entries ``xy, xz, yx, zx`` change sign.
     """
     f = np.array(features, dtype=np.float64)
-    if f.ndim != 2 or f.shape[1] != 6:
-        raise ValueError(f"Expected features to have shape (T, 6), got {f.shape}")
+    if f.ndim != 2 or f.shape[1] != NUM_WRIST_FEATURES:
+        raise ValueError(f"Expected features to have shape (T, {NUM_WRIST_FEATURES}), got {f.shape}")
     f[:, 0] *= -1
-    f[:, 4:6] *= -1
+    f[:, 3 + np.array([1, 2, 3, 6])] *= -1
     return f
