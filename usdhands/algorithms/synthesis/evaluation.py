@@ -53,7 +53,7 @@ from usdhands.model.rotations import euler_deg_to_quat, quat_angle_deg
 __all__ = [
     "DEFAULT_PREDICTORS", "PAPER_PREDICTOR", "parse_predictor", "EvalSet", "prepare_eval_set",
     "leave_one_out", "evaluate_predictors", "holdout_evaluation", "finger_angle_error", "mean_angular_speed",
-    "slot_quats", "shares_by_side",
+    "slot_quats", "shares_by_side", "parse_terms", "random_segments",
 ]
 
 PAPER_PREDICTOR = "wrist_pos+0.5rot"
@@ -63,30 +63,48 @@ DEFAULT_PREDICTORS = (
 )
 SINGLE_JOINT_PREDICTORS = DEFAULT_PREDICTORS[:6]
 
-_TERM = re.compile(r"^\s*(?:(\d+(?:\.\d*)?|\.\d+)\s*\*?\s*)?(?:(shoulder|elbow|wrist)_)?(pos|rot)\s*$")
+_TERM = re.compile(r"^\s*(?:(\d+(?:\.\d*)?|\.\d+)\s*\*?\s*)?(other_)?(?:(shoulder|elbow|wrist)_)?(pos|rot|vel)\s*$")
+
+
+def parse_terms(name: str, what: str = "predictor", extended: bool = False) -> list[tuple[str, float]]:
+    """Weighted feature terms of a name such as ``wrist_pos+0.5rot``.
+
+    A term is ``[weight*]<joint>_<kind>``, joint ``shoulder``, ``elbow`` or ``wrist``,
+    kind ``pos`` or ``rot`` (and, with ``extended``, ``vel`` and an ``other_`` prefix for
+    the other hand's joint); a term of only a kind keeps the previous term's joint.
+
+    Raises
+    ------
+    ValueError
+        Quoting the name (as a ``what``) and the term that does not parse.
+    """
+    syntax = ("'[weight*][other_]<shoulder|elbow|wrist>_<pos|rot|vel>' or '[weight*]<pos|rot|vel>'" if extended
+              else "'[weight]<shoulder|elbow|wrist>_<pos|rot>' or '[weight]<pos|rot>'")
+    terms, joint, other = [], None, ""
+    for part in str(name).split("+"):
+        m = _TERM.match(part)
+        if not m or (not extended and (m.group(2) or m.group(4) == "vel")):
+            raise ValueError(f"Cannot read {what} {name!r}: term {part!r} is not {syntax}")
+        w, o, j, kind = m.groups()
+        if j:
+            joint, other = j, o or ""
+        elif o:
+            raise ValueError(f"Cannot read {what} {name!r}: term {part!r} names no joint after 'other_'")
+        if joint is None:
+            raise ValueError(f"Cannot read {what} {name!r}: term {part!r} names no joint")
+        terms.append((f"{other}{joint}_{kind}", 1.0 if w is None else float(w)))
+    return terms
 
 
 def parse_predictor(name: str) -> list[tuple[str, float]]:
-    """Terms of a predictor name: ``[("wrist_pos", 1.0), ("wrist_rot", 0.5)]``.
+    """Terms of a predictor name: ``[("wrist_pos", 1.0), ("wrist_rot", 0.5)]`` (:func:`parse_terms`).
 
     Raises
     ------
     ValueError
         Quoting the name and the term that does not parse.
     """
-    terms = []
-    joint = None
-    for part in str(name).split("+"):
-        m = _TERM.match(part)
-        if not m:
-            raise ValueError(f"Cannot read predictor {name!r}: term {part!r} is not "
-                             f"'[weight]<shoulder|elbow|wrist>_<pos|rot>' or '[weight]<pos|rot>'")
-        w, j, kind = m.groups()
-        joint = j or joint
-        if joint is None:
-            raise ValueError(f"Cannot read predictor {name!r}: term {part!r} names no joint")
-        terms.append((f"{joint}_{kind}", 1.0 if w is None else float(w)))
-    return terms
+    return parse_terms(name, "predictor")
 
 
 @dataclass(frozen=True, eq=False)
@@ -321,6 +339,26 @@ def mean_angular_speed(curves: np.ndarray, slots: np.ndarray, fps: float) -> flo
     return float(quat_angle_deg(q[1:], q[:-1]).mean() * fps)
 
 
+def random_segments(db: FingerDatabase, seg_idx: np.ndarray, bounds: np.ndarray, rng: np.random.Generator,
+                    config: SynthesisConfig) -> np.ndarray:
+    """The random-segments baseline: canonical curves ``(bounds[-1] - bounds[0], 60)``.
+
+    Each input segment (``bounds``, frames) gets a random database segment among
+    ``seg_idx`` of a compatible length (any, if none is), stretched linearly; the
+    fragments are stitched like synthesis's.
+    """
+    sc, st = config.segment_cost, config.stitching
+    lens = db.segments[seg_idx, 1] - db.segments[seg_idx, 0]
+    frags = []
+    for q0, q1 in zip(bounds[:-1], bounds[1:]):
+        n = q1 - q0
+        ok = np.nonzero((lens * sc.length_factor >= n) & (lens <= n * sc.length_factor))[0]
+        pick = seg_idx[rng.choice(ok)] if len(ok) else seg_idx[rng.integers(len(seg_idx))]
+        sa, sb = db.segments[pick, :2]
+        frags.append(db.full_curves(np.round(np.linspace(sa, sb - 1, n)).astype(np.int64)))
+    return stitch_fragments(frags, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s)[0]
+
+
 def holdout_evaluation(db: FingerDatabase, config: SynthesisConfig | None = None, seed: int = 0,
                        progress=None) -> dict:
     """Synthesize every clip of ``db`` from the others; errors of synthesis and baselines.
@@ -339,7 +377,6 @@ def holdout_evaluation(db: FingerDatabase, config: SynthesisConfig | None = None
 
     cfg = config or SynthesisConfig()
     rng = np.random.default_rng(seed)
-    sc = cfg.segment_cost
     dw = weight_features(db.features, segment_weights(cfg))
     slots = np.nonzero(db.dof_mask().reshape(-1, 3).all(axis=1))[0]
     methods = ("synthesis", "mean_pose", "random_segments", "nearest_wrist")
@@ -347,7 +384,6 @@ def holdout_evaluation(db: FingerDatabase, config: SynthesisConfig | None = None
     spd = {m: [] for m in methods}
     gt_speed, frames, per_clip = [], [], []
     queries = [t for t in range(len(db.tracks)) if not db.tracks[t, 4]]
-    st = cfg.stitching
     for qi, t in enumerate(queries):
         a, b, c, s, _ = (int(x) for x in db.tracks[t])
         side = SIDES[s]
@@ -359,17 +395,7 @@ def holdout_evaluation(db: FingerDatabase, config: SynthesisConfig | None = None
         syn = synthesize_hand(feats, db, side, cfg, (c,), dw)
         rows = np.concatenate([np.arange(*db.segments[i, :2]) for i in seg_idx])
         mean_pose = np.broadcast_to(db.full_curves(rows).mean(axis=0), truth.shape)
-        # random segments of a compatible length, stretched linearly
-        lens = db.segments[seg_idx, 1] - db.segments[seg_idx, 0]
-        frags = []
-        for q0, q1 in zip(syn.bounds[:-1], syn.bounds[1:]):
-            n = q1 - q0
-            ok = np.nonzero((lens * sc.length_factor >= n) & (lens <= n * sc.length_factor))[0]
-            pick = seg_idx[rng.choice(ok)] if len(ok) else seg_idx[rng.integers(len(seg_idx))]
-            sa, sb = db.segments[pick, :2]
-            warp = np.round(np.linspace(sa, sb - 1, n)).astype(np.int64)
-            frags.append(db.full_curves(warp))
-        rand, _ = stitch_fragments(frags, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s)
+        rand = random_segments(db, seg_idx, syn.bounds, rng, cfg)
         tree = cKDTree(dw[rows])
         _, nn = tree.query(dw[a:b])
         nearest = db.full_curves(rows[nn])

@@ -41,17 +41,15 @@ compares predictors, but on the finger error itself.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.algorithms.synthesis.database import DatabaseClip, FingerDatabase, build_database, same_rate
-from usdhands.algorithms.synthesis.evaluation import slot_quats
+from usdhands.algorithms.synthesis.evaluation import parse_terms, random_segments, slot_quats
 from usdhands.algorithms.synthesis.finger_transfer import dof_names
 from usdhands.algorithms.synthesis.segment_cost import weight_features
-from usdhands.algorithms.synthesis.stitching import stitch_fragments
 from usdhands.algorithms.synthesis.synthesize import db_side_segments, segment_weights, synthesize_hand
 from usdhands.algorithms.synthesis.wrist_features import arm_features, reach_cm
 from usdhands.model.handmap import SIDES
@@ -64,32 +62,18 @@ PAPER_FEATURES = "wrist_pos+0.5rot"
 REPEAT_DEG = 1e-3
 MEDOID_SAMPLE = 2000
 
-_TERM = re.compile(r"^\s*(?:(\d+(?:\.\d*)?|\.\d+)\s*\*?\s*)?(other_)?(?:(shoulder|elbow|wrist)_)?(pos|rot|vel)\s*$")
-
-
 def parse_feature_set(name: str) -> list[tuple[str, float]]:
     """Terms of a feature set: ``[("wrist_pos", 1.0), ("wrist_rot", 0.5), ("other_wrist_pos", 0.5)]``.
+
+    The grammar of :func:`~usdhands.algorithms.synthesis.evaluation.parse_terms` with
+    ``vel`` and ``other_``.
 
     Raises
     ------
     ValueError
         Quoting the name and the term that does not parse.
     """
-    terms, joint, other = [], None, ""
-    for part in str(name).split("+"):
-        m = _TERM.match(part)
-        if not m:
-            raise ValueError(f"Cannot read feature set {name!r}: term {part!r} is not "
-                             f"'[weight*][other_]<shoulder|elbow|wrist>_<pos|rot|vel>' or '[weight*]<pos|rot|vel>'")
-        w, o, j, kind = m.groups()
-        if j:
-            joint, other = j, o or ""
-        elif o:
-            raise ValueError(f"Cannot read feature set {name!r}: term {part!r} names no joint after 'other_'")
-        if joint is None:
-            raise ValueError(f"Cannot read feature set {name!r}: term {part!r} names no joint")
-        terms.append((f"{other}{joint}_{kind}", 1.0 if w is None else float(w)))
-    return terms
+    return parse_terms(name, "feature set", extended=True)
 
 
 def window_bounds(start: int, stop: int, folds: int) -> np.ndarray:
@@ -228,7 +212,7 @@ def kfold_evaluation(items: list[DatabaseClip], config: SynthesisConfig | None =
     if len({int(db.tracks[t, 2]) % folds for t in real}) < 2 and not any(n / folds >= min_window_s * fps for n in lens):
         raise ValueError(f"{folds} folds need more than one take, or a take of {folds * min_window_s:g} s or more")
     rng = np.random.default_rng(seed)
-    sc, st = cfg.segment_cost, cfg.stitching
+    sc = cfg.segment_cost
     dw = weight_features(db.features, segment_weights(cfg))
     set_dw, left_out = {}, []
     if sets:
@@ -287,15 +271,7 @@ def kfold_evaluation(items: list[DatabaseClip], config: SynthesisConfig | None =
             k10 = min(10, len(rows))
             _, nn = tree.query(dw[a:b], k=k10)
             nn = nn.reshape(n, k10)
-            lens_i = db.segments[idx, 1] - db.segments[idx, 0]
-            frags = []
-            for q0, q1 in zip(syn.bounds[:-1], syn.bounds[1:]):
-                m = q1 - q0
-                ok = np.nonzero((lens_i * sc.length_factor >= m) & (lens_i <= m * sc.length_factor))[0]
-                pick = idx[rng.choice(ok)] if len(ok) else idx[rng.integers(len(idx))]
-                sa, sb = db.segments[pick, :2]
-                frags.append(db.full_curves(np.round(np.linspace(sa, sb - 1, m)).astype(np.int64)))
-            rand, _ = stitch_fragments(frags, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s)
+            rand = random_segments(db, idx, syn.bounds, rng, cfg)
             results = {
                 "synthesis": syn.curves,
                 "mean_pose": np.broadcast_to(mean_pose, truth.shape),
