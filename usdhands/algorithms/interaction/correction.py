@@ -175,7 +175,7 @@ def _window(hit: np.ndarray, core: int, ramp: int) -> np.ndarray:
 
 def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 0.0,
                  config: InteractionConfig | None = None, smooth: bool = True,
-                 measure: bool = True) -> tuple[Clip, CorrectionReport]:
+                 measure: bool = True, iterations: int = 9) -> tuple[Clip, CorrectionReport]:
     """Push penetrating fingers out of the colliders, smoothly, changing as little as possible.
 
     Parameters
@@ -192,6 +192,8 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         False: the per-frame bound alone (no Kalman smoothing, no bounded smoother).
     measure : bool
         Measure penetration before and after (the report's depths are zeros otherwise).
+    iterations : int
+        Bisection steps for the bound (the opening to ``2**-iterations`` of its path).
 
     Returns
     -------
@@ -227,7 +229,7 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
             for run in _runs(frames):  # the smoother runs over each window only
                 sm = rts_smooth(angles[run].reshape(len(run), -1), clip.fps, cfg.smoothing_s).reshape(-1, n, 3)
                 base[run] = angles[run] + w[run, None, None] * (sm - angles[run])
-        bound, resolved = poser.least_opening(colliders, frames, base[frames], margin, resolution)
+        bound, resolved = poser.least_opening(colliders, frames, base[frames], margin, resolution, iterations)
         for f in frames[~resolved]:
             unresolved.append((poser.chain.name, int(f)))
         u = np.array(bound)

@@ -16,7 +16,7 @@ database's frame rate.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -119,8 +119,11 @@ class InteractionTerms:
                                  scales=self.clip.scales[frames_all], start_time=0.0)
         stacked = self.apply_curves(base, self.rig, D)
         handmap = HandMap(**{self.hand.side: self.hand})
+        # an estimate for ranking candidates: a 2 mm clearance search and 5 bisection steps
+        # (the result is corrected again with the full guarantee)
+        coarse = replace(self.config or InteractionConfig(), tolerance_mm=2.0)
         corrected, _ = correct_clip(stacked, handmap, self.colliders.take(frames_all), margin_mm=self.margin_mm,
-                                    config=self.config, smooth=False, measure=False)
+                                    config=coarse, smooth=False, measure=False, iterations=5)
         D_star = self.read_curves(corrected, self.rig)
         m = max(int(np.count_nonzero(np.any(D != 0, axis=0))), 1)
         pos = 0
