@@ -125,3 +125,37 @@ def test_handmap_write_schema_refuses_non_usd(shared_assets, tmp_path, capsys):
     assert capsys.readouterr().err.strip().endswith("--write-schema needs a USD input (the schema is authored on its "
                                                     "Skeleton prim)")
     assert not (tmp_path / "x.usda").exists()
+
+
+def _records(path):
+    return list(read_asset(path).provenance.values())
+
+
+def test_every_command_writing_finger_motion_records_it(sample_assets, shared_assets, ok_glb, tmp_path, capsys):
+    """synthesize (copy, --as-layer, another format), splice, reduce and expand: the output says how."""
+    from usdhands.cli import main
+
+    body_usd = tmp_path / "body.usdc"
+    import shutil
+
+    shutil.copy(sample_assets / "gestures_bodyonly" / "ok_00_bodyonly.usdc", body_usd)
+    runs = {
+        "synthesis": [["synthesize", body_usd, "-o", tmp_path / "s.usda"],
+                      ["synthesize", body_usd, "-o", tmp_path / "s_layer.usda", "--as-layer"],
+                      ["synthesize", ok_glb, "-o", tmp_path / "s.glb"]],
+        "splicing": [["splice", ok_glb, ok_glb, "-o", tmp_path / "sp.glb"]],
+        "reduction": [["reduce", ok_glb, "-o", tmp_path / "r.glb", "--model", tmp_path / "m.json"],
+                      ["expand", tmp_path / "r.glb", "--model", tmp_path / "m.json", "-o", tmp_path / "e.glb"]],
+    }
+    for method, argvs in runs.items():
+        for argv in argvs:
+            assert main([str(a) for a in argv]) == 0, argv
+            capsys.readouterr()
+            out = argv[argv.index("-o") + 1]
+            recs = _records(out)
+            assert len(recs) == 1 and recs[0]["method"] == method, (argv, recs)
+            assert recs[0]["version"] and isinstance(recs[0]["parameters"], dict)
+    assert _records(tmp_path / "s.usda")[0]["database"].endswith("gesture_db")
+    assert _records(tmp_path / "sp.glb")[0]["database"] == ok_glb.as_posix()
+    assert _records(tmp_path / "e.glb")[0]["database"] == (tmp_path / "m.json").as_posix()
+    assert "UsdHandsFingerMotionAPI" in (tmp_path / "s_layer.usda").read_text()

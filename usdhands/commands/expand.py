@@ -84,7 +84,11 @@ def run(args) -> int:
     if missing:  # only when the model's axis letters do not match its Euler order
         raise UsdHandsError(f"curves {missing[:3]} of the model do not match its Euler order {model.order}",
                             path=args.model)
-    out = write_clip(args.file, expand_clip(clip, joints, model), args.output, **write_opts)
+    from usdhands.model.provenance import provenance_record
+
+    record = provenance_record("reduction", database=args.model, parameters={
+        "controlling": list(model.controlling_curves), "curves": len(model.curves)})
+    out = write_clip(args.file, expand_clip(clip, joints, model), args.output, provenance=record, **write_opts)
     summary = {
         "file": str(args.file), "model": str(args.model), "output": str(out),
         "frames": int(clip.num_frames), "curves": len(model.curves),

@@ -130,8 +130,12 @@ def run(args) -> int:
 
         # what 'usdhands expand' gives for this clip and model (the curves read for the model: the
         # same as these unless rotations jump between frames)
+        from usdhands.model.provenance import provenance_record
+
         out_clip = expand_clip(clip, curves.joints, chosen.model)
-        written.append(write_clip(args.file, out_clip, args.output, **write_opts))
+        record = provenance_record("reduction", database=args.model, parameters={
+            "step": k, "controlling": list(chosen.model.controlling_curves), "curves": len(chosen.model.curves)})
+        written.append(write_clip(args.file, out_clip, args.output, provenance=record, **write_opts))
     if args.model is not None:
         model = chosen.model
         model = dataclasses.replace(model, metadata={

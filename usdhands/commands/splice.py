@@ -299,7 +299,13 @@ def run(args) -> int:
                               body_markers=body_markers, hand_markers=hand_markers)
     except ValueError as e:  # a band without a path and the like: the user's numbers
         raise UsdHandsError(str(e)) from None
-    write_clip(args.body, result.clip, args.output, **opts)
+    from dataclasses import asdict
+
+    from usdhands.model.provenance import provenance_record
+
+    record = provenance_record("splicing", database=args.hands, parameters={
+        **asdict(options), "sides": list(sides), "constraints": [list(asdict(c).values()) for c in constraints]})
+    write_clip(args.body, result.clip, args.output, provenance=record, **opts)
 
     for s in sides:
         rb, rh = result.wrist_range_cm[s]

@@ -71,6 +71,7 @@ def run(args) -> int:
     progress = Progress("synthesize")
     progress(0, 4, "reading")
     db = load_database(args.db or bundled_database_path())
+    record = _provenance(args, cfg)
     asset = read_asset(args.file)
     if args.animation == "all" and not any(c.name == "all" for c in asset.clips):
         return _run_all(args, asset, db, cfg, progress)
@@ -104,9 +105,10 @@ def run(args) -> int:
     progress(2, 4, "writing")
     if added:
         out = write_asset(Asset(str(args.file), (result.clip.skeleton,), (result.clip,), ()), args.output,
-                          inputs=(args.file,))
+                          inputs=(args.file,), provenance=record)
     else:
-        out = write_clip(args.file, result.clip, args.output, **layer_options(args.layer, args.file, args.output))
+        out = write_clip(args.file, result.clip, args.output, provenance=record,
+                         **layer_options(args.layer, args.file, args.output))
     report = _report(result, db, cfg)
     report["grafted_joints"] = added
     if correction is not None:
@@ -200,6 +202,15 @@ def _print_report(report) -> None:
               f"deg/s^2; {i['frames_corrected']} frames corrected")
 
 
+def _provenance(args, cfg) -> dict:
+    """The UsdHandsFingerMotionAPI / extras record of a synthesis with these options."""
+    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.model.provenance import provenance_record
+
+    return provenance_record("synthesis", database=args.db or bundled_database_path(), parameters={
+        "config": cfg.to_dict(), "finger_reference": args.finger_reference, "graft_hands": bool(args.graft_hands)})
+
+
 def _run_all(args, asset, db, cfg, progress) -> int:
     """``--animation all``: every animation of the file gets fingers, written in one output."""
     import contextlib
@@ -233,7 +244,7 @@ def _run_all(args, asset, db, cfg, progress) -> int:
                 os.unlink(name)
                 target = type(args.output)(name)
                 temps.append(target)
-            out = write_clip(current, res.clip, target)
+            out = write_clip(current, res.clip, target, provenance=_provenance(args, cfg))
             current = target
     finally:
         for t in temps:
