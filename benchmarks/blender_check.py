@@ -1,0 +1,110 @@
+"""Open a source file and its conversions in Blender (``bpy``) and compare what Blender shows.
+
+Blender is the tool users open usdhands' outputs in: this script imports each file with
+Blender's own importers (glTF-IO, the USD importer) and compares, against the source,
+the world positions of the bones (matched by name) and the bounding box of the evaluated
+(skinned) meshes at a few frames.
+
+bpy is not a test dependency: its wheel (``pip install bpy``, 77 s and 968 MB here for
+bpy 5.0.1) pins numpy 1.26, which would downgrade the project's numpy. Run it from a
+separate environment, giving it files converted by usdhands::
+
+    python3 -m venv /tmp/bpyenv && /tmp/bpyenv/bin/pip install bpy
+    usdhands convert ../shared/assets/robot_expressive/RobotExpressive.glb /tmp/robot.usda
+    usdhands convert /tmp/robot.usda /tmp/robot_back.glb
+    /tmp/bpyenv/bin/python benchmarks/blender_check.py \\
+        ../shared/assets/robot_expressive/RobotExpressive.glb /tmp/robot.usda /tmp/robot_back.glb
+
+Without bpy it says so and exits 0. Figures: see the lead's notes for issue 12.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+try:
+    import bpy
+    from mathutils import Vector
+except ImportError:  # not in the project's environment: see the module docs
+    print("blender_check: bpy is not installed here; skipped (see the module docs)")
+    sys.exit(0)
+
+FRAMES = (1, 10, 20)
+
+
+def load(path: Path) -> None:
+    """Empty the scene and import ``path`` with Blender's importer for its extension."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    if path.suffix.lower() in (".glb", ".gltf"):
+        bpy.ops.import_scene.gltf(filepath=str(path))
+    else:
+        bpy.ops.wm.usd_import(filepath=str(path))
+
+
+def bone_positions() -> dict[str, Vector]:
+    """Bone name -> world position of its head (metres)."""
+    out = {}
+    for obj in bpy.context.scene.objects:
+        if obj.type == "ARMATURE":
+            for pb in obj.pose.bones:
+                out[_key(pb.name)] = obj.matrix_world @ pb.head
+    return out
+
+
+def _key(name: str) -> str:
+    """Names as USD prims hold them (``Hand.R_0`` and ``Hand_R_0`` match)."""
+    return name.replace(":", "_").replace(".", "_")
+
+
+def skinned_bbox() -> tuple[Vector, Vector] | None:
+    """World bounding box of every evaluated mesh with an Armature modifier (skinning applied).
+
+    Only skinned meshes: usdhands converts those (a source's rigid meshes are left out
+    and named in a warning), and the importers split primitives into objects differently.
+    """
+    deps = bpy.context.evaluated_depsgraph_get()
+    pts = []
+    for obj in bpy.context.scene.objects:
+        if obj.type != "MESH" or not any(m.type == "ARMATURE" for m in obj.modifiers):
+            continue
+        ev = obj.evaluated_get(deps)
+        mesh = ev.to_mesh()
+        pts += [ev.matrix_world @ v.co for v in mesh.vertices]
+        ev.to_mesh_clear()
+    if not pts:
+        return None
+    return Vector(map(min, *pts)), Vector(map(max, *pts))
+
+
+def snapshot(path: Path) -> dict[int, tuple[dict, tuple | None]]:
+    load(path)
+    out = {}
+    for f in FRAMES:
+        bpy.context.scene.frame_set(f)
+        out[f] = (bone_positions(), skinned_bbox())
+    return out
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) < 2:
+        print(__doc__)
+        return 2
+    source, *converted = (Path(a) for a in argv)
+    ref = snapshot(source)
+    print(f"{'file':28s} {'frame':>5s} {'bones':>5s} {'max bone cm':>11s} {'skinned bbox cm':>15s}")
+    for path in converted:
+        got = snapshot(path)
+        for f in FRAMES:
+            (rb, rbox), (gb, gbox) = ref[f], got[f]
+            common = sorted(set(rb) & set(gb))
+            worst = max(((rb[n] - gb[n]).length for n in common), default=float("nan")) * 100
+            box = float("nan")
+            if rbox and gbox:
+                box = max(abs(a - b) for k in (0, 1) for a, b in zip(rbox[k], gbox[k])) * 100
+            print(f"{path.name:28s} {f:5d} {len(common):5d} {worst:11.4f} {box:15.4f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]))
