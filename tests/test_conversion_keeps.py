@@ -55,6 +55,16 @@ def test_names_usd_cannot_hold_come_back(tmp_path):
     assert [a["name"] for a in json.loads(back.read_text())["animations"]] == names
     assert [n.rsplit("/", 1)[-1] for n in read_asset(back).skeletons[0].joint_names] == \
         ["mixamorig:Hips", "mixamorig:Spine"]
+    # UsdSkel's jointNames holds the names too: a file without usdhands' customData reads them back
+    from pxr import Usd, UsdSkel
+
+    stage = Usd.Stage.Open(str(usd))
+    skel = next(UsdSkel.Skeleton(p) for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton))
+    assert list(skel.GetJointNamesAttr().Get()) == ["mixamorig:Hips", "mixamorig:Spine"]
+    skel.GetPrim().ClearCustomDataByKey("usdhands:sourceJointNames")
+    stage.GetRootLayer().Export(str(tmp_path / "jointnames_only.usda"))
+    assert list(read_asset(tmp_path / "jointnames_only.usda").skeletons[0].joint_names) == \
+        ["mixamorig:Hips", "mixamorig:Hips/mixamorig:Spine"]
 
 
 @pytest.mark.parametrize("name", ["robot_expressive/RobotExpressive.glb", "usd_cesiumman/CesiumMan.usdz"])

@@ -156,13 +156,26 @@ def skeleton_tokens_and_names(skel: UsdSkel.Skeleton) -> tuple[list[str], list[s
     """The joint tokens of a Skeleton prim and the names the model uses for them.
 
     The names are the tokens, unless the prim's customData ``usdhands:sourceJointNames``
-    (written by :mod:`usdhands.formats.usd_write`) holds one original name per joint.
+    (written by :mod:`usdhands.formats.usd_write`) holds one original name per joint, or
+    else UsdSkel's own ``jointNames`` attribute holds one name per joint that differs from
+    the tokens' last elements (``mixamorig:Hips`` for the token ``mixamorig_Hips``): then
+    the names are the tokens' paths with each element replaced by its joint's name.
     """
     tokens = [str(t) for t in (skel.GetJointsAttr().Get() or [])]
     names = list(tokens)
     stored = skel.GetPrim().GetCustomDataByKey(SOURCE_JOINT_NAMES_KEY)
     if stored is not None and len(stored) == len(tokens) and len(set(map(str, stored))) == len(tokens):
-        names = [str(n) for n in stored]
+        return tokens, [str(n) for n in stored]
+    attr = skel.GetJointNamesAttr()
+    short = [str(n) for n in (attr.Get() or [])] if attr and attr.HasAuthoredValue() else []
+    if len(short) == len(tokens) and short != [t.rsplit("/", 1)[-1] for t in tokens] and all(short):
+        by_token = dict(zip(tokens, short))
+        full = []
+        for t in tokens:
+            parts = t.split("/")
+            full.append("/".join(by_token.get("/".join(parts[:k + 1]), parts[k]) for k in range(len(parts))))
+        if len(set(full)) == len(full):
+            names = full
     return tokens, names
 
 

@@ -222,6 +222,8 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
             skel.CreateJointsAttr().Set(Vt.TokenArray(tokens))
             if list(tokens) != list(sk.joint_names):
                 skel.GetPrim().SetCustomDataByKey(SOURCE_JOINT_NAMES_KEY, Vt.StringArray(list(sk.joint_names)))
+                # UsdSkel's own place for names joint paths cannot hold (mixamorig:Hips)
+                skel.CreateJointNamesAttr().Set(Vt.TokenArray([n.rsplit("/", 1)[-1] for n in sk.joint_names]))
             skel.CreateRestTransformsAttr().Set(numpy_to_matrices(sk.rest_local_xforms()))
             bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
             skel.CreateBindTransformsAttr().Set(numpy_to_matrices(bind))
