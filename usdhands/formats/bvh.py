@@ -690,7 +690,7 @@ class BvhHandler:
                    units: str | float | None = None, provenance: dict | None = None, **options) -> None:
         """Write ``source``'s hierarchy (text unchanged) with ``clip``'s motion.
 
-        A ``provenance`` record is named in a warning and not kept (BVH has no place for it).
+        A ``provenance`` record is not kept (BVH has no place for it); logged at INFO.
 
         Every ROOT/JOINT of the source must be in the clip's skeleton (matched by
         short name); channel orders are the source's.
@@ -714,7 +714,7 @@ class BvhHandler:
         """
         source = Path(source)
         bvh = parse_bvh(source)
-        _warn_provenance_lost(provenance)
+        _warn_provenance_lost(provenance, logging.INFO)  # the command chose BVH: -v says so
         clip = _clip_in(clip, units_to_meters(units))
         sk = clip.skeleton
         lookup = {}
@@ -754,10 +754,10 @@ class BvhHandler:
         Path(path).write_text(bvh.hierarchy_text + _motion_text(T, clip.fps, values), encoding="utf-8")
 
 
-def _warn_provenance_lost(record: dict | None) -> None:
+def _warn_provenance_lost(record: dict | None, level: int = logging.WARNING) -> None:
     if record:
-        _log.warning("BVH cannot record how the finger motion was made (method %r): provenance not kept",
-                     record.get("method"))
+        _log.log(level, "BVH cannot record how the finger motion was made (method %r): provenance not kept",
+                 record.get("method"))
 
 
 HANDLER = BvhHandler()
