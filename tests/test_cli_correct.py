@@ -51,6 +51,10 @@ def test_json_summary(scene, capsys):
     after = read_clip(scene / "j.usda")
     assert after.num_frames == before.num_frames
     assert not np.allclose(after.rotations, before.rotations)
+    from usdhands.formats.io import read_asset
+
+    (record,) = read_asset(scene / "j.usda").provenance.values()  # UsdHandsFingerMotionAPI
+    assert record["method"] == "interaction" and record["parameters"]["props"] == [str(scene / "cyl.obj")]
 
 
 def test_table_layer_and_plots(scene, capsys):

@@ -57,7 +57,13 @@ def run(args) -> int:
     start = time.perf_counter()
     out, report = correct_clip(clip, handmap, colliders, margin_mm=args.margin, config=config)
     seconds = time.perf_counter() - start
-    written = write_clip(args.file, out, args.output, **write_opts)
+    from dataclasses import asdict
+
+    from usdhands.model.provenance import provenance_record
+
+    record = provenance_record("interaction", parameters={
+        "props": [str(p) for p in args.props], "margin_mm": args.margin, "config": asdict(config)})
+    written = write_clip(args.file, out, args.output, provenance=record, **write_opts)
     if report.unresolved:
         chains = sorted({c for c, _ in report.unresolved})
         print(f"usdhands: note: {len(report.unresolved)} chain frames touch even with the finger open "

@@ -208,7 +208,8 @@ def _provenance(args, cfg) -> dict:
     from usdhands.model.provenance import provenance_record
 
     return provenance_record("synthesis", database=args.db or bundled_database_path(), parameters={
-        "config": cfg.to_dict(), "finger_reference": args.finger_reference, "graft_hands": bool(args.graft_hands)})
+        "config": cfg.to_dict(), "finger_reference": args.finger_reference, "graft_hands": bool(args.graft_hands),
+        **({"props": [str(p) for p in args.props], "margin_mm": args.margin} if getattr(args, "props", None) else {})})
 
 
 def _run_all(args, asset, db, cfg, progress) -> int:
