@@ -257,7 +257,9 @@ def test_synthesize_usd_as_an_override_layer_and_bad_outputs_before_any_work(sam
     prims = [x for x in specs if isinstance(x, Sdf.PrimSpec)]
     assert prims and all(x.specifier == Sdf.SpecifierOver for x in prims)  # overrides only, no new prims
     props = {x.name for x in specs if isinstance(x, Sdf.PropertySpec)}
-    assert props == {"rotations"}  # the joint rotations, nothing else (no meshes, translations, joints)
+    # the joint rotations and the provenance record, nothing else (no meshes, translations, joints)
+    assert props == {"rotations", "usdhands:fingerMotion:method", "usdhands:fingerMotion:database",
+                     "usdhands:fingerMotion:parameters", "usdhands:fingerMotion:version"}
     a, b, c = read_clip(src), read_clip(layer), read_clip(full)
     hm = detect_hands(a.skeleton)
     fingers = sorted(a.skeleton.index(j) for s in hm.sides for j in s.finger_joints)
