@@ -195,3 +195,45 @@ def test_attached_prop_moves_with_the_joint():
     np.testing.assert_allclose(out[3:7, 0, 3], joint[3:7, 0, 3] - 0.3, atol=1e-12)  # held: the offset it had at frame 3
     np.testing.assert_allclose(out[7:, 0, 3], out[6, 0, 3])  # put down where it was left
     np.testing.assert_allclose(out[:, 1, 3], 1.0)
+
+
+def _animated_cup_glb(path):
+    """The sample cup (scaled to metres) as a glTF node rising 1 m over 1 s (a LINEAR translation channel)."""
+    import pygltflib
+
+    cup = cup_mesh()
+    cup.apply_scale(0.01)
+    cup.export(path)
+    g = pygltflib.GLTF2().load(str(path))
+    blob = bytearray(g.binary_blob())
+    node = next(i for i, n in enumerate(g.nodes) if n.mesh is not None)
+    times = np.array([0.0, 1.0], dtype=np.float32).tobytes()
+    moves = np.array([[0, 0, 0], [0, 1, 0]], dtype=np.float32).tobytes()
+    views = []
+    for data in (times, moves):
+        while len(blob) % 4:
+            blob.append(0)
+        views.append(len(g.bufferViews))
+        g.bufferViews.append(pygltflib.BufferView(buffer=0, byteOffset=len(blob), byteLength=len(data)))
+        blob.extend(data)
+    g.accessors.append(pygltflib.Accessor(bufferView=views[0], componentType=5126, count=2, type="SCALAR",
+                                          min=[0.0], max=[1.0]))
+    g.accessors.append(pygltflib.Accessor(bufferView=views[1], componentType=5126, count=2, type="VEC3"))
+    n = len(g.accessors)
+    g.animations = [pygltflib.Animation(
+        samplers=[pygltflib.AnimationSampler(input=n - 2, output=n - 1, interpolation="LINEAR")],
+        channels=[pygltflib.AnimationChannel(sampler=0, target=pygltflib.AnimationChannelTarget(
+            node=node, path="translation"))])]
+    g.buffers[0].byteLength = len(blob)
+    g.set_binary_blob(bytes(blob))
+    g.save(str(path))
+
+
+def test_animated_gltf_prop_keeps_its_node_animation(tmp_path):
+    _animated_cup_glb(tmp_path / "rising.glb")
+    (prop,) = read_props(tmp_path / "rising.glb", meters_per_unit=0.01, up_axis="Y")  # a cm clip
+    assert prop.animated
+    np.testing.assert_allclose(prop.times, [0.0, 1.0])
+    x = prop.xforms_at(np.array([0.0, 0.5, 1.0]))
+    np.testing.assert_allclose(x[:, 1, 3], [0.0, 50.0, 100.0], atol=1e-4)  # 1 m = 100 cm, linear
+    assert np.asarray(prop.vertices)[:, 1].max() == pytest.approx(9.5, abs=1e-3)  # the cup in cm

@@ -1,6 +1,7 @@
 """Reading props (rigid meshes the hands touch) into :class:`~usdhands.model.prop.PropMesh`.
 
-OBJ, STL, PLY, OFF, GLB and glTF are read through trimesh; USD ``Mesh`` prims through
+OBJ, STL, PLY and OFF are read through trimesh; glTF mesh nodes (static or moved by an
+animation) through :mod:`usdhands.formats.gltf_props`; USD ``Mesh`` prims through
 :mod:`usdhands.formats.usd_props`. Every prop is converted to the units and up axis
 of the clip it goes with. Formats that do not say their units (OBJ, STL, PLY, OFF) are
 taken to be in the clip's units and Y up unless told otherwise; glTF is metres and Y up
@@ -98,12 +99,16 @@ def read_props(path: str | os.PathLike, *, meters_per_unit: float, up_axis: str,
 
         props = read_usd_props(path, meters_per_unit=meters_per_unit, up_axis=up_axis,
                                prop_meters_per_unit=prop_meters_per_unit, prop_up_axis=prop_up_axis)
+    elif suffix in (".glb", ".gltf"):
+        from usdhands.formats.gltf_props import read_gltf_props
+
+        m = convert_xform(prop_meters_per_unit or 1.0, prop_up_axis or "Y", meters_per_unit, up_axis)
+        props = read_gltf_props(path, m)
+        if not props:
+            raise AssetReadError("not a mesh (no triangles in it)", path=path)
     elif suffix in MESH_SUFFIXES:
         vertices, faces = _read_trimesh(path)
-        gltf = suffix in (".glb", ".gltf")
-        mpu = prop_meters_per_unit or (1.0 if gltf else meters_per_unit)
-        up = prop_up_axis or "Y"
-        m = convert_xform(mpu, up, meters_per_unit, up_axis)
+        m = convert_xform(prop_meters_per_unit or meters_per_unit, prop_up_axis or "Y", meters_per_unit, up_axis)
         props = [PropMesh(path.stem, vertices @ m[:3, :3].T, faces, path=str(path))]
     else:
         raise AssetReadError(f"unknown prop format {suffix or '(no extension)'!r}; expected one of "
