@@ -201,3 +201,18 @@ def test_leave_one_out_trims_rest_and_reports_each_hand():
         n = [int((trimmed.seg_side == s).sum()) for s in (0, 1)]
         # pooled = segment-weighted mean of the hands
         assert r["predictors"][p] == pytest.approx((hands["left"] * n[0] + hands["right"] * n[1]) / sum(n))
+
+
+def test_transition_velocities_are_per_frame():
+    from usdhands.algorithms.synthesis.synthesize import _candidate_ends
+
+    items = [DatabaseClip(c, tiny_handmap(), lab) for lab, c in gesture_set(1)]
+    db = build_database(items)
+    f = np.asarray(db.fingers, dtype=np.float64)
+    s = 3
+    a, b = int(db.segments[s, 0]), int(db.segments[s, 1])
+    starts, ends, vstart, vend = _candidate_ends(db, np.array([[s, -1]]))
+    assert np.allclose(starts[0, 0], f[a]) and np.allclose(ends[0, 0], f[b - 1])
+    # degrees per frame (not per second: that would make the velocity term fps^2 times the angles')
+    assert np.allclose(vstart[0, 0], f[a + 1] - f[a]) and np.allclose(vend[0, 0], f[b - 1] - f[b - 2])
+    assert not vstart[0, 1].any() and not starts[0, 1].any()  # no candidate: zeros

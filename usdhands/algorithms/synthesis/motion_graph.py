@@ -7,7 +7,10 @@ end of the first and the start of the second::
 
     cT = (wJ · Σ_i (J_A(i) − J_B(i))² + wW · Σ_i (W_A(i) − W_B(i))²) / m      (eq. 2)
 
-over the ``m`` finger DOFs (degrees and degrees per second). Entering node ``b`` from
+over the ``m`` finger DOFs (degrees and degrees per frame at the database's rate:
+with ``wW = 0.5`` the paper weighs velocity like the angles, which holds per frame;
+in degrees per second the velocity term would be fps² = 900 times larger at 30 fps
+and decide every transition alone). Entering node ``b`` from
 ``a`` costs ``wS · cS(b) + wT · cT(a, b)`` (eq. 3). The paper runs Dijkstra's
 algorithm; on a layered graph the dynamic programme below finds the same least-cost
 path in ``O(L k²)``. Ties go to the lower node index, so the path is deterministic.
@@ -46,7 +49,7 @@ def transition_costs(end_pose: np.ndarray, end_velocity: np.ndarray, start_pose:
     Parameters
     ----------
     end_pose, end_velocity : (Ka, C) float
-        Finger DOFs (degrees) and their velocities (degrees per second) at the last
+        Finger DOFs (degrees) and their velocities (degrees per frame) at the last
         frame of each fragment A.
     start_pose, start_velocity : (Kb, C) float
         The same at the first frame of each fragment B.

@@ -103,7 +103,7 @@ def db_side_segments(db: FingerDatabase, side: str, exclude_clips=()) -> np.ndar
 
 
 def _candidate_ends(db: FingerDatabase, cand: np.ndarray):
-    """Finger DOFs and velocities (deg/s) at the first and last frame of candidate segments.
+    """Finger DOFs and velocities (degrees per frame) at the first and last frame of candidate segments.
 
     ``cand (N, k)`` database segment indices (-1: none, given zeros). Velocities are
     one-sided differences inside the segment's track.
@@ -118,7 +118,7 @@ def _candidate_ends(db: FingerDatabase, cand: np.ndarray):
     def velocity(first, second):
         first = np.clip(first, ta, tb - 1)
         second = np.clip(second, ta, tb - 1)
-        v = (rows(second) - rows(first)) * db.fps
+        v = rows(second) - rows(first)  # per frame: eq. 2 weighs it like the angles (wW = 0.5)
         return np.where((second > first)[..., None], v, 0.0)
 
     starts, ends = rows(a), rows(b - 1)
