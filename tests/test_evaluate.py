@@ -278,3 +278,14 @@ def test_evaluate_refuses_sets_it_cannot_judge(gesture_files, capsys, sample_ass
     assert status == 2 and "the fingers never move in any of these clips: --holdout needs clips with finger" in err
     status, _, err = _run(capsys, "evaluate", "--holdout", bodyonly, *paths[:2], "--json")
     assert status == 0 and err.startswith("usdhands: warning: the fingers never move in 3 of 5 clips (")
+
+
+
+def test_evaluate_predictors_reports_progress_per_predictor(gesture_files):
+    _, paths = gesture_files
+    hm = tiny_handmap()
+    es = prepare_eval_set([(p.name.split("_")[0], read_clip(p), hm) for p in paths])
+    calls = []
+    shares = evaluate_predictors(es, DEFAULT_PREDICTORS[:3], 5, progress=lambda *a: calls.append(a))["predictors"]
+    assert calls == [(i + 1, 3, p) for i, p in enumerate(DEFAULT_PREDICTORS[:3])]
+    assert shares == evaluate_predictors(es, DEFAULT_PREDICTORS[:3], 5)["predictors"]

@@ -84,3 +84,12 @@ def test_default_cache_is_under_the_home_cache_on_linux(monkeypatch):
     for k in ("USDHANDS_CACHE_DIR", "NUMBA_CACHE_DIR", "XDG_CACHE_HOME"):
         monkeypatch.delenv(k, raising=False)
     assert jit.kernel_cache_dir() == Path.home() / ".cache" / "usdhands" / "kernels"
+
+
+def test_compile_listener_does_not_import_numba():
+    code = ("import sys; from usdhands.jit import compile_listener\n"
+            "with compile_listener(print):\n    pass\n"
+            "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert out.stdout.strip() == "False", out.stderr

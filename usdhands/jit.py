@@ -75,7 +75,10 @@ def njit(*args, cache: bool = True, **kwargs):
     import numba
     from numba.core import config
 
+    _install_listener()
+
     def decorate(fn):
+        _kernels.add(id(fn))  # the function stays alive with its dispatcher
         dispatcher = numba.njit(cache=False, **kwargs)(fn)
         folder = kernel_cache_dir()
         if cache and _can_write(folder):
@@ -104,22 +107,46 @@ def __getattr__(name: str):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-@contextlib.contextmanager
-def compile_listener(on_compile: Callable[[str], None]) -> Iterator[None]:
-    """Call ``on_compile(kernel_name)`` each time numba starts compiling a kernel, inside the block.
+_listeners: list[Callable[[str], None]] = []
+_installed = False
+_kernels: set[int] = set()  # id() of the Python functions compiled through njit here
 
-    Loading a kernel from the cache is not a compilation: on every run after the first,
-    ``on_compile`` is not called. The callback runs in the compiling thread and must not raise.
-    """
+
+def _install_listener() -> None:
+    """Hear numba's compile events (once per process; numba is imported by then)."""
+    global _installed
+    if _installed:
+        return
     from numba.core import event
 
     class _Listener(event.Listener):
         def on_start(self, ev):
             dispatcher = ev.data.get("dispatcher") if isinstance(ev.data, dict) else None
-            on_compile(getattr(getattr(dispatcher, "py_func", None), "__name__", "kernel"))
+            fn = getattr(dispatcher, "py_func", None)
+            if id(fn) not in _kernels:  # numba's own helpers compiled along the way
+                return
+            for listener in list(_listeners):
+                listener(fn.__name__)
 
         def on_end(self, ev):
             pass
 
-    with event.install_listener("numba:compile", _Listener()):
+    event.register("numba:compile", _Listener())
+    _installed = True
+
+
+@contextlib.contextmanager
+def compile_listener(on_compile: Callable[[str], None]) -> Iterator[None]:
+    """Call ``on_compile(kernel_name)`` each time numba starts compiling one of our kernels, inside the block.
+
+    Loading a kernel from the cache is not a compilation: on every run after the first,
+    ``on_compile`` is not called. Does not import numba (a command that uses no kernel
+    does not pay for it). The callback runs in the compiling thread and must not raise.
+    """
+    _listeners.append(on_compile)
+    if "numba" in sys.modules:
+        _install_listener()
+    try:
         yield
+    finally:
+        _listeners.remove(on_compile)

@@ -2,35 +2,105 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import logging
 import sys
 import time
-from typing import Iterable, Sequence
+from typing import Iterable, Iterator, Sequence
+
+
+_quiet = False
+
+
+def set_quiet(quiet: bool) -> None:
+    """``-q``: no progress display at all (the command line sets it on every run)."""
+    global _quiet
+    _quiet = bool(quiet)
+
+
+def _bars_wanted(stream) -> bool:
+    return not _quiet and hasattr(stream, "isatty") and stream.isatty()
 
 
 class Progress:
-    """A one-line progress display on stderr, shown only on a terminal or when forced.
+    """A progress bar on stderr (tqdm) for the library's ``progress(done, total, label)`` callbacks.
 
-    Use as a callback ``progress(done, total, label)``.
+    Drawn only when the stream is a terminal and ``-q`` was not given (or when forced with
+    ``enabled``). Without a bar, ``-v`` logs each step instead (at most one line a second).
+    The bar disappears when ``done`` reaches ``total``.
     """
 
     def __init__(self, label: str, *, enabled: bool | None = None, stream=None):
         self.stream = stream or sys.stderr
-        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self.enabled = _bars_wanted(self.stream) if enabled is None else enabled
         self.label = label
-        self._last = 0.0
+        self._bar = None
+        self._logged = 0.0
 
     def __call__(self, done: int, total: int, what: str = "") -> None:
         if not self.enabled:
+            self._log(done, total, what)
+            return
+        if self._bar is None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=total, initial=done, postfix=what[:40], desc=self.label, file=self.stream,
+                             leave=False, dynamic_ncols=True,
+                             bar_format="{desc}: {n}/{total} {bar} {elapsed}<{remaining} {postfix}")
+        bar = self._bar
+        if bar.total != total:
+            bar.total = total
+        bar.set_postfix_str(what[:40], refresh=False)
+        bar.update(done - bar.n)
+        if done >= total:
+            bar.close()
+            self._bar = None
+
+    def _log(self, done: int, total: int, what: str) -> None:
+        if _quiet or not _log.isEnabledFor(logging.INFO):
             return
         now = time.monotonic()
-        if done < total and now - self._last < 0.1:
+        if done < total and now - self._logged < 1.0:
             return
-        self._last = now
-        pct = 100.0 * done / total if total else 100.0
-        end = "\n" if done >= total else ""
-        self.stream.write(f"\r{self.label}: {done}/{total} ({pct:3.0f}%) {what[:40]:<40}{end}")
-        self.stream.flush()
+        self._logged = now
+        _log.info("%s: %d/%d %s", self.label, done, total, what)
+
+
+_log = logging.getLogger("usdhands")
+
+
+@contextlib.contextmanager
+def compile_progress(stream=None) -> Iterator[None]:
+    """Inside the block, a bar "compiling kernels, once" while numba compiles (first run only).
+
+    Hears :func:`usdhands.jit.compile_listener`; numba itself is not imported here.
+    """
+    from usdhands.jit import compile_listener
+
+    stream = stream or sys.stderr
+    bar = None
+
+    def on_compile(name: str) -> None:
+        nonlocal bar
+        if bar is None:
+            if not _bars_wanted(stream):
+                _log.info("compiling kernels, once (%s)", name)
+                return
+            from tqdm import tqdm
+
+            bar = tqdm(desc="compiling kernels, once", unit="kernels", initial=1, postfix=name, file=stream,
+                       leave=False, bar_format="{desc}: {n} {unit} {elapsed} {postfix}")
+            return
+        bar.set_postfix_str(name, refresh=False)
+        bar.update(1)
+
+    try:
+        with compile_listener(on_compile):
+            yield
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def print_table(rows: Sequence[Sequence], headers: Sequence[str], stream=None) -> None:

@@ -137,7 +137,7 @@ def run(args) -> int:
     try:
         es = prepare_eval_set([(lab, clip, hm) for _, lab, clip, hm in items], cfg, args.fps,
                               predictors=predictors, trim_rest=not args.keep_rest)
-        result = evaluate_predictors(es, predictors, k, cfg)
+        result = evaluate_predictors(es, predictors, k, cfg, progress=Progress("leave-one-out"))
     except ValueError as e:
         raise UsdHandsError(str(e)) from None
     result["idle_hands"] = [f"{c}:{s}" for c, s in es.idle]

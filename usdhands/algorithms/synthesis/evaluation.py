@@ -289,8 +289,10 @@ def _chance(es: EvalSet) -> float:
 
 
 def evaluate_predictors(es: EvalSet, predictors=DEFAULT_PREDICTORS, k: int = 5,
-                        config: SynthesisConfig | None = None) -> dict:
+                        config: SynthesisConfig | None = None, progress=None) -> dict:
     """Leave-one-out shares of several predictors.
+
+    ``progress(done, total, predictor)``, when given, is called after each predictor.
 
     Returns
     -------
@@ -304,8 +306,10 @@ def evaluate_predictors(es: EvalSet, predictors=DEFAULT_PREDICTORS, k: int = 5,
     for p in predictors:
         parse_predictor(p)
     shares, neigh = {}, {}
-    for p in predictors:
+    for i, p in enumerate(predictors):
         shares[p], neigh[p] = leave_one_out(es, p, k, config)
+        if progress:
+            progress(i + 1, len(predictors), p)
     best = max(predictors, key=lambda p: (shares[p], -predictors.index(p)))
     conf_p = PAPER_PREDICTOR if PAPER_PREDICTOR in shares else best
     return {
