@@ -204,3 +204,35 @@ def test_fps_option_resamples(shared_assets, tmp_path, capsys):
     assert b.fps == 20.0 and b.num_frames == 123
     idx = [b.skeleton.index(n) for n in a.skeleton.joint_names]
     np.testing.assert_allclose(b.world_positions()[:, idx] * 0.01, a.world_positions()[::2] * 0.01, atol=1e-6)
+
+
+def test_output_by_option_or_position_and_json(sample_assets, tmp_path, capsys):
+    """-o OUT like every other command; the positional OUT still works; --json says what was written."""
+    import json
+
+    src = sample_assets / "humanoid.bvh"
+    assert main(["convert", str(src), "-o", str(tmp_path / "a.glb"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    clip = read_asset(src).clips[0]
+    assert report == {"input": str(src), "output": str(tmp_path / "a.glb"), "skeletons": [report["skeletons"][0]],
+                      "animations": [{"name": report["animations"][0]["name"], "frames": clip.num_frames,
+                                      "fps": clip.fps}],
+                      "meshes": 0, "notes": []}
+    assert read_asset(tmp_path / "a.glb").clips[0].num_frames == clip.num_frames
+    convert(capsys, src, tmp_path / "b.glb")  # positional
+    assert (tmp_path / "b.glb").is_file()
+    assert main(["convert", str(src), str(tmp_path / "c.glb"), "--output", str(tmp_path / "c.glb")]) == 0
+    capsys.readouterr()
+    for argv, message in (([], "no output file given (-o OUT)"),
+                          ([str(tmp_path / "d.glb"), "-o", str(tmp_path / "e.glb")], "two outputs given")):
+        assert main(["convert", str(src), *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"usdhands: error: {message}") and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "d.glb").exists() and not (tmp_path / "e.glb").exists()
+
+
+def test_bvh_units_refuses_an_unknown_unit(sample_assets, tmp_path, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["convert", str(sample_assets / "humanoid.bvh"), "-o", str(tmp_path / "a.bvh"), "--bvh-units", "yard"])
+    assert e.value.code == 2
+    assert "invalid choice: 'yard' (choose from cm, dm, ft, in, inch, m, mm)" in capsys.readouterr().err

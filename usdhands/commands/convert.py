@@ -1,16 +1,20 @@
-"""``usdhands convert IN OUT [--animation NAME]``: between USD, glTF and BVH."""
+"""``usdhands convert IN -o OUT [--animation NAME] [--json]``: between USD, glTF and BVH.
+
+The output may also be given as a second positional argument (``convert IN OUT``), as in
+earlier versions, so existing scripts keep working.
+"""
 
 from __future__ import annotations
 
+import argparse
 import logging
 import sys
 from dataclasses import replace
 from pathlib import Path
 
-from usdhands.commands._common import check_fps
+from usdhands.commands._common import check_fps, print_json
 from usdhands.commands._output import MAIN_INPUT, check_paths
-from usdhands.errors import AssetReadError, NoSkeletonError
-from usdhands.formats.bvh import UNITS, units_to_meters
+from usdhands.errors import AssetReadError, NoSkeletonError, UsdHandsError
 from usdhands.formats.io import read_asset, write_asset
 from usdhands.formats.registry import check_output_path, handler_for
 from usdhands.model.asset import Asset
@@ -33,14 +37,27 @@ def register(sub) -> None:
                                    "target's conventions (glTF: metres, +Y; BVH: centimetres, +Y; USD "
                                    "keeps the source's). BVH files carry no unit: --bvh-units says which "
                                    "one a BVH input is in and which one a BVH output is written in.")
-    p.add_argument("input", type=Path)
-    p.add_argument("output", type=Path)
+    p.add_argument("input", type=Path, help="input file (.usd*, .gltf/.glb, .bvh)")
+    p.add_argument("output_positional", type=Path, nargs="?", default=None, metavar="OUT",
+                   help="output file; the same as -o OUT (kept for existing scripts)")
+    p.add_argument("-o", "--output", type=Path, default=None,
+                   help="output file; its extension chooses the format")
     p.add_argument("--animation", default=None,
                    help="only this animation (name or 0-based index); default: all (BVH: the first)")
     p.add_argument("--fps", type=float, default=None, help="resample animations to this rate")
-    p.add_argument("--bvh-units", choices=sorted(UNITS), default="cm",
-                   help="unit of the numbers of a BVH input or output (default: cm)")
+    p.add_argument("--bvh-units", type=_bvh_units, default="cm", metavar="UNIT",
+                   help="unit of the numbers of a BVH input or output: cm (default), m, mm, dm, in, ft")
+    p.add_argument("--json", action="store_true", help="print what was written as JSON")
     p.set_defaults(func=run)
+
+
+def _bvh_units(text: str) -> str:
+    """A --bvh-units value; the BVH module (and its imports) is loaded only when the option is given."""
+    from usdhands.formats.bvh import UNITS
+
+    if text not in UNITS:
+        raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from {', '.join(sorted(UNITS))})")
+    return text
 
 
 def convert(src: Path, dst: Path, animation: str | None = None, fps: float | None = None,
@@ -85,6 +102,8 @@ def convert(src: Path, dst: Path, animation: str | None = None, fps: float | Non
     mpu, up = TARGET_CONVENTIONS.get(target.name, (None, None))
     options = {}
     if target.name == "bvh":
+        from usdhands.formats.bvh import units_to_meters
+
         mpu = units_to_meters(bvh_units)
         options["units"] = bvh_units
     asset = asset_to(asset, mpu, up)
@@ -94,11 +113,29 @@ def convert(src: Path, dst: Path, animation: str | None = None, fps: float | Non
 
 def run(args) -> int:
     check_fps(args.fps)
-    check_paths({MAIN_INPUT: args.input}, {"OUT": args.output})
+    output = _output(args)
+    check_paths({MAIN_INPUT: args.input}, {"OUT": output})
     notes: list[str] = []
-    asset = convert(args.input, args.output, args.animation, args.fps, args.bvh_units, notes)
+    asset = convert(args.input, output, args.animation, args.fps, args.bvh_units, notes)
+    if args.json:
+        print_json({"input": str(args.input), "output": str(output),
+                    "skeletons": [sk.name for sk in asset.skeletons],
+                    "animations": [{"name": c.name, "frames": int(c.num_frames), "fps": float(c.fps)}
+                                   for c in asset.clips],
+                    "meshes": len(asset.meshes), "notes": notes})
+        return 0
     for note in notes:
         print(f"usdhands: {note}", file=sys.stderr)
-    print(f"wrote {args.output}: {len(asset.skeletons)} skeleton(s), {len(asset.clips)} animation(s), "
+    print(f"wrote {output}: {len(asset.skeletons)} skeleton(s), {len(asset.clips)} animation(s), "
           f"{len(asset.meshes)} mesh(es)", file=sys.stderr)
     return 0
+
+
+def _output(args) -> Path:
+    """The output from -o OUT or the positional OUT (one of them, or both the same)."""
+    given = [p for p in (args.output, args.output_positional) if p is not None]
+    if not given:
+        raise UsdHandsError("no output file given (-o OUT)")
+    if len(given) == 2 and given[0] != given[1]:
+        raise UsdHandsError(f"two outputs given: -o {given[0]} and {given[1]}; give one")
+    return given[0]
