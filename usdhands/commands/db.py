@@ -42,7 +42,12 @@ def register(sub) -> None:
     b.add_argument("--json", action="store_true", help="print the manifest's counts as JSON")
     add_prop_arguments(b, required=False)
     b.set_defaults(func=run_build)
-    i = dsub.add_parser("info", help="print what a database holds")
+    i = dsub.add_parser("info", help="print what a database holds",
+                        description="Print what a finger-motion database holds: clips, hand tracks, segments, "
+                                    "frames and frame rate, finger DOFs and arm reach, then the segments of "
+                                    "each gesture label per hand (--json: the whole manifest). Without a "
+                                    "folder, the database bundled in the package (the one synthesize uses "
+                                    "without --db).")
     i.add_argument("database", type=Path, nargs="?", default=None, help="database folder (default: the bundled one)")
     i.add_argument("--json", action="store_true", help="print the manifest as JSON")
     i.set_defaults(func=run_info)

@@ -1,4 +1,4 @@
-"""``usdhands evaluate``: how well body motion predicts finger motion (seed 000, §4).
+"""``usdhands evaluate``: how well body motion predicts finger motion (Jörg, Hodgins, Safonova 2012, section 4).
 
 ``evaluate INPUTS... --labels REGEX`` runs the leave-one-out analysis over labelled
 clips (body motion is enough): for each predictor, the share of the k closest
@@ -22,7 +22,7 @@ from usdhands.errors import UsdHandsError
 def register(sub) -> None:
     from usdhands.algorithms.synthesis.evaluation import DEFAULT_PREDICTORS
 
-    p = sub.add_parser("evaluate", help="leave-one-out: which body features predict finger motion (seed 000, sec. 4)",
+    p = sub.add_parser("evaluate", help="leave-one-out: which body features predict finger motion (Jörg et al. 2012, sec. 4)",
                        description="Leave-one-out analysis of Jorg, Hodgins, Safonova 2012, section 4, on labelled "
                                    "clips; with --holdout, held-out finger synthesis error against baselines.")
     p.add_argument("inputs", type=Path, nargs="*", help="animation files or folders")

@@ -1,4 +1,4 @@
-"""``usdhands handmap FILE [-o MAP.json] [--write-schema OUT [--as-layer]]``: the detected hands of a
+"""``usdhands handmap FILE [-o MAP.json] [--json] [--write-schema OUT [--as-layer]]``: the detected hands of a
 skeleton, as a table or JSON, or authored on a USD Skeleton as ``UsdHandsHandMapAPI``."""
 
 from __future__ import annotations
@@ -7,14 +7,14 @@ import json
 import sys
 from pathlib import Path
 
-from usdhands.commands._common import print_table
+from usdhands.commands._common import print_json, print_table
 from usdhands.commands._output import MAIN_INPUT, USD_LAYER_SUFFIXES, add_layer_argument, check_paths, layer_options
 from usdhands.errors import AssetReadError, NoSkeletonError, UsdHandsError
 from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset
 from usdhands.formats.registry import atomic_output
 from usdhands.model.handmap import FINGERS, SIDES, HandMap
-from usdhands.model.skeleton import short_joint_name
+from usdhands.model.skeleton import display_joint_names, short_joint_name
 
 
 def register(sub) -> None:
@@ -36,6 +36,8 @@ def register(sub) -> None:
                    help="USD: write the hands onto the Skeleton prim as UsdHandsHandMapAPI, in a copy of FILE "
                         "(or, with --as-layer, a sparse layer over it) at OUT (.usd, .usda, .usdc)")
     add_layer_argument(p, "FILE (with --write-schema)")
+    p.add_argument("--json", action="store_true",
+                   help="print the hand map as JSON (the -o file's content, with the file and where the map came from)")
     p.set_defaults(func=run)
 
 
@@ -56,8 +58,10 @@ def _pick_skeleton(asset, path: Path, animation, skeleton):
     raise AssetReadError(f"no skeleton named {skeleton!r}; there are {names}", path=path)
 
 
-def handmap_rows(hm: HandMap) -> list[tuple]:
-    """Table rows ``(side, part, joints)`` with short joint names."""
+def handmap_rows(hm: HandMap, joint_names=()) -> list[tuple]:
+    """Table rows ``(side, part, joints)`` with short joint names where they are unambiguous among ``joint_names``."""
+    shown = display_joint_names(joint_names)
+    short = lambda j: shown.get(j, short_joint_name(j))  # noqa: E731
     rows = []
     for side in SIDES:
         h = hm[side]
@@ -66,9 +70,9 @@ def handmap_rows(hm: HandMap) -> list[tuple]:
             continue
         for part in ("wrist", "forearm", "shoulder", "root"):
             j = getattr(h, part)
-            rows.append((side, part, "-" if j is None else short_joint_name(j)))
+            rows.append((side, part, "-" if j is None else short(j)))
         for f in FINGERS:
-            rows.append((side, f, " ".join(short_joint_name(j) for j in h.fingers[f]) or "(absent)"))
+            rows.append((side, f, " ".join(short(j) for j in h.fingers[f]) or "(absent)"))
     return rows
 
 
@@ -84,12 +88,16 @@ def run(args) -> int:
     hm, source = hands_for(args.file, sk, args.handmap, side_hint=args.side)
     origin = {"override": f"from {args.handmap}", "file": "recorded in the file (UsdHandsHandMapAPI)",
               "detected": "detected"}[source]
-    print(f"{args.file}: skeleton {sk.name!r}, {sk.num_joints} joints; hands {origin}")
-    print_table(handmap_rows(hm), ["side", "part", "joints (proximal to distal)"])
+    data = {"skeleton": sk.name, **hm.to_dict()}
     if args.output is not None:
-        data = {"skeleton": sk.name, **hm.to_dict()}
         with atomic_output(args.output) as tmp:
             tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+    if args.json:
+        print_json({"file": str(args.file), "source": source, "num_joints": sk.num_joints, **data})
+    else:
+        print(f"{args.file}: skeleton {sk.name!r}, {sk.num_joints} joints; hands {origin}")
+        print_table(handmap_rows(hm, sk.joint_names), ["side", "part", "joints (proximal to distal)"])
+    if args.output is not None:
         print(f"wrote {args.output}", file=sys.stderr)
     if args.write_schema is not None:
         from usdhands.formats.usd_write import write_usd_hand_map

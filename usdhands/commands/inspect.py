@@ -10,6 +10,7 @@ from usdhands.errors import NoHandsError
 from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset
 from usdhands.model.handmap import FINGERS, SIDES, HandMap
+from usdhands.model.skeleton import display_joint_names
 
 
 def register(sub) -> None:
@@ -85,6 +86,9 @@ def run(args) -> int:
     else:
         print("no animation")
     print()
+    shown = {}  # short joint names where unambiguous in their skeleton (the JSON keeps full paths)
+    for s in reversed(report["skeletons"]):
+        shown.update(display_joint_names(s["joints"]))
     rows = []
     for side in SIDES:
         h = report["hands"][side]
@@ -92,7 +96,8 @@ def run(args) -> int:
             rows.append((side, "-", "(none)", ""))
             continue
         for f in FINGERS:
-            rows.append((side, h["wrist"], f, " ".join(h["fingers"][f]) or "(absent)"))
+            rows.append((side, shown.get(h["wrist"], h["wrist"]), f,
+                         " ".join(shown.get(j, j) for j in h["fingers"][f]) or "(absent)"))
     print_table(rows, ["side", "wrist", "finger", "joints (proximal to distal)"])
     if report["meshes"]:
         print()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from usdhands.commands._common import Progress, check_seed, parse_list, print_table
+from usdhands.commands._common import Progress, check_seed, parse_list, print_json, print_table
 from usdhands.errors import OutputPathError
 
 
@@ -21,6 +21,7 @@ def register(sub) -> None:
                    help="'committed' (default): the compact set of sample_assets/, ground truth in .glb only; "
                         "'full': every clip in every format (about 40 MB)")
     p.add_argument("--seed", type=int, default=0, help="random seed of the variations (default 0: the committed set)")
+    p.add_argument("--json", action="store_true", help="list the files written, with their sizes, as JSON")
     p.set_defaults(func=run)
 
 
@@ -41,6 +42,11 @@ def run(args) -> int:
     except OSError as e:
         raise OutputPathError(f"cannot create the folder: {e.strerror}", path=out) from None
     files = generate_samples(out, formats, args.layout, args.seed, progress=Progress("samples"))
+    if args.json:
+        sizes = [(f.relative_to(out).as_posix(), f.stat().st_size) for f in files]
+        print_json({"outdir": str(out), "files": [{"path": p, "bytes": n} for p, n in sizes],
+                    "total_bytes": sum(n for _, n in sizes)})
+        return 0
     groups: dict[str, list[Path]] = {}
     for f in files:
         rel = f.relative_to(out)

@@ -8,7 +8,7 @@ import numpy as np
 
 from usdhands.model.rotations import check_quat, quat_normalize, trs_to_xform
 
-__all__ = ["Skeleton", "short_joint_name", "readonly"]
+__all__ = ["Skeleton", "short_joint_name", "display_joint_names", "readonly"]
 
 
 def readonly(a: np.ndarray, dtype=np.float64) -> np.ndarray:
@@ -21,6 +21,24 @@ def readonly(a: np.ndarray, dtype=np.float64) -> np.ndarray:
 def short_joint_name(name: str) -> str:
     """Last path element of a USD-style joint path (``"Hips/Spine/Chest"`` → ``"Chest"``)."""
     return name.rsplit("/", 1)[-1]
+
+
+def display_joint_names(joint_names) -> dict[str, str]:
+    """For printing: each joint's short name where it names that joint alone, else its full name.
+
+    A short name is kept when no other joint has the same short name and none is called
+    that in full (the names :meth:`Skeleton.index` takes back to the same joint).
+    """
+    names = list(joint_names)
+    counts: dict[str, int] = {}
+    for n in names:
+        counts[short_joint_name(n)] = counts.get(short_joint_name(n), 0) + 1
+    full = set(names)
+    out = {}
+    for n in names:
+        sn = short_joint_name(n)
+        out[n] = sn if counts[sn] == 1 and (sn == n or sn not in full) else n
+    return out
 
 
 @dataclass(frozen=True, eq=False)
