@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -45,14 +46,32 @@ def validate_gltf(*paths: Path) -> list[dict]:
     Each report has ``numErrors``, ``numWarnings`` and the first error ``messages``.
     """
     node = shutil.which("node")
-    if node is None or not (VALIDATOR_DIR / "node_modules" / "gltf-validator").is_dir():
-        pytest.fail("gltf-validator is not installed: run `npm install --prefix tests/gltf_validator`")
     out = subprocess.run([node, str(VALIDATOR_DIR / "validate.js"), *map(str, paths)],
                          capture_output=True, text=True, check=True)
     return json.loads(out.stdout)
 
 
+def validator_missing() -> str | None:
+    """Why the Khronos validator cannot run here (Node.js or the npm package missing), or None."""
+    if shutil.which("node") is None:
+        return "Node.js is not installed (the Khronos glTF validator runs on it)"
+    if not (VALIDATOR_DIR / "node_modules" / "gltf-validator").is_dir():
+        return "the glTF validator is not installed: run `npm install --prefix tests/gltf_validator`"
+    return None
+
+
+def require_validator() -> None:
+    """Skip the test, with the reason, where the validator cannot run; fail instead under
+    ``USDHANDS_REQUIRE_VALIDATOR=1`` (set by .ci/run, where it must run)."""
+    why = validator_missing()
+    if why is not None:
+        if os.environ.get("USDHANDS_REQUIRE_VALIDATOR") == "1":
+            pytest.fail(f"{why} (USDHANDS_REQUIRE_VALIDATOR=1)")
+        pytest.skip(why)
+
+
 @pytest.fixture(scope="session")
 def gltf_validator():
-    """A function ``validate(*paths) -> list of reports`` (Khronos glTF validator)."""
+    """A function ``validate(*paths) -> list of reports`` (Khronos glTF validator); see require_validator."""
+    require_validator()
     return validate_gltf
