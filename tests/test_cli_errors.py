@@ -83,7 +83,12 @@ def test_truncated_glb(shared_assets, tmp_path, capsys):
 def test_corrupt_glb_header(tmp_path, capsys):
     bad = tmp_path / "noise.glb"
     bad.write_bytes(b"not a glb file at all, just text" * 4)
-    check_error(capsys, tmp_path, ["inspect", bad], f"{bad}: ", [bad])
+    check_error(capsys, tmp_path, ["inspect", bad],
+                f"usdhands: error: {bad}: not a .glb file (magic b'not ', expected b'glTF')", [bad])
+    short = tmp_path / "short.glb"
+    short.write_bytes(b"glTF")  # the magic, then nothing: a header cut short
+    check_error(capsys, tmp_path, ["inspect", short],
+                f"usdhands: error: {short}: truncated .glb: 4 bytes, shorter than the 12-byte header", [short])
 
 
 def test_bvh_numbers_do_not_match_channels(shared_assets, tmp_path, capsys):

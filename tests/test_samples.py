@@ -12,7 +12,7 @@ import pytest
 
 from usdhands.cli import main as cli_main
 from usdhands.model import finger_curves
-from usdhands.model.rotations import quat_angle_deg, quat_conjugate, quat_multiply, quat_to_euler_deg
+from usdhands.model.rotations import quat_angle_deg, quat_conjugate, quat_multiply
 from usdhands.samples.gestures import (
     GESTURE_TYPES, TAKES_PER_TYPE, body_only, conversation_annotations, conversation_clip, gesture_database,
     gesture_hands, gesture_take, wave_clip,
@@ -204,10 +204,14 @@ def test_joint_limits_and_smoothness(database):
         assert e[..., 0].min() > -10 and e[..., 0].max() < 110, c.name
         assert np.abs(e[..., 2]).max() < 35 and np.abs(e[5:, 3:, 1]).max() < 1e-6
         for side in ("Left", "Right"):
-            # the elbow hinges one way, 0..160°
-            el = quat_to_euler_deg(rel[:, sk.index(f"{side}ForeArm")], "YZX")
-            bend = quat_angle_deg(rel[:, sk.index(f"{side}ForeArm")], [0, 0, 0, 1])
-            assert bend.max() < 181 and np.abs(el[:, 1]).max() < 90
+            # the elbow hinges one way, under 160°: the angle between the upper arm and forearm
+            # bones, and the turn from one to the other about the upper arm's +x axis only
+            arm, fore = world[:, sk.index(f"{side}Arm"), :3, :3], world[:, sk.index(f"{side}ForeArm"), :3, :3]
+            ya, yf = arm[:, :, 1], fore[:, :, 1]
+            flex = np.degrees(np.arccos(np.clip(np.sum(ya * yf, axis=1), -1, 1)))
+            assert flex.max() < 160, (c.name, side, flex.max())
+            hinge = np.einsum("tji,tj->ti", arm, np.cross(ya, yf))  # sin(flex) times the axis, in the arm's frame
+            assert hinge[:, 0].min() > 0 and np.abs(hinge[:, 1:]).max() < 1e-6, (c.name, side)
             # the wrist bends less than 80° from its forearm (angle between the bones)
             yh = world[:, sk.index(f"{side}Hand"), :3, 1]
             yf = world[:, sk.index(f"{side}ForeArm"), :3, 1]

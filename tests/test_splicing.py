@@ -113,7 +113,21 @@ def test_hand_angle_cost_equals_scipy_alignment():
     ok = np.ones_like(fast, bool)
     ok[2, 3] = False  # a half turn about any perpendicular axis aligns opposite vectors: no unique answer
     np.testing.assert_allclose(fast[ok], naive[ok], atol=1e-6)
-    assert 0.0 <= fast[2, 3] <= 180.0
+    # there, the answer must be that of one of those half turns: within the range they give
+    p = np.cross(fh[3], [1.0, 0, 0])
+    p /= np.linalg.norm(p)
+    q = np.cross(fh[3], p)
+    t = np.linspace(0, np.pi, 3601)[:, None]
+    axes = np.cos(t) * p + np.sin(t) * q  # every axis perpendicular to the hand's forearm
+    turned = 2 * (axes @ hh[3])[:, None] * axes - hh[3]  # hh[3] after a half turn about each
+    possible = np.degrees(np.arccos(np.clip(turned @ hb[2], -1, 1)))
+    assert possible.min() - 1e-6 <= fast[2, 3] <= possible.max() + 1e-6
+    assert possible.max() - possible.min() > 10  # (the range is a real constraint here)
+    # a hand vector along its forearm has one answer: after any half turn it points along fb
+    hh2 = hh.copy()
+    hh2[3] = fh[3]
+    along = hand_angle_cost(fb, hb, fh, hh2, np.array([2]), np.array([3]))[0]
+    assert along == pytest.approx(np.degrees(np.arccos(np.dot(hb[2], fb[2]))), abs=1e-6)
 
 
 def test_direction_angle_cost_is_the_angle_in_degrees():
