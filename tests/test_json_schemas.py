@@ -29,3 +29,23 @@ def test_error_names_the_deepest_place():
 def test_top_level_error():
     where, message = first_schema_error([], "handmap")
     assert where == "(top level)" and "is not of type 'object'" in message
+
+
+def test_bundled_database_manifest_is_valid(tmp_path):
+    """synthesize loads the bundled database without the schema check (check_schema=False): checked here."""
+    import json
+    import shutil
+
+    from usdhands.algorithms.synthesis.database import load_database
+    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.errors import ConfigError
+
+    manifest = json.loads((bundled_database_path() / "manifest.json").read_text())
+    assert first_schema_error(manifest, "database") is None
+    # and the check the bundled database skips still runs for any other database
+    broken = tmp_path / "db"
+    shutil.copytree(bundled_database_path(), broken)
+    manifest["fps"] = "thirty"
+    (broken / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(ConfigError, match="invalid database manifest at fps"):
+        load_database(broken)
