@@ -77,3 +77,21 @@ def test_display_names_keep_full_paths_where_short_ones_are_ambiguous():
 def test_help_runs_in_a_fresh_process(argv):
     out = subprocess.run([sys.executable, "-m", "usdhands", *argv], capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.startswith("usage: usdhands"), out.stderr
+
+
+def test_evaluate_help_lists_the_default_predictors():
+    from usdhands.algorithms.synthesis.evaluation import DEFAULT_PREDICTORS
+    from usdhands.commands.evaluate import DEFAULT_PREDICTORS_HELP
+
+    assert DEFAULT_PREDICTORS_HELP == ",".join(DEFAULT_PREDICTORS)
+
+
+def test_building_the_parser_imports_no_heavy_library():
+    """Every command (and --help) builds the whole parser: no synthesis algorithms, format handlers, numba, scipy."""
+    code = ("import sys; from usdhands.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in sys.modules if m.startswith(('usdhands.algorithms.synthesis', 'usdhands.formats.bvh', "
+            "'usdhands.formats.usd', 'usdhands.formats.gltf', 'numba', 'pxr', 'pygltflib', 'scipy', 'jsonschema', "
+            "'matplotlib', 'tqdm'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"

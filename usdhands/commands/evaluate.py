@@ -19,9 +19,13 @@ from usdhands.commands._output import MAIN_INPUT, check_paths
 from usdhands.errors import UsdHandsError
 
 
-def register(sub) -> None:
-    from usdhands.algorithms.synthesis.evaluation import DEFAULT_PREDICTORS
+#: evaluation.DEFAULT_PREDICTORS, written out so that building the parser (every command, --help)
+#: does not import the synthesis algorithms; a test checks they agree
+DEFAULT_PREDICTORS_HELP = ("shoulder_pos,shoulder_rot,elbow_pos,elbow_rot,wrist_pos,wrist_rot,wrist_pos+0.25rot,"
+                           "wrist_pos+0.5rot,wrist_pos+rot,elbow_pos+wrist_pos")
 
+
+def register(sub) -> None:
     p = sub.add_parser("evaluate", help="leave-one-out: which body features predict finger motion (Jörg et al. 2012, sec. 4)",
                        description="Leave-one-out analysis of Jorg, Hodgins, Safonova 2012, section 4, on labelled "
                                    "clips; with --holdout, held-out finger synthesis error against baselines.")
@@ -33,7 +37,7 @@ def register(sub) -> None:
                    help="neighbours per segment (default 5; with --holdout, candidates per segment: the config's, 5)")
     p.add_argument("--predictors", default=None,
                    help="comma-separated predictors, e.g. wrist_rot,wrist_pos+0.5rot,elbow_pos "
-                        f"(default: {','.join(DEFAULT_PREDICTORS)})")
+                        f"(default: {DEFAULT_PREDICTORS_HELP})")
     p.add_argument("--holdout", action="store_true",
                    help="synthesize each clip's fingers from the others; error against ground truth and baselines")
     p.add_argument("--folds", type=int, default=None, metavar="K",
