@@ -41,12 +41,21 @@ def test_gltf_usd_gltf_round_trip_keeps_motion_and_meshes(shared_assets, tmp_pat
     a, b = read_asset(src), read_asset(back)
     assert [c.name for c in b.clips] == [c.name for c in a.clips]
     sa, sb = a.skeletons[0], b.skeletons[0]
-    idx = [sb.index(n) for n in sa.joint_names]
+    # RobotArmature (a static node above the skin's joints) is an Xform above the SkelRoot in
+    # USD, folded back into the root joint on the way back
+    assert set(sa.joint_names) - set(sb.joint_names) == {"RobotArmature"}
+    common = [n for n in sa.joint_names if n in sb.joint_names]
+    ia, ib = [sa.index(n) for n in common], [sb.index(n) for n in common]
+    inner = [k for k, j in enumerate(ib) if sb.parents[j] >= 0]
     scale = np.abs(sa.bind_xforms[:, :3, 3]).max()
-    np.testing.assert_allclose(sb.bind_xforms[idx], sa.bind_xforms, atol=1e-6 * scale)  # inverse bind matrices
-    np.testing.assert_allclose(sb.rest_translations[idx], sa.rest_translations, atol=1e-6 * scale)
+    np.testing.assert_allclose(sb.bind_xforms[ib], sa.bind_xforms[ia], atol=1e-6 * scale)  # inverse bind matrices
+    np.testing.assert_allclose(sb.rest_translations[ib][inner], sa.rest_translations[ia][inner], atol=1e-6 * scale)
     for ca, cb in zip(a.clips, b.clips):
-        assert_same_motion(ca, cb)
+        assert cb.num_frames == ca.num_frames and cb.fps == pytest.approx(ca.fps)
+        extent = np.ptp(ca.world_positions().reshape(-1, 3), axis=0).max()  # float32 in USD
+        np.testing.assert_allclose(cb.world_positions()[:, ib], ca.world_positions()[:, ia], atol=1e-5 * extent)
+        angle = np.radians(quat_angle_deg(ca.rotations[:, ia][:, inner], cb.rotations[:, ib][:, inner]))
+        assert angle.max() < 1e-4
     assert len(b.meshes) == len(a.meshes) == 4
     for ma, mb in zip(a.meshes, b.meshes):
         np.testing.assert_allclose(mb.points, ma.points, atol=1e-5)

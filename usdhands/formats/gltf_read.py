@@ -748,8 +748,14 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
         left_out = left_out_of(scene, meshes)
     for thing in left_out:
         _log.info("%s: not read: %s", path, thing)
+    non_skin = {}
+    for b, binding in enumerate(scene.bindings):
+        in_skin = {n for s in binding.skins for n in doc.gltf.skins[s].joints or []}
+        names = tuple(binding.skeleton.joint_names[j] for j, n in enumerate(binding.nodes) if n not in in_skin)
+        if names:
+            non_skin[b] = names
     return Asset(str(path), tuple(b.skeleton for b in scene.bindings), tuple(clips), tuple(meshes),
-                 provenance=provenance, left_out=left_out)
+                 provenance=provenance, left_out=left_out, non_skin_joints=non_skin)
 
 
 def left_out_of(scene: GltfScene, meshes: list[SkinnedMesh]) -> tuple[str, ...]:

@@ -7,6 +7,7 @@ with ``Vt.*Array.FromNumpy``.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
 from typing import Sequence
@@ -198,7 +199,10 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
         tcps = asset.clips[0].fps if asset.clips else 24.0
         stage.SetTimeCodesPerSecond(tcps)
         stage.SetFramesPerSecond(tcps)
-        single = len(asset.skeletons) == 1
+        chains = [_node_chain(sk, asset.non_skin_joints.get(k, ()), [c for c, o in zip(asset.clips, owner) if o == k],
+                              [m for m in asset.meshes if m.skeleton_index == k])
+                  for k, sk in enumerate(asset.skeletons)]
+        single = len(asset.skeletons) == 1 and not chains[0][0]
         root_path = Sdf.Path("/Root")
         if single:
             UsdSkel.Root.Define(stage, root_path)
@@ -208,12 +212,19 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
         all_codes = []
         used_roots: set[str] = set()
         for k, sk in enumerate(asset.skeletons):
+            chain, keep = chains[k]
             if single:
                 parent = root_path
             else:
+                above = root_path
+                for j in chain:
+                    above = _define_node_xform(stage, above, sk, j, used_roots if above == root_path else set())
                 leaf = valid_identifier(sk.name.rsplit("/", 1)[-1]) + "Root"
-                parent = root_path.AppendChild(unique_name(leaf, used_roots))
+                parent = above.AppendChild(unique_name(leaf, used_roots if above == root_path else set()))
                 UsdSkel.Root.Define(stage, parent)
+            lifted = sk
+            if chain:
+                sk, to_skel = _without_chain(sk, chain, keep)
             used: set[str] = set()
             skel_path = parent.AppendChild(unique_name(valid_identifier(sk.name.rsplit("/", 1)[-1] or "Skeleton"),
                                                        used))
@@ -232,6 +243,9 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
             for clip, o, record in zip(asset.clips, owner, records):
                 if o != k:
                     continue
+                if chain:
+                    clip = clip.replace(skeleton=sk, rotations=clip.rotations[:, keep],
+                                        translations=clip.translations[:, keep], scales=clip.scales[:, keep])
                 if abs(clip.skeleton.meters_per_unit - mpu) > 1e-12:
                     clip = clip.with_meters_per_unit(mpu)
                 original = asset.source_names.get(clip.name) or clip.name.rsplit("/", 1)[-1] or "Animation"
@@ -251,10 +265,82 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                     anim.GetPrim().SetCustomDataByKey(SOURCE_SKELETON_KEY, str(skel_path))
             for m in asset.meshes:
                 if m.skeleton_index == k:
+                    if chain:
+                        m = _mesh_without_chain(m, lifted.num_joints, keep, to_skel)
                     _write_mesh(stage, parent, used, m, skel_path, sk.num_joints, asset.source_names.get(m.name))
         if all_codes:
             _set_time_range(layer, np.concatenate(all_codes), extend=False)
         layer.Export(str(path))
+
+
+def _node_chain(sk: Skeleton, non_skin: Sequence[str], clips: Sequence[Clip],
+                meshes: Sequence[SkinnedMesh]) -> tuple[list[int], np.ndarray]:
+    """The joints to author as ``Xform`` prims above the SkelRoot, and the joints kept.
+
+    The chain starts at the single root joint and goes down while each joint is one that
+    no skin lists (``non_skin``), does not move in any of ``clips``, carries no mesh weight,
+    and (but for the last) has one child. Returns ``(chain, keep)``: joint indices root
+    first (empty when nothing can be lifted) and the sorted indices of the other joints.
+    """
+    names = set(non_skin)
+    parents = np.asarray(sk.parents)
+    weighted = set()
+    for m in meshes:
+        if m.joint_indices is not None:
+            w = np.asarray(m.joint_weights).reshape(np.asarray(m.joint_indices).shape)
+            weighted.update(np.unique(np.asarray(m.joint_indices)[w != 0]).tolist())
+
+    def still(j: int) -> bool:
+        for c in clips:
+            if (quat_angle_deg(c.rotations[:, j], sk.rest_rotations[j]).max(initial=0.0) > _ROT_TOL_DEG
+                    or not np.allclose(c.translations[:, j], sk.rest_translations[j], rtol=1e-6, atol=_LIN_TOL)
+                    or not np.allclose(c.scales[:, j], sk.rest_scales[j], rtol=1e-6, atol=_LIN_TOL)):
+                return False
+        return True
+
+    chain: list[int] = []
+    roots = np.flatnonzero(parents < 0)
+    j = int(roots[0]) if len(roots) == 1 else -1
+    while j >= 0 and sk.joint_names[j] in names and j not in weighted and still(j):
+        chain.append(j)
+        kids = np.flatnonzero(parents == j)
+        j = int(kids[0]) if len(kids) == 1 else -1
+    if len(chain) == sk.num_joints:
+        chain = []
+    keep = np.array([j for j in range(sk.num_joints) if j not in set(chain)], dtype=np.int64)
+    return chain, keep
+
+
+def _define_node_xform(stage: Usd.Stage, above: Sdf.Path, sk: Skeleton, j: int, used: set[str]) -> Sdf.Path:
+    """An ``Xform`` prim under ``above`` with joint ``j``'s rest transform (translate, orient, scale)."""
+    original = sk.joint_names[j].rsplit("/", 1)[-1]
+    path = above.AppendChild(unique_name(valid_identifier(original), used))
+    xf = UsdGeom.Xform.Define(stage, path)
+    t, q, s = sk.rest_translations[j], sk.rest_rotations[j], sk.rest_scales[j]
+    xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, t)))
+    xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(float(q[3]), *map(float, q[:3])))
+    xf.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, s)))
+    if path.name != original:
+        xf.GetPrim().SetCustomDataByKey(SOURCE_NAME_KEY, original)
+    return path
+
+
+def _without_chain(sk: Skeleton, chain: list[int], keep: np.ndarray) -> tuple[Skeleton, np.ndarray]:
+    """The skeleton of the ``keep`` joints in the space below ``chain``, and the (4, 4)
+    transform from the model's world space into that space."""
+    to_skel = np.linalg.inv(sk.rest_world_xforms()[chain[-1]])
+    sub = sk.subset(list(keep))
+    bind = None if sub.bind_xforms is None else to_skel @ sub.bind_xforms
+    return Skeleton(sub.joint_names, sub.parents, sub.rest_translations, sub.rest_rotations, sub.rest_scales,
+                    bind, sub.meters_per_unit, sub.up_axis, sub.name), to_skel
+
+
+def _mesh_without_chain(m: SkinnedMesh, num_joints: int, keep: np.ndarray, to_skel: np.ndarray) -> SkinnedMesh:
+    """``m`` bound to the skeleton of :func:`_without_chain` (joint indices renumbered)."""
+    remap = np.zeros(num_joints, dtype=np.int64)
+    remap[keep] = np.arange(len(keep))
+    idx = None if m.joint_indices is None else remap[np.asarray(m.joint_indices)]
+    return dataclasses.replace(m, joint_indices=idx, geom_bind_xform=to_skel @ m.geom_bind_xform)
 
 
 def _owner(skeletons: Sequence[Skeleton], clip: Clip) -> int:

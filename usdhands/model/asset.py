@@ -74,6 +74,10 @@ class Asset:
     left_out : tuple of str
         What the file holds that the reader did not read (``"3 material(s)"``, ...),
         so a conversion can say what it does not carry.
+    non_skin_joints : dict int -> tuple of str
+        Skeleton index -> names of its joints that no skin lists (glTF nodes above the
+        skin's joints, kept for their transforms: Mixamo's ``Armature``); the USD writer
+        puts the static ones above every skin joint on ``Xform`` prims instead.
     """
 
     path: str
@@ -83,6 +87,7 @@ class Asset:
     provenance: dict[str, dict] = field(default_factory=dict)
     source_names: dict[str, str] = field(default_factory=dict)
     left_out: tuple[str, ...] = ()
+    non_skin_joints: dict[int, tuple[str, ...]] = field(default_factory=dict)
 
     def clip(self, animation: str | int | None = None) -> Clip:
         """One clip by name or index; the first when ``animation`` is None.

@@ -1,0 +1,194 @@
+"""glTF -> USD gives the conventional UsdSkel shape: scaled nodes above the skin's joints
+(Mixamo's ``Character`` 0.1 > ``Armature`` 0.01) become ``Xform`` prims above the SkelRoot,
+joints are the skin's, and the world joints and skinned mesh are where the glTF puts them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pygltflib
+from pxr import Gf, Usd, UsdGeom, UsdSkel
+from scipy.spatial.transform import Rotation
+
+from tests.cli_helpers import run
+from usdhands.formats.io import read_asset
+from usdhands.formats.usd_common import matrices_to_numpy
+from usdhands.formats.usd_validate import usd_compliance_errors
+from usdhands.model.rotations import trs_to_xform
+
+SKIN = ["mixamorig:Hips", "mixamorig:Spine", "mixamorig:LeftArm", "mixamorig:RightArm"]
+FPS = 30.0
+KEYS = 11
+
+
+def _mixamo_like(path):
+    """Character (scale 0.1, turned 30° about y) > Armature (scale 0.01, 90° about x) > Hips >
+    Spine > LeftArm, RightArm; a skinned box per joint; Hips moves and Spine turns.
+
+    Returns (rest TRS per node, animated TRS per node per key, inverse bind matrices,
+    mesh points, joint indices, weights) for the independent skinning below."""
+    rx = Rotation.from_euler("x", 90, degrees=True).as_quat()
+    ry = Rotation.from_euler("y", 30, degrees=True).as_quat()
+    one = np.array([0.0, 0, 0, 1])
+    nodes = [  # name, t, q, s, children
+        ("Character", [5.0, 0, 0], ry, [0.1] * 3, [1]),
+        ("Armature", [0.0, 0, 0], rx, [0.01] * 3, [2]),
+        ("mixamorig:Hips", [0.0, 100, 0], one, [1.0] * 3, [3]),
+        ("mixamorig:Spine", [0.0, 20, 0], one, [1.0] * 3, [4, 5]),
+        ("mixamorig:LeftArm", [15.0, 30, 0], one, [1.0] * 3, []),
+        ("mixamorig:RightArm", [-15.0, 30, 0], one, [1.0] * 3, []),
+        ("Body", [0.0, 0, 0], one, [1.0] * 3, []),
+    ]
+    parents = [-1, 0, 1, 2, 3, 3, -1]
+    rest = [trs_to_xform(np.array(t), np.array(q), np.array(s)) for _, t, q, s, _ in nodes]
+
+    def world(locals_):
+        out = []
+        for i, m in enumerate(locals_):
+            out.append(m if parents[i] < 0 else out[parents[i]] @ m)
+        return out
+
+    rest_world = world(rest)
+    joints = [2, 3, 4, 5]
+    ibm = np.array([np.linalg.inv(rest_world[n]) for n in joints])
+    # a box of 8 points around each joint (in world space, the mesh's bind space)
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=np.float64) * 0.004
+    pts, ji, jw, tris = [], [], [], []
+    faces = [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
+             [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
+    for k, n in enumerate(joints):
+        base = len(pts)
+        pts += list(rest_world[n][:3, 3] + corners)
+        tris += [[base + a for a in f] for f in faces]
+        other = (k + 1) % len(joints)
+        ji += [[k, other, 0, 0]] * 8
+        jw += [[0.75, 0.25, 0, 0]] * 8
+    pts = np.array(pts, np.float32)
+    ji = np.array(ji, np.uint16)
+    jw = np.array(jw, np.float32)
+    tris = np.array(tris, np.uint16).reshape(-1)
+    times = np.arange(KEYS) / FPS
+    hips_t = np.array([[0.0, 100 + 10 * np.sin(f / 3), 5.0 * f] for f in range(KEYS)])
+    spine_q = Rotation.from_euler("z", np.linspace(0, 60, KEYS)[:, None], degrees=True).as_quat()
+
+    g = pygltflib.GLTF2(asset=pygltflib.Asset(version="2.0"))
+    data = bytearray()
+
+    def accessor(arr, type_, comp=pygltflib.FLOAT, target=None, min_max=False):
+        nonlocal data
+        arr = np.ascontiguousarray(arr)
+        data += b"\0" * (-len(data) % 4)
+        raw = arr.tobytes()
+        g.bufferViews.append(pygltflib.BufferView(buffer=0, byteOffset=len(data), byteLength=len(raw), target=target))
+        data += raw
+        acc = pygltflib.Accessor(bufferView=len(g.bufferViews) - 1, componentType=comp, count=arr.shape[0], type=type_)
+        if min_max:
+            acc.min = arr.reshape(arr.shape[0], -1).min(0).tolist()
+            acc.max = arr.reshape(arr.shape[0], -1).max(0).tolist()
+        g.accessors.append(acc)
+        return len(g.accessors) - 1
+
+    for i, (name, t, q, s, kids) in enumerate(nodes):
+        g.nodes.append(pygltflib.Node(name=name, translation=list(t), rotation=list(map(float, q)), scale=list(s),
+                                      children=kids or None))
+    g.nodes[6].mesh, g.nodes[6].skin = 0, 0
+    attrs = pygltflib.Attributes(POSITION=accessor(pts, "VEC3", target=pygltflib.ARRAY_BUFFER, min_max=True),
+                                 JOINTS_0=accessor(ji, "VEC4", pygltflib.UNSIGNED_SHORT, pygltflib.ARRAY_BUFFER),
+                                 WEIGHTS_0=accessor(jw, "VEC4", target=pygltflib.ARRAY_BUFFER))
+    g.meshes = [pygltflib.Mesh(name="Body", primitives=[pygltflib.Primitive(
+        attributes=attrs, indices=accessor(tris, "SCALAR", pygltflib.UNSIGNED_SHORT, pygltflib.ELEMENT_ARRAY_BUFFER))])]
+    g.skins = [pygltflib.Skin(name="Rig", joints=joints,
+                              inverseBindMatrices=accessor(np.swapaxes(ibm, 1, 2).astype(np.float32).reshape(-1, 16),
+                                                           "MAT4"))]
+    tin = accessor(times.astype(np.float32), "SCALAR", min_max=True)
+    smp = [pygltflib.AnimationSampler(input=tin, output=accessor(hips_t.astype(np.float32), "VEC3")),
+           pygltflib.AnimationSampler(input=tin, output=accessor(spine_q.astype(np.float32), "VEC4"))]
+    tgt = pygltflib.AnimationChannelTarget
+    g.animations = [pygltflib.Animation(name="Take 001", samplers=smp, channels=[
+        pygltflib.AnimationChannel(sampler=0, target=tgt(node=2, path="translation")),
+        pygltflib.AnimationChannel(sampler=1, target=tgt(node=3, path="rotation"))])]
+    g.scenes = [pygltflib.Scene(nodes=[0, 6])]
+    g.scene = 0
+    g.buffers = [pygltflib.Buffer(byteLength=len(data))]
+    g.set_binary_blob(bytes(data))
+    g.save_binary(str(path))
+
+    # independent truth: world joints and skinned points per key, from the node TRS
+    worlds, skinned = [], []
+    for f in range(KEYS):
+        local = list(rest)
+        local[2] = trs_to_xform(hips_t[f].astype(np.float32).astype(np.float64), one, np.ones(3))
+        local[3] = trs_to_xform(np.array(nodes[3][1]), spine_q[f].astype(np.float32).astype(np.float64), np.ones(3))
+        w = world(local)
+        wj = np.array([w[n] for n in joints])
+        worlds.append(wj[:, :3, 3])
+        skin_m = wj @ ibm.astype(np.float32).astype(np.float64)
+        p = np.c_[pts.astype(np.float64), np.ones(len(pts))]
+        out = np.zeros((len(pts), 3))
+        for c in range(2):
+            out += jw[:, c:c + 1] * np.einsum("vij,vj->vi", skin_m[ji[:, c]], p)[:, :3]
+        skinned.append(out)
+    return np.array(worlds), np.array(skinned)
+
+
+def test_mixamo_like_gltf_converts_to_conventional_usdskel_shape(tmp_path, capsys):
+    src = tmp_path / "char.glb"
+    world_joints, skinned = _mixamo_like(src)
+    usd = tmp_path / "char.usda"
+    assert run(capsys, "convert", str(src), str(usd))[0] == 0
+    assert usd_compliance_errors(usd) == []
+
+    stage = Usd.Stage.Open(str(usd))
+    skel_prim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton))
+    skel = UsdSkel.Skeleton(skel_prim)
+    joint_leaves = [str(t).rsplit("/", 1)[-1] for t in skel.GetJointNamesAttr().Get() or skel.GetJointsAttr().Get()]
+    assert joint_leaves == SKIN                       # no Character, no Armature
+    bind = matrices_to_numpy(skel.GetBindTransformsAttr().Get())
+    assert np.allclose(np.linalg.norm(bind[:, :3, :3], axis=1), 1.0, atol=1e-6)   # unit scale
+
+    # the Xforms above the SkelRoot carry the 0.001 scale
+    root = skel_prim.GetParent()
+    assert root.IsA(UsdSkel.Root)
+    above = matrices_to_numpy([UsdGeom.Xformable(root).ComputeLocalToWorldTransform(Usd.TimeCode.Default())])[0]
+    assert np.allclose(np.linalg.norm(above[:3, :3], axis=0), 0.001, rtol=1e-6)
+    names = [p.GetName() for p in (root.GetParent(), root.GetParent().GetParent())]
+    assert names == ["Armature", "Character"]
+    assert root.GetParent().IsA(UsdGeom.Xform) and root.GetParent().GetParent().IsA(UsdGeom.Xform)
+
+    # UsdSkel's own world joints equal the glTF's
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root(root), Usd.TraverseInstanceProxies())
+    query = cache.GetSkelQuery(skel)
+    xf = UsdGeom.XformCache()
+    for f in (0, 3, 7, 10):
+        tc = Usd.TimeCode(f)
+        xf.SetTime(tc)
+        to_world = np.asarray(xf.GetLocalToWorldTransform(skel_prim), dtype=np.float64).T
+        jw = matrices_to_numpy(query.ComputeJointWorldTransforms(xf))   # the prim's transform included
+        local = matrices_to_numpy(query.ComputeJointSkelTransforms(tc))
+        assert np.allclose(jw, to_world @ local, atol=1e-9)
+        assert np.abs(jw[:, :3, 3] - world_joints[f]).max() * 100 < 1e-4   # cm (metres per unit 1)
+
+    # UsdSkel's skinning of the mesh agrees with the glTF's
+    mesh_prim = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
+    stage_bake = Usd.Stage.Open(str(usd))
+    assert UsdSkel.BakeSkinning(stage_bake.Traverse(), Gf.Interval(0, KEYS - 1))
+    baked = UsdGeom.Mesh(stage_bake.GetPrimAtPath(mesh_prim.GetPath()))
+    bcache = UsdGeom.XformCache()
+    for f in (0, 5, 10):
+        bcache.SetTime(Usd.TimeCode(f))
+        m = np.asarray(bcache.GetLocalToWorldTransform(baked.GetPrim()), dtype=np.float64).T
+        p = np.asarray(baked.GetPointsAttr().Get(Usd.TimeCode(f)), dtype=np.float64)
+        p = (np.c_[p, np.ones(len(p))] @ m.T)[:, :3]
+        lo, hi = p.min(0), p.max(0)
+        assert np.abs(lo - skinned[f].min(0)).max() * 100 < 0.1
+        assert np.abs(hi - skinned[f].max(0)).max() * 100 < 0.1
+
+    # glTF -> USD -> glTF keeps the world joints
+    back = tmp_path / "back.glb"
+    assert run(capsys, "convert", str(usd), str(back))[0] == 0
+    clip = read_asset(back).clips[0]
+    names = [n.rsplit("/", 1)[-1] for n in clip.skeleton.joint_names]
+    cols = [names.index(n) for n in SKIN]
+    got = clip.world_positions()[:, cols]
+    assert got.shape[0] == KEYS
+    assert np.abs(got - world_joints).max() * 100 < 1e-4
