@@ -6,7 +6,9 @@ Decisions (see docs/format-gltf.md):
   the same 43 joints). Its joints are the union of the skins' joints, plus the
   non-joint ancestors needed for correct world transforms: an ancestor is kept when
   it, or a node above it, has a non-identity transform or is animated. Identity
-  nodes above everything are dropped (their transform changes nothing).
+  nodes above everything are dropped (their transform changes nothing). The kept
+  ancestors are listed in ``Asset.non_skin_joints`` (the USD writer makes the static
+  ones above the skin's joints ``Xform`` prims).
 - Joints keep the skin's order (ancestors first) when parents already come before
   children there; otherwise they are in depth-first order of the node tree.
 - Joint names are node names; an empty name becomes ``"node<i>"``; repeated names

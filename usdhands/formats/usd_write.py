@@ -165,6 +165,10 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
     Layout: ``/Root`` is the default prim, a SkelRoot holding the Skeleton, its
     SkelAnimations (the first bound through ``skel:animationSource``) and its skinned
     Meshes; with several skeletons ``/Root`` is an Xform with one SkelRoot per skeleton.
+    The static root joints that no skin lists (``asset.non_skin_joints``: Mixamo's
+    ``Character`` › ``Armature``) become ``Xform`` prims between ``/Root`` and the
+    SkelRoot (see :func:`_node_chain`); bind transforms and ``geomBindTransform`` are then
+    in the space below them.
     ``timeCodesPerSecond`` is the first clip's frame rate, ``metersPerUnit`` and
     ``upAxis`` the first skeleton's (other skeletons' clips are rescaled to its units).
     Joint names that are not USD identifiers are sanitised and the originals kept in
