@@ -109,7 +109,7 @@ def test_k_above_segment_count_is_capped(sample_assets, tmp_path, capsys):
     """--k 100000 asked numpy for a (100000, 100000, 45) transition array (3.27 TiB MemoryError);
     more candidates than the database has segments give the same result as all of them."""
     from usdhands.algorithms.synthesis.database import load_database
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.inputs import bundled_database_path
 
     db = load_database(bundled_database_path())
     most = int(max((db.segment_side() == s).sum() for s in (0, 1)))

@@ -30,6 +30,7 @@ def imported_modules(path: Path) -> set[str]:
     ("algorithms", ("pxr", "pygltflib", "usdhands.formats", "usdhands.jobs", "usdhands.commands", "usdhands.cli",
                     "usdhands.pipeline")),
     ("formats", ("usdhands.commands", "usdhands.cli", "usdhands.jobs", "usdhands.algorithms")),
+    ("jobs", ("pxr", "pygltflib", "usdhands.commands", "usdhands.cli")),
 ])
 def test_layer_imports_only_layers_below(layer, forbidden):
     bad = []
@@ -38,6 +39,17 @@ def test_layer_imports_only_layers_below(layer, forbidden):
             if any(mod == f or mod.startswith(f + ".") for f in forbidden):
                 bad.append(f"{path.relative_to(PKG.parent)} imports {mod}")
     assert bad == []
+
+
+#: commands backed by a job: they parse, call the job and print
+JOB_COMMANDS = ("synthesize", "splice", "reduce", "expand", "convert")
+
+
+@pytest.mark.parametrize("command", JOB_COMMANDS)
+def test_job_commands_only_parse_call_a_job_and_print(command):
+    mods = imported_modules(PKG / "commands" / f"{command}.py")
+    assert any(m.startswith("usdhands.jobs.") for m in mods)
+    assert sorted(m for m in mods if m.startswith(("usdhands.algorithms", "usdhands.formats", "pxr"))) == []
 
 
 def test_algorithms_are_rooms_by_method():

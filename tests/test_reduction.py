@@ -475,7 +475,7 @@ def test_reduce_json_report_layout(shared_assets, capsys):
         assert set(r) >= {"dependent", "controlling", "kind", "rmsd"} and r["kind"] in ("rmsd1", "rmsd2")
     assert all(set(c) >= {"curve", "value"} for c in report["constants"])
     # the reported rmsd is the distance of the original pair, recomputed here
-    from usdhands.commands.reduce import load_finger_curves
+    from usdhands.jobs.reduction import load_finger_curves
 
     _, _, curves, _ = load_finger_curves(shared_assets.joinpath(*LEAP), None, None, None, "XYZ")
     r1, r2 = pair_rmsd(curves.values)
@@ -487,7 +487,7 @@ def test_reduce_json_report_layout(shared_assets, capsys):
 
 def test_reduce_then_expand_reproduces_the_reduced_clip(shared_assets, tmp_path, capsys):
     from usdhands.algorithms.reduction.model import ReductionModel
-    from usdhands.commands.reduce import load_finger_curves
+    from usdhands.jobs.reduction import load_finger_curves
     from usdhands.formats.io import read_clip
     from usdhands.model.rotations import quat_angle_deg
 
@@ -532,7 +532,7 @@ def test_reduce_then_expand_reproduces_the_reduced_clip(shared_assets, tmp_path,
 
 
 def test_expand_in_memory_is_exact(shared_assets):
-    from usdhands.commands.reduce import load_finger_curves
+    from usdhands.jobs.reduction import load_finger_curves
     from usdhands.model.finger_dofs import apply_finger_curves, finger_curves
     from usdhands.model.rotations import quat_angle_deg
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from usdhands.commands.convert import convert
+from usdhands.jobs.conversion import convert
 from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset
 from usdhands.formats.usd_validate import usd_compliance_errors

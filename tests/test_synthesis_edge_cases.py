@@ -48,7 +48,7 @@ def test_db_build_on_leap_bvhs_whose_wrist_sits_on_the_root(shared_assets, capsy
 def test_a_clip_shorter_than_half_of_every_database_segment_gets_the_closest_uniform_sample():
     from usdhands.algorithms.synthesis.finger_transfer import NUM_DOFS
     from usdhands.algorithms.synthesis.synthesize import db_side_segments, synthesize_hand
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.inputs import bundled_database_path
 
     db = load_database(bundled_database_path())
     right = db_side_segments(db, "right")
@@ -93,7 +93,7 @@ def _damaged_copy(tmp_path, name, change):
     """A copy of the bundled database with one array changed in place."""
     import shutil
 
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.inputs import bundled_database_path
 
     path = tmp_path / name
     shutil.copytree(bundled_database_path(), path)
@@ -348,7 +348,7 @@ def test_bundled_database_is_what_the_current_code_builds():
     # a change to features, segmentation or finger transfer must come with
     # `usdhands db build --samples -o usdhands/data/gesture_db`
     from usdhands.algorithms.synthesis.database import build_database
-    from usdhands.commands._synthesis_common import bundled_database_path, sample_database_items
+    from usdhands.jobs.inputs import bundled_database_path, sample_database_items
 
     shipped = load_database(bundled_database_path())
     fresh = build_database(sample_database_items(), fps=30.0)
@@ -424,7 +424,7 @@ def test_graph_plot_of_a_large_k_draws_at_most_eight_candidates_per_row(tmp_path
 
     import matplotlib.image
 
-    from usdhands.commands._synthesis_plots import plot_graph
+    from usdhands.jobs.plots.synthesis import plot_graph
 
     k = 400
     res = SimpleNamespace(side="right", candidates=np.arange(3 * k).reshape(3, k),
@@ -452,7 +452,7 @@ def test_db_info_of_the_bundled_database(capsys):
     import jsonschema
 
     from usdhands.algorithms.synthesis.database import database_schema
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.inputs import bundled_database_path
 
     status, out, _ = _run(capsys, "db", "info")
     assert status == 0
@@ -470,7 +470,7 @@ def test_db_info_of_the_bundled_database(capsys):
 
 def test_an_input_segment_with_no_candidate_within_the_length_factor_widens_it():
     from usdhands.algorithms.synthesis.synthesize import db_side_segments, synthesize_hand
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.inputs import bundled_database_path
 
     db = load_database(bundled_database_path())
     right = db_side_segments(db, "right")
@@ -591,7 +591,7 @@ def test_a_long_hold_is_cut_in_its_middle_whatever_its_noise():
 
 def test_the_same_motion_from_gltf_bvh_and_usd_gets_the_same_fingers(sample_assets):
     from usdhands.algorithms.synthesis.synthesize import synthesize_clip
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.inputs import bundled_database_path
     from usdhands.model.hand_detection import detect_hands
 
     db = load_database(bundled_database_path())

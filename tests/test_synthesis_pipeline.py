@@ -13,7 +13,7 @@ from usdhands.algorithms.synthesis.evaluation import (
 from usdhands.algorithms.synthesis.synthesize import synthesize_clip
 from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.cli import main
-from usdhands.commands._synthesis_common import bundled_database_path
+from usdhands.jobs.inputs import bundled_database_path
 from usdhands.model.hand_detection import detect_hands
 from usdhands.samples.gestures import body_only, conversation_clip, gesture_database, gesture_hands
 

@@ -7,6 +7,14 @@ The everyday API::
     hands = usdhands.detect_hands(clip.skeleton)    # a HandMap
     usdhands.write_clip("take.usda", clip, "take_out.usda")
 
+The jobs, one call per capability (see :mod:`usdhands.jobs`)::
+
+    result = usdhands.synthesize("take.usda", "take_fingers.usda", usdhands.SynthesizeOptions(k=8))
+    print(result.to_json())
+
+``usdhands.synthesize``, ``splice``, ``reduce``, ``expand``, ``convert`` and their
+``...Options`` / ``...Result`` classes are loaded on first use.
+
 Importing usdhands imports neither ``pxr`` nor ``pygltflib``; a format's library is
 imported when a file of that format is first read or written.
 """
@@ -20,8 +28,30 @@ from usdhands.model import (  # noqa: E402
 )
 from usdhands.model.hand_detection import detect_hands, load_handmap  # noqa: E402
 
+#: names loaded on first use (module __getattr__), so that ``import usdhands`` stays fast
+_LAZY_JOBS = (
+    "synthesize", "SynthesizeOptions", "SynthesizeResult", "splice", "SpliceOptions", "SpliceResult",
+    "reduce", "ReduceOptions", "ReduceResult", "expand", "ExpandOptions", "ExpandResult",
+    "convert", "ConvertOptions", "ConvertResult",
+)
+
+
+def __getattr__(name: str):
+    if name in _LAZY_JOBS:
+        import usdhands.jobs
+
+        value = getattr(usdhands.jobs, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'usdhands' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY_JOBS))
+
+
 __all__ = [
     "__version__", "UsdHandsError", "read_asset", "read_clip", "write_asset", "write_clip", "Clip",
     "Skeleton", "HandMap", "HandSide", "FINGERS", "SIDES", "FingerCurves", "finger_curves",
-    "apply_finger_curves", "detect_hands", "load_handmap",
+    "apply_finger_curves", "detect_hands", "load_handmap", *_LAZY_JOBS,
 ]

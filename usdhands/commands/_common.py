@@ -7,7 +7,11 @@ import json
 import logging
 import sys
 import time
-from typing import Iterable, Iterator, Sequence
+from pathlib import Path
+from typing import Iterator, Sequence
+
+# the option checks live in the jobs layer; commands import them from here too
+from usdhands.jobs.option_checks import MAX_FPS, check_fps, check_seed, parse_list  # noqa: F401
 
 
 _quiet = False
@@ -127,44 +131,26 @@ def print_json(obj, stream=None) -> None:
     stream.write("\n")
 
 
-#: Highest frame rate a --fps option takes (motion capture runs at 120-480).
-MAX_FPS = 1000.0
+def add_layer_argument(parser, what: str = "the input") -> None:
+    """Add ``--as-layer`` (alias ``--layer``) (a sparse USD override layer instead of a full copy) to a subcommand."""
+    parser.add_argument("--as-layer", "--layer", dest="layer", action="store_true",
+                        help=f"USD: write a sparse override layer over {what} instead of a full copy")
 
 
-def check_fps(value: float | None, option: str = "--fps") -> float | None:
-    """``value`` if it is a usable frame rate (or None), else a one-line UsdHandsError.
-
-    0, negative, NaN and infinite rates were silently ignored, blamed on the input file
-    ("malformed glTF"), raised tracebacks or ran out of memory (1e9).
-    """
-    if value is None:
-        return None
-    from usdhands.errors import UsdHandsError
-
-    if not (value > 0 and value <= MAX_FPS):  # also refuses NaN
-        raise UsdHandsError(f"{option} must be a frame rate above 0 and at most {MAX_FPS:g}, got {value:g}")
-    return float(value)
-
-
-def check_seed(value: int) -> int:
-    """``value`` if it is a usable random seed (numpy takes integers >= 0), else a one-line UsdHandsError."""
-    if value < 0:
-        from usdhands.errors import UsdHandsError
-
-        raise UsdHandsError(f"--seed must be 0 or more, got {value}")
-    return value
-
-
-def parse_list(text: str | None, allowed: Iterable[str] | None = None) -> list[str]:
-    """Split ``"a,b"`` into ``["a", "b"]``, checking against ``allowed``."""
-    if not text:
-        return []
-    items = [t.strip() for t in text.split(",") if t.strip()]
-    if allowed is not None:
-        allowed = list(allowed)
-        bad = [i for i in items if i not in allowed]
-        if bad:
-            from usdhands.errors import UsdHandsError
-
-            raise UsdHandsError(f"unknown value(s) {bad}; expected some of {allowed}")
-    return items
+def add_prop_arguments(p, required: bool) -> None:
+    """``--props``, ``--margin``, ``--self``, ``--attach``, ``--prop-units``, ``--prop-up``, ``--interaction-config``."""
+    p.add_argument("--props", type=Path, nargs="+", required=required, default=[], metavar="PROP",
+                   help="props the hands touch: mesh files (.obj .stl .ply .off .glb .gltf) or USD files with Mesh prims")
+    p.add_argument("--margin", type=float, default=0.0, metavar="MM",
+                   help="clearance to keep between fingers and props, millimetres (default 0: touching)")
+    p.add_argument("--self", dest="self_collision", action="store_true",
+                   help="also keep the fingers out of the character's own body (torso, head, upper arms, thighs)")
+    p.add_argument("--attach", action="append", default=[], metavar="PROP=JOINT[:FROM-TO]",
+                   help="the prop moves with JOINT (a hand), from frame FROM to TO inclusive (default all frames); "
+                        "PROP is the prop file's name or stem")
+    p.add_argument("--prop-units", type=float, default=None, metavar="M",
+                   help="metres per unit of the prop files (default: what the file says; OBJ, STL, PLY, OFF: the clip's)")
+    p.add_argument("--prop-up", choices=("Y", "Z"), default=None,
+                   help="up axis of the prop files (default: what the file says; OBJ, STL, PLY, OFF: Y)")
+    p.add_argument("--interaction-config", type=Path, default=None, metavar="JSON",
+                   help="finger radii, joint limits and smoothing (schemas/interaction_config.schema.json)")

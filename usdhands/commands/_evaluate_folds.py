@@ -16,7 +16,7 @@ def run_folds(args, items, cfg, feature_sets) -> int:
         raise UsdHandsError(str(e)) from None
     written = []
     if args.plot is not None:
-        from usdhands.commands._synthesis_plots import plot_kfold_errors, plot_worst_window
+        from usdhands.jobs.plots.synthesis import plot_kfold_errors, plot_worst_window
 
         args.plot.mkdir(parents=True, exist_ok=True)
         written = [plot_kfold_errors(result, args.plot / "kfold_errors.png"),

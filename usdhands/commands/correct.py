@@ -14,11 +14,9 @@ import sys
 import time
 from pathlib import Path
 
-from usdhands.commands._common import print_json, print_table
-from usdhands.commands._interaction_common import (
-    add_prop_arguments, build_colliders, check_prop_options, read_scene_props,
-)
-from usdhands.commands._output import MAIN_INPUT, add_layer_argument, check_paths, layer_options
+from usdhands.commands._common import add_layer_argument, add_prop_arguments, print_json, print_table
+from usdhands.jobs.outputs import MAIN_INPUT, check_paths, layer_options
+from usdhands.jobs.props import build_colliders, check_prop_options, read_scene_props
 
 
 def register(sub) -> None:
@@ -41,7 +39,7 @@ def register(sub) -> None:
 def run(args) -> int:
     from usdhands.algorithms.interaction.correction import correct_clip
     from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
-    from usdhands.commands._synthesis_common import check_plot_folder, handmap_for
+    from usdhands.jobs.inputs import check_plot_folder, handmap_for
     from usdhands.formats.io import read_clip, write_clip
 
     check_paths({MAIN_INPUT: args.file, "--props": args.props, "--handmap": args.handmap,
@@ -53,7 +51,7 @@ def run(args) -> int:
     clip = read_clip(args.file, animation=args.animation)
     handmap = handmap_for(clip, args.file, args.handmap)
     props = read_scene_props(args, clip)
-    colliders, _ = build_colliders(args, clip, handmap, props)
+    colliders, _ = build_colliders(args, clip, handmap, props, path=args.file)
     start = time.perf_counter()
     out, report = correct_clip(clip, handmap, colliders, margin_mm=args.margin, config=config)
     seconds = time.perf_counter() - start

@@ -13,9 +13,10 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from usdhands.commands._common import Progress, check_fps, print_json, print_table
-from usdhands.commands._interaction_common import add_prop_arguments, check_prop_options
-from usdhands.commands._output import MAIN_INPUT, check_paths
+from usdhands.commands._common import Progress, add_prop_arguments, print_json, print_table
+from usdhands.jobs.option_checks import check_fps
+from usdhands.jobs.props import check_prop_options
+from usdhands.jobs.outputs import MAIN_INPUT, check_paths
 from usdhands.errors import UsdHandsError
 
 
@@ -57,7 +58,7 @@ def register(sub) -> None:
 def run_build(args) -> int:
     check_fps(args.fps)
     from usdhands.algorithms.synthesis.database import DatabaseClip, build_database, save_database
-    from usdhands.commands._synthesis_common import (
+    from usdhands.jobs.inputs import (
         expand_inputs, labeller, load_config, read_labelled, sample_database_items,
     )
 
@@ -87,7 +88,7 @@ def run_build(args) -> int:
             if not any(h.finger_joints for h in handmap.sides):
                 raise UsdHandsError("no finger joints found: a database needs clips with finger animation", path=p)
             if args.props:  # interaction clips: the database holds their corrected fingers
-                from usdhands.commands._interaction_common import corrected_for_props
+                from usdhands.jobs.props import corrected_for_props
 
                 clip, summary = corrected_for_props(args, p, clip, handmap)
                 after = summary["penetration_after_mm"]
@@ -113,7 +114,7 @@ def run_build(args) -> int:
 
 def _read_all_animations(paths, label_of, handmap_path, progress):
     """``(path, label, clip, handmap)`` for every animation of every file."""
-    from usdhands.commands._synthesis_common import handmap_for
+    from usdhands.jobs.inputs import handmap_for
     from usdhands.formats.io import read_asset
 
     out = []
@@ -163,7 +164,7 @@ def _print_summary(db, path) -> None:
 
 def run_info(args) -> int:
     from usdhands.algorithms.synthesis.database import load_database
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.inputs import bundled_database_path
 
     path = args.database or bundled_database_path()
     db = load_database(path)

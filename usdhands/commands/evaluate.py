@@ -14,8 +14,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from usdhands.commands._common import Progress, check_fps, check_seed, print_json, print_table
-from usdhands.commands._output import MAIN_INPUT, check_paths
+from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.jobs.option_checks import check_fps, check_seed
+from usdhands.jobs.outputs import MAIN_INPUT, check_paths
 from usdhands.errors import UsdHandsError
 
 
@@ -61,7 +62,7 @@ def register(sub) -> None:
 
 
 def _items(args):
-    from usdhands.commands._synthesis_common import expand_inputs, labeller, read_labelled, sample_database_items
+    from usdhands.jobs.inputs import expand_inputs, labeller, read_labelled, sample_database_items
 
     if args.samples:
         if args.inputs:
@@ -78,7 +79,7 @@ def _items(args):
 
 
 def run(args) -> int:
-    from usdhands.commands._synthesis_common import load_config
+    from usdhands.jobs.inputs import load_config
 
     check_fps(args.fps)
     check_seed(args.seed)
@@ -91,9 +92,9 @@ def run(args) -> int:
         DEFAULT_PREDICTORS, evaluate_predictors, parse_predictor, prepare_eval_set,
     )
     from usdhands.algorithms.synthesis.kfold import parse_feature_set
-    from usdhands.commands._common import parse_list
+    from usdhands.jobs.option_checks import parse_list
 
-    from usdhands.commands._synthesis_common import check_plot_folder
+    from usdhands.jobs.inputs import check_plot_folder
 
     check_plot_folder(args.plot)
     cfg = load_config(args.config)
@@ -149,7 +150,7 @@ def run(args) -> int:
         result["left_out_predictors"] = left_out
     written = []
     if args.plot is not None:
-        from usdhands.commands._synthesis_plots import plot_confusion, plot_predictors
+        from usdhands.jobs.plots.synthesis import plot_confusion, plot_predictors
 
         args.plot.mkdir(parents=True, exist_ok=True)
         written = [plot_predictors(result, args.plot / "predictors.png"),

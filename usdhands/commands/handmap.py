@@ -8,7 +8,8 @@ import sys
 from pathlib import Path
 
 from usdhands.commands._common import print_json, print_table
-from usdhands.commands._output import MAIN_INPUT, USD_LAYER_SUFFIXES, add_layer_argument, check_paths, layer_options
+from usdhands.commands._common import add_layer_argument
+from usdhands.jobs.outputs import MAIN_INPUT, USD_LAYER_SUFFIXES, check_paths, layer_options
 from usdhands.errors import AssetReadError, NoSkeletonError, UsdHandsError
 from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from usdhands.commands._common import print_json, print_table
-from usdhands.commands._output import MAIN_INPUT, check_paths
+from usdhands.jobs.outputs import MAIN_INPUT, check_paths
 from usdhands.errors import NoHandsError
 from usdhands.formats.hands import hands_for
 from usdhands.formats.io import read_asset

@@ -9,16 +9,13 @@ input, ``--model`` saves the model that ``usdhands expand`` rebuilds a hand from
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
-from usdhands.commands._common import parse_list, print_json, print_table
-from usdhands.commands._output import MAIN_INPUT, add_layer_argument, check_paths, layer_options
-from usdhands.errors import UsdHandsError
+from usdhands.commands._common import Progress, add_layer_argument, print_json, print_table
 
 
 def register(sub) -> None:
-    from usdhands.algorithms.reduction.reduce import DEFAULT_STEPS
+    from usdhands.jobs.reduction import DEFAULT_STEPS
 
     p = sub.add_parser(
         "reduce", help="find irrelevant and redundant finger DOFs; rebuild a hand from a few curves",
@@ -46,124 +43,28 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def load_finger_curves(path: Path, animation, handmap_path, hands_arg: str | None, order: str):
-    """Read a clip and the finger curves of the chosen hands.
-
-    Returns ``(clip, handmap, curves, sides)``: ``curves`` a FingerCurves over the chosen
-    hands' finger joints (left first), kept continuous through gimbal regions
-    (:func:`~usdhands.algorithms.reduction.reduce.continuous_euler_curves`); ``sides`` the side
-    of each curve. Curve names: :func:`~usdhands.algorithms.reduction.reduce.curve_names` (not
-    ``curves.names``, which repeat when two joints share a short name).
-    """
-    from usdhands.algorithms.reduction.reduce import continuous_euler_curves
-    from usdhands.formats.io import read_clip
-    from usdhands.model.finger_dofs import finger_curves
-    from usdhands.formats.hands import hands_for
+def run(args) -> int:
+    from usdhands.jobs.option_checks import parse_list
+    from usdhands.jobs.reduction import RangeRule, ReduceOptions, reduce
     from usdhands.model.handmap import SIDES
+    from usdhands.errors import UsdHandsError
 
-    _check_order(order)
     try:
-        chosen = parse_list(hands_arg, SIDES)
+        hands = tuple(parse_list(args.hands, SIDES))
     except UsdHandsError as e:
         raise UsdHandsError(f"--hands: {e.message}") from None
-    clip = read_clip(path, animation=animation)
-    if clip.num_frames < 2:
-        raise UsdHandsError(f"the animation has {clip.num_frames} frame(s); finger curves need at least 2",
-                            path=path)
-    handmap = hands_for(path, clip.skeleton, handmap_path)[0]
-    wanted = chosen or [h.side for h in handmap.sides if h.finger_joints]
-    if not wanted:
-        raise UsdHandsError("no hand with finger joints", path=path)
-    joints, sides = [], []
-    for side in SIDES:
-        if side not in wanted:
-            continue
-        hand = handmap[side]
-        if hand is None or not hand.finger_joints:
-            found = ", ".join(h.side for h in handmap.sides if h.finger_joints) or "none"
-            raise UsdHandsError(f"no {side} hand with fingers (hands found: {found})", path=path)
-        for name in hand.finger_joints:
-            joints.append(clip.skeleton.index(name))
-            sides += [side] * 3
-    curves = finger_curves(clip, joints, order.upper())
-    curves = curves.with_values(continuous_euler_curves(curves.values))
-    return clip, handmap, curves, sides
-
-
-def _check_order(order: str) -> None:
-    o = order.upper()
-    if len(o) != 3 or set(o) != set("XYZ"):
-        raise UsdHandsError(f"bad --order {order!r}: expected a permutation of XYZ such as XYZ or ZYX")
-
-
-def run(args) -> int:
-    from usdhands.algorithms.reduction.reduce import RangeRule, curve_names, paper_style_names, parse_steps, reduce_curves
-    from usdhands.commands._common import Progress
-    from usdhands.commands._synthesis_common import check_plot_folder
-
-    steps = parse_steps(args.steps)
-    write_opts = layer_options(args.layer, args.file, args.output) if args.output is not None else {}
-    if args.layer and args.output is None:
-        raise UsdHandsError("--as-layer needs -o OUT")
-    check_paths({MAIN_INPUT: args.file, "--handmap": args.handmap}, {"-o": args.output, "--model": args.model})
-    check_plot_folder(args.plot)
-    progress = Progress("reduce")
-    progress(0, 3, "reading")
-    clip, handmap, curves, sides = load_finger_curves(args.file, args.animation, args.handmap, args.hands, args.order)
-    progress(1, 3, "reducing")
-    names = curve_names(clip.skeleton, curves.joints, curves.order)
-    result = reduce_curves(curves.values, names, steps,
-                           groups=sides, across_groups=args.across_hands, order=curves.order,
-                           source=args.file.name)
-    k = len(result.steps) if args.step is None else args.step
-    if not 1 <= k <= len(result.steps):
-        raise UsdHandsError(f"--step {args.step} is out of range: {len(result.steps)} step(s) given")
-    chosen = result.steps[k - 1]
-    paper = paper_style_names(handmap, curves.order, clip.skeleton)
-
-    if args.output is not None or args.model is not None or args.plot is not None:
-        progress(2, 3, "writing")
-    written = []
-    if args.output is not None:
-        from usdhands.algorithms.reduction.reduce import expand_clip
-        from usdhands.formats.io import write_clip
-
-        # what 'usdhands expand' gives for this clip and model (the curves read for the model: the
-        # same as these unless rotations jump between frames)
-        from usdhands.model.provenance import provenance_record
-
-        out_clip = expand_clip(clip, curves.joints, chosen.model)
-        record = provenance_record("reduction", database=args.model, parameters={
-            "step": k, "controlling": list(chosen.model.controlling_curves), "curves": len(chosen.model.curves)})
-        written.append(write_clip(args.file, out_clip, args.output, provenance=record, **write_opts))
-    if args.model is not None:
-        model = chosen.model
-        model = dataclasses.replace(model, metadata={
-            **model.metadata, "paper_names": {c: paper[c] for c in model.curves if c in paper},
-            "frames": int(clip.num_frames), "fps": float(clip.fps)})
-        written.append(model.save(args.model))
-    if args.plot is not None:
-        from usdhands.commands._reduction_plots import plot_reduction
-
-        written += plot_reduction(result, curves.values, args.plot, step=k - 1, paper_names=paper,
-                                  fps=clip.fps)
-    progress(3, 3, "done")
+    options = ReduceOptions(steps=args.steps, step=args.step, hands=hands, animation=args.animation,
+                            handmap=args.handmap, order=args.order, across_hands=args.across_hands,
+                            as_layer=args.layer, plot=args.plot)
+    job = reduce(args.file, args.output, options, model_output=args.model, progress=Progress("reduce"))
 
     if args.json:
-        report = result.to_dict(step=k - 1)
-        report = {"file": str(args.file), "frames": int(clip.num_frames), "fps": float(clip.fps), **report}
-        for r in report["relations"]:
-            r["dependent_paper"] = paper.get(r["dependent"])
-            r["controlling_paper"] = paper.get(r["controlling"])
-        for c in report["constants"]:
-            c["curve_paper"] = paper.get(c["curve"])
-        if written:
-            report["written"] = [str(w) for w in written]
-        print_json(report)
+        print_json(job.to_json())
         return 0
+    result, paper, names, sides, k, chosen = job.reduction, job.paper_names, job.curve_names, job.sides, job.step, job.chosen
 
     by_hand = ", ".join(f"{s} {sides.count(s)}" for s in ("left", "right") if s in sides)
-    print(f"{args.file}: {len(names)} finger curves ({by_hand}), {clip.num_frames} frames at {clip.fps:g} fps")
+    print(f"{args.file}: {len(names)} finger curves ({by_hand}), {job.frames} frames at {job.fps:g} fps")
     print()
     def pname(c: str) -> str:
         return paper.get(c, "-")
@@ -207,6 +108,6 @@ def run(args) -> int:
             prev_relations = (i, {r.dependent: (r.controlling, r.kind) for r in model.relations})
     print(f"\nstep {k} ({chosen.condition}) keeps {chosen.dofs_left} of {len(names)} curves: "
           + (", ".join(f"{c} ({pname(c)})" if c in paper else c for c in chosen.model.free_curves) or "none"))
-    for w in written:
+    for w in job.written:
         print(f"wrote {w}")
     return 0

@@ -181,3 +181,30 @@ def sample_database_items(seed: int = 0):
         handmap = handmap or detect_hands(clip.skeleton)
         items.append(DatabaseClip(clip, handmap, label, f"samples:gestures/{clip.name}"))
     return items
+
+
+_DATABASES: dict = {}
+
+
+def cached_database(path: Path | None = None):
+    """The finger database at ``path`` (default: the bundled one), loaded once per process.
+
+    Kept while the folder's index file is unchanged (same modification time and size), so
+    a batch worker or a pipeline that runs many jobs pays the load once.
+    """
+    from usdhands.algorithms.synthesis.database import load_database
+
+    bundled = path is None
+    folder = Path(path) if path is not None else bundled_database_path()
+    try:
+        stamp = tuple((f.name, f.stat().st_mtime_ns, f.stat().st_size) for f in sorted(folder.iterdir()))
+    except OSError:
+        return load_database(folder)  # missing or unreadable: load_database says what is wrong
+    key = str(folder.resolve())
+    hit = _DATABASES.get(key)
+    if hit is not None and hit[0] == stamp:
+        return hit[1]
+    # the bundled database's manifest is validated by the tests, not on every run
+    db = load_database(folder, check_schema=False) if bundled else load_database(folder)
+    _DATABASES[key] = (stamp, db)
+    return db

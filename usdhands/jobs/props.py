@@ -1,4 +1,10 @@
-"""Shared by ``correct`` and ``synthesize --props``: the prop options, reading props, the colliders."""
+"""Shared by ``correct`` and the synthesize job's ``props``: checking the prop options, reading props, the colliders.
+
+The functions take ``options``: any object with the prop options as attributes (``props``,
+``margin``, ``self_collision``, ``attach``, ``prop_units``, ``prop_up``,
+``interaction_config``, and ``collision_weight`` for synthesis), such as
+:class:`usdhands.jobs.synthesis.SynthesizeOptions` or the ``correct`` command's arguments.
+"""
 
 from __future__ import annotations
 
@@ -9,25 +15,6 @@ from pathlib import Path
 import numpy as np
 
 from usdhands.errors import UsdHandsError
-
-
-def add_prop_arguments(p, required: bool) -> None:
-    """``--props``, ``--margin``, ``--self``, ``--attach``, ``--prop-units``, ``--prop-up``, ``--interaction-config``."""
-    p.add_argument("--props", type=Path, nargs="+", required=required, default=[], metavar="PROP",
-                   help="props the hands touch: mesh files (.obj .stl .ply .off .glb .gltf) or USD files with Mesh prims")
-    p.add_argument("--margin", type=float, default=0.0, metavar="MM",
-                   help="clearance to keep between fingers and props, millimetres (default 0: touching)")
-    p.add_argument("--self", dest="self_collision", action="store_true",
-                   help="also keep the fingers out of the character's own body (torso, head, upper arms, thighs)")
-    p.add_argument("--attach", action="append", default=[], metavar="PROP=JOINT[:FROM-TO]",
-                   help="the prop moves with JOINT (a hand), from frame FROM to TO inclusive (default all frames); "
-                        "PROP is the prop file's name or stem")
-    p.add_argument("--prop-units", type=float, default=None, metavar="M",
-                   help="metres per unit of the prop files (default: what the file says; OBJ, STL, PLY, OFF: the clip's)")
-    p.add_argument("--prop-up", choices=("Y", "Z"), default=None,
-                   help="up axis of the prop files (default: what the file says; OBJ, STL, PLY, OFF: Y)")
-    p.add_argument("--interaction-config", type=Path, default=None, metavar="JSON",
-                   help="finger radii, joint limits and smoothing (schemas/interaction_config.schema.json)")
 
 
 @dataclass(frozen=True)
@@ -65,18 +52,18 @@ def check_margin(margin: float) -> float:
     return float(margin)
 
 
-def check_prop_options(args) -> None:
+def check_prop_options(options) -> None:
     """Refuse bad prop options before any work."""
-    check_margin(args.margin)
-    if args.prop_units is not None and not (1e-6 <= args.prop_units <= 1e6):
-        raise UsdHandsError(f"--prop-units must be metres per unit between 1e-6 and 1e6, got {args.prop_units:g}")
-    for p in args.props:
+    check_margin(options.margin)
+    if options.prop_units is not None and not (1e-6 <= options.prop_units <= 1e6):
+        raise UsdHandsError(f"--prop-units must be metres per unit between 1e-6 and 1e6, got {options.prop_units:g}")
+    for p in options.props:
         if not Path(p).exists():
             raise UsdHandsError("no such prop file", path=p)
-    parse_attachments(args.attach)
+    parse_attachments(options.attach)
 
 
-def read_scene_props(args, clip):
+def read_scene_props(options, clip):
     """Every prop of ``--props`` in the clip's units, checked for unit slips: list of (path, PropMesh)."""
     from usdhands.formats.props import USD_SUFFIXES, check_prop_units, read_props
 
@@ -84,11 +71,11 @@ def read_scene_props(args, clip):
     positions = clip.world_positions()
     bounds = np.array([positions.reshape(-1, 3).min(axis=0), positions.reshape(-1, 3).max(axis=0)])
     out = []
-    for path in args.props:
+    for path in options.props:
         props = read_props(path, meters_per_unit=sk.meters_per_unit, up_axis=sk.up_axis,
-                           prop_meters_per_unit=args.prop_units, prop_up_axis=args.prop_up)
+                           prop_meters_per_unit=options.prop_units, prop_up_axis=options.prop_up)
         suffix = Path(path).suffix.lower()
-        claimed = args.prop_units
+        claimed = options.prop_units
         if claimed is None and suffix in USD_SUFFIXES:
             from usdhands.formats.usd_props import stage_meters_per_unit
 
@@ -101,7 +88,7 @@ def read_scene_props(args, clip):
     return out
 
 
-def build_colliders(args, clip, handmap, props, path=None):
+def build_colliders(options, clip, handmap, props, path=None):
     """The colliders of the scene: the props (static, animated or attached) and, with ``--self``, the body.
 
     Returns ``(Colliders, attachments)``.
@@ -110,8 +97,8 @@ def build_colliders(args, clip, handmap, props, path=None):
     from usdhands.algorithms.interaction.colliders import Colliders, attached_xforms, mesh_collider
 
     T = clip.num_frames
-    path = path if path is not None else args.file
-    attachments = parse_attachments(args.attach)
+    path = path if path is not None else getattr(options, "file", None)
+    attachments = parse_attachments(options.attach)
     by_prop: dict[int, Attachment] = {}
     for att in attachments:
         hits = [i for i, (path, prop) in enumerate(props)
@@ -137,35 +124,35 @@ def build_colliders(args, clip, handmap, props, path=None):
         start, stop = (0, T - 1) if att.start is None else (att.start, att.stop)
         xf = attached_xforms(prop.xforms_at(clip.times), world[:, clip.skeleton.index(att.joint)], start, stop)
         items.append(mesh_collider(prop, clip.times, world=xf))
-    if args.self_collision:
+    if options.self_collision:
         body = body_collider(clip, handmap)
         if body is not None:
             items.append(body)
     return Colliders(items), attachments
 
 
-def corrected_for_props(args, path, clip, handmap):
+def corrected_for_props(options, path, clip, handmap):
     """``clip`` corrected against ``--props`` (``db build --props``): the report's dict and the clip."""
     from usdhands.algorithms.interaction.correction import correct_clip
     from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
 
-    config = load_interaction_config(args.interaction_config) if args.interaction_config else InteractionConfig()
-    props = read_scene_props(args, clip)
-    colliders, _ = build_colliders(args, clip, handmap, props, path=path)
-    fixed, report = correct_clip(clip, handmap, colliders, margin_mm=args.margin, config=config)
+    config = load_interaction_config(options.interaction_config) if options.interaction_config else InteractionConfig()
+    props = read_scene_props(options, clip)
+    colliders, _ = build_colliders(options, clip, handmap, props, path=path)
+    fixed, report = correct_clip(clip, handmap, colliders, margin_mm=options.margin, config=config)
     return fixed, report.to_dict()
 
 
-def synthesis_interaction(args, clip, handmap, db, cfg, props, config):
+def synthesis_interaction(options, clip, handmap, db, cfg, props, config, path=None):
     """The ``interaction`` factory for ``synthesize_clip`` (proximity cuts, collision term) and the
     colliders at the clip's own rate for the correction run on the result."""
     from usdhands.algorithms.interaction.synthesis_terms import InteractionTerms
     from usdhands.algorithms.synthesis.database import same_rate
     from usdhands.algorithms.synthesis.finger_transfer import apply_canonical_curves, canonical_curves
 
-    colliders, _ = build_colliders(args, clip, handmap, props)
+    colliders, _ = build_colliders(options, clip, handmap, props, path=path)
     at_db = clip if same_rate(clip.fps, db.fps) else clip.resample(db.fps)
-    db_colliders = colliders if at_db is clip else build_colliders(args, at_db, handmap, props)[0]
+    db_colliders = colliders if at_db is clip else build_colliders(options, at_db, handmap, props, path=path)[0]
     rest = clip.skeleton.rest_world_positions()
 
     def fingers(segment: int):
@@ -177,8 +164,8 @@ def synthesis_interaction(args, clip, handmap, db, cfg, props, config):
         tips = rest[[clip.skeleton.index(j) for j in hand.finger_joints]]
         reach = 1.5 * float(np.linalg.norm(tips - wrist, axis=1).max(initial=0.0)) + 0.05 / clip.skeleton.meters_per_unit
         return InteractionTerms(at_db, hand, rig, apply_canonical_curves, canonical_curves, fingers, db_colliders,
-                                weight=args.collision_weight, reach=reach,
+                                weight=options.collision_weight, reach=reach,
                                 min_frames=max(int(round(cfg.segmentation.min_segment_s * db.fps)), 1),
-                                margin_mm=args.margin, config=config)
+                                margin_mm=options.margin, config=config)
 
     return factory, colliders

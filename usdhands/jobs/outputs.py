@@ -1,5 +1,5 @@
-"""Output options and checks shared by the commands: ``--as-layer`` (splice, reduce, expand, synthesize)
-and :func:`check_paths`, which keeps every output off every input (all commands)."""
+"""Output options and checks shared by the jobs and commands: ``as_layer`` (splice, reduce, expand, synthesize)
+and :func:`check_paths`, which keeps every output off every input (every job and command)."""
 
 from __future__ import annotations
 
@@ -95,12 +95,6 @@ def check_paths(inputs: Mapping[str, PathArg], outputs: Mapping[str, PathArg] | 
                                           f"{str(p)!r}, and is replaced whole; choose another folder", path=folder)
 
 USD_LAYER_SUFFIXES = (".usd", ".usda", ".usdc")
-
-
-def add_layer_argument(parser, what: str = "the input") -> None:
-    """Add ``--as-layer`` (alias ``--as-layer``) (a sparse USD override layer instead of a full copy) to a subcommand."""
-    parser.add_argument("--as-layer", "--layer", dest="layer", action="store_true",
-                        help=f"USD: write a sparse override layer over {what} instead of a full copy")
 
 
 def layer_options(layer: bool, source: Path, output: Path) -> dict:
