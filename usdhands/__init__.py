@@ -12,8 +12,9 @@ The jobs, one call per capability (see :mod:`usdhands.jobs`)::
     result = usdhands.synthesize("take.usda", "take_fingers.usda", usdhands.SynthesizeOptions(k=8))
     print(result.to_json())
 
-``usdhands.synthesize``, ``splice``, ``reduce``, ``expand``, ``convert`` and their
-``...Options`` / ``...Result`` classes are loaded on first use.
+``usdhands.synthesize``, ``splice``, ``reduce``, ``expand``, ``convert``, ``check`` and
+their ``...Options`` / ``...Result`` classes are loaded on first use; so is
+:mod:`usdhands.usd`, the same jobs on an open ``Usd.Stage``.
 
 Importing usdhands imports neither ``pxr`` nor ``pygltflib``; a format's library is
 imported when a file of that format is first read or written.
@@ -32,11 +33,15 @@ from usdhands.model.hand_detection import detect_hands, load_handmap  # noqa: E4
 _LAZY_JOBS = (
     "synthesize", "SynthesizeOptions", "SynthesizeResult", "splice", "SpliceOptions", "SpliceResult",
     "reduce", "ReduceOptions", "ReduceResult", "expand", "ExpandOptions", "ExpandResult",
-    "convert", "ConvertOptions", "ConvertResult",
+    "convert", "ConvertOptions", "ConvertResult", "check", "CheckOptions", "CheckResult",
 )
 
 
 def __getattr__(name: str):
+    if name == "usd":  # the USD stage hooks (imports pxr)
+        import usdhands.usd
+
+        return usdhands.usd
     if name in _LAZY_JOBS:
         import usdhands.jobs
 

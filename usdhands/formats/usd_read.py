@@ -35,7 +35,7 @@ from usdhands.model.clip import Clip
 from usdhands.model.rotations import xform_to_trs
 from usdhands.model.skeleton import Skeleton
 
-__all__ = ["read_usd", "read_skeleton", "frame_times"]
+__all__ = ["read_usd", "read_stage", "read_skeleton", "frame_times"]
 
 _PREDICATE = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
 _log = logging.getLogger(__name__)
@@ -72,6 +72,18 @@ def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
         raise ValueError(f"Expected fps > 0, got {fps}")
     path = Path(path)
     stage = open_stage(path)
+    with quiet_diagnostics():
+        return _read_stage(stage, path, fps)
+
+
+def read_stage(stage: Usd.Stage, *, fps: float | None = None, path: str | os.PathLike | None = None) -> Asset:
+    """Read an open stage as it composes now (every layer, the session layer, unsaved edits).
+
+    As :func:`read_usd`; ``path`` names the stage in errors (default: the root layer's identifier).
+    """
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"Expected fps > 0, got {fps}")
+    path = Path(path if path is not None else stage.GetRootLayer().identifier)
     with quiet_diagnostics():
         return _read_stage(stage, path, fps)
 

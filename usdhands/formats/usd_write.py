@@ -40,7 +40,7 @@ from usdhands.model.provenance import provenance_record
 from usdhands.model.rotations import quat_angle_deg
 from usdhands.model.skeleton import Skeleton
 
-__all__ = ["write_usd", "write_usd_clip", "write_usd_hand_map", "author_animation", "frame_time_codes"]
+__all__ = ["write_usd", "write_usd_clip", "write_usd_hand_map", "author_clip", "author_animation", "frame_time_codes"]
 
 # a joint absent from an animation's `joints` is added when the clip moves it this much
 _ROT_TOL_DEG = 1e-3
@@ -523,6 +523,29 @@ def _export_output(layer: Sdf.Layer, source: Path, path: Path, final_path: Path,
         layer.subLayerPaths.clear()
         layer.subLayerPaths.append(rel)
     layer.Export(str(path))
+
+
+def author_clip(stage: Usd.Stage, clip: Clip, *, animation: str | None = None, hand_map: HandMap | None = None,
+                finger_motion: dict | None = None) -> tuple[Usd.Prim, Usd.Prim]:
+    """Author ``clip``'s animation into an open stage's current edit target, sparsely.
+
+    Only the attributes whose values change are authored (as ``over``s when the edit
+    target is not where the prims are defined); joints the clip moves away from rest that
+    the animation lacks are appended to its ``joints``. Nothing is saved. Which
+    SkelAnimation, ``hand_map`` and ``finger_motion``: as :func:`write_usd_clip`.
+
+    Returns
+    -------
+    (skeleton prim, SkelAnimation prim)
+    """
+    source = Path(stage.GetRootLayer().identifier)
+    with quiet_diagnostics():
+        _, skel_prim, anim_prim = _put_clip(stage, clip, animation, source, only_changed=True)
+        if hand_map is not None:
+            write_hand_map(skel_prim, hand_map)
+        if finger_motion is not None:
+            write_finger_motion(anim_prim, **provenance_record(finger_motion))
+    return skel_prim, anim_prim
 
 
 def _copy_self_contained_root(stage: Usd.Stage, source: Path, out_folder: Path) -> Sdf.Layer | None:

@@ -13,6 +13,7 @@ splice             ``splice(body, hands, output, options)``              SpliceO
 reduce             ``reduce(source, output=None, options, model_output)``  ReduceOptions/Result
 expand             ``expand(source, model, output, options)``            ExpandOptions/Result
 convert            ``convert(source, output, options)``                  ConvertOptions/Result
+check              ``check(paths, options)`` (writes nothing)            CheckOptions/Result
 =================  ====================================================  =====================
 
 Adding a job (the pattern): a module named for what it does (``usdhands/jobs/correction.py``: a
@@ -39,6 +40,7 @@ JOBS = {
     "reduce": "reduction", "ReduceOptions": "reduction", "ReduceResult": "reduction",
     "expand": "expansion", "ExpandOptions": "expansion", "ExpandResult": "expansion",
     "convert": "conversion", "ConvertOptions": "conversion", "ConvertResult": "conversion",
+    "check": "validation", "CheckOptions": "validation", "CheckResult": "validation",
 }
 
 __all__ = sorted(JOBS)
