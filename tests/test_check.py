@@ -11,6 +11,7 @@ import pytest
 from pxr import Gf, Sdf, Usd, UsdSkel, Vt
 
 import usdhands
+import usdhands.cli
 from tests.cli_helpers import run
 
 

@@ -1,0 +1,134 @@
+"""``usdhands batch INPUTS... --job JOB --out DIR [job options] [--workers N] [--scheduler ADDRESS]``.
+
+Runs one job over many clips on a local process pool, or on a Dask cluster with
+``--scheduler tcp://HOST:8786`` (an existing scheduler) or ``--scheduler local`` (a
+``LocalCluster``). Resumable; a failing clip is recorded in ``DIR/report.json`` and the
+others go on. See :mod:`usdhands.jobs.batch`.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+from usdhands.commands._common import print_json, print_table
+
+BATCH_JOBS = ("synthesize", "reduce", "expand", "convert", "check")
+
+
+def register(sub) -> None:
+    p = sub.add_parser("batch", help="run a job over many clips (local process pool or a Dask cluster)",
+                       description="Run synthesize, reduce, expand, convert or check over files, folders "
+                                   "(recursive) or text files listing paths; outputs under --out at the same "
+                                   "relative paths. Outputs newer than their input and the options are skipped; "
+                                   "failures are recorded in OUT/report.json and do not stop the others.")
+    p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT", help="files, folders or lists of paths")
+    p.add_argument("--job", required=True, choices=BATCH_JOBS, help="the job to run on every clip")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: the CPU count)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="send the clips to Dask: a scheduler address (tcp://host:8786) or 'local' for a "
+                        "LocalCluster (pip install 'usdhands[dask]')")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    g = p.add_argument_group("job options")
+    g.add_argument("--animation", default=None, help="animation name or index (default the first)")
+    g.add_argument("--handmap", type=Path, default=None, help="synthesize, reduce: hand map JSON")
+    g.add_argument("--hands", default=None, help="synthesize, reduce: left, right or left,right")
+    g.add_argument("--db", type=Path, default=None, help="synthesize: database folder (default: bundled)")
+    g.add_argument("--k", type=int, default=None, help="synthesize: candidates per segment")
+    g.add_argument("--config", type=Path, default=None, help="synthesize: configuration JSON")
+    g.add_argument("--finger-reference", choices=("rest", "input"), default="rest", help="synthesize")
+    g.add_argument("--steps", default=None, help="reduce: the reduction steps (default as 'usdhands reduce')")
+    g.add_argument("--model", type=Path, default=None, help="expand: reduction model JSON")
+    g.add_argument("--to", default=None, metavar="EXT", help="convert: output extension (usda, glb, bvh, ...)")
+    g.add_argument("--fps", type=float, default=None, help="convert: resample to this rate")
+    g.add_argument("--bvh-units", default="cm", help="convert: unit of BVH numbers (default cm)")
+    g.add_argument("--require-provenance", action="store_true", help="check: finger motion must record provenance")
+    p.set_defaults(func=run)
+
+
+def job_options(args):
+    """The job's options dataclass from the parsed arguments."""
+    from usdhands.jobs.option_checks import parse_list
+    from usdhands.model.handmap import SIDES
+
+    hands = tuple(parse_list(args.hands, SIDES))
+    if args.job == "synthesize":
+        from usdhands.jobs.synthesis import SynthesizeOptions
+
+        return SynthesizeOptions(db=args.db, k=args.k, hands=hands, config=args.config, handmap=args.handmap,
+                                 animation=args.animation, finger_reference=args.finger_reference)
+    if args.job == "reduce":
+        from usdhands.jobs.reduction import ReduceOptions
+
+        extra = {"steps": args.steps} if args.steps else {}
+        return ReduceOptions(hands=hands, animation=args.animation, handmap=args.handmap, **extra)
+    if args.job == "expand":
+        from usdhands.jobs.expansion import ExpandOptions
+
+        return ExpandOptions(animation=args.animation)
+    if args.job == "convert":
+        from usdhands.jobs.conversion import ConvertOptions
+
+        return ConvertOptions(animation=args.animation, fps=args.fps, bvh_units=args.bvh_units)
+    from usdhands.jobs.validation import CheckOptions
+
+    return CheckOptions(require_provenance=args.require_provenance)
+
+
+def run(args) -> int:
+    from usdhands.jobs.batch import BatchOptions, run_batch
+
+    options = BatchOptions(job=args.job, out=args.out, job_options=job_options(args),
+                           workers=args.workers or os.cpu_count() or 1, scheduler=args.scheduler, to=args.to,
+                           model=args.model)
+    bar = _progress_bar(args.job)
+    try:
+        report = run_batch(args.inputs, options, progress=bar)
+    finally:
+        bar.close()
+    if args.json:
+        print_json(report.to_json())
+    else:
+        rows = [(Path(c.file).name, c.status, f"{c.seconds:.2f}", c.error or "") for c in report.clips
+                if c.status != "skipped" or len(report.clips) <= 50]
+        print_table(rows, ["file", "status", "seconds", "error"])
+        s = report.summary
+        print(f"{s['done']} done, {s['skipped']} skipped, {s['failed']} failed in {s['seconds']:.1f} s "
+              f"({s['clips_per_second']:.2f} clips/s, {report.workers} worker(s)"
+              f"{', Dask ' + report.scheduler if report.scheduler else ''}); report: {args.out / 'report.json'}")
+    return 1 if report.count("failed") else 0
+
+
+class _progress_bar:
+    """``progress(finished, total, failed, what)`` drawn with tqdm on a terminal (a line per 10% otherwise)."""
+
+    def __init__(self, label: str):
+        self.label = label
+        self.bar = None
+        self.start = time.perf_counter()
+        self.shown = -1
+
+    def __call__(self, finished: int, total: int, failed: int, what: str) -> None:
+        if sys.stderr.isatty():
+            try:
+                from tqdm import tqdm
+            except ImportError:
+                tqdm = None
+            if tqdm is not None:
+                if self.bar is None:
+                    self.bar = tqdm(total=total, desc=self.label, unit="clip", file=sys.stderr)
+                self.bar.set_postfix(failed=failed, refresh=False)
+                self.bar.update(finished - self.bar.n)
+                return
+        step = max(total // 10, 1)
+        if finished // step != self.shown or finished == total:
+            self.shown = finished // step
+            rate = finished / max(time.perf_counter() - self.start, 1e-9)
+            print(f"{self.label}: {finished}/{total} done, {failed} failed, {rate:.2f} clips/s", file=sys.stderr)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()

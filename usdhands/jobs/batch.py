@@ -1,0 +1,402 @@
+"""The batch runner: one job over many clips, on a local process pool or a Dask cluster.
+
+::
+
+    import usdhands
+    from usdhands.jobs.batch import BatchOptions, run_batch
+
+    report = run_batch(["takes/"], BatchOptions(job="synthesize", out=Path("out"), workers=2,
+                                               job_options=usdhands.SynthesizeOptions(k=8)))
+    print(report.summary)     # {"done", "skipped", "failed", "seconds", "clips_per_second"}
+
+- Inputs: files, folders (searched recursively for the job's input extensions) or a text
+  file listing paths (one a line, ``#`` comments; relative paths from the list's folder).
+- Outputs under ``out``, at the input's path relative to the folder it was found in (its
+  name for a file given directly); ``convert`` takes the extension ``to``; ``check``
+  writes ``<name>.check.json``. Written atomically by the jobs.
+- Resumable: an output newer than its input (and the ``expand`` model) and than the
+  options recorded in ``out/batch_options.json`` is skipped; a changed option rewrites
+  that file, so every clip runs again.
+- A failing clip is recorded (``out/report.json``: file, status, seconds, error line) and
+  does not stop the others. A worker process that dies is replaced and its clips retried
+  once, each alone, so a clip that kills its worker is the only one to fail.
+- Start-up is paid once per worker, and the database loaded once per worker
+  (:func:`usdhands.jobs.inputs.cached_database`).
+- ``scheduler``: None for a local process pool (``workers`` processes), ``"local"`` for a
+  ``dask.distributed.LocalCluster`` of ``workers`` processes, or a scheduler address
+  (``tcp://host:8786``) to send the clips to an existing Dask cluster (``pip install
+  'usdhands[dask]'``; the workers need usdhands installed and the paths visible).
+
+Adding a job (``correct``): an entry in :data:`JOBS` naming its module, function, options
+class and input extensions.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import importlib
+import json
+import os
+import tempfile
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+from usdhands.errors import UsdHandsError
+
+ANIMATION_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz", ".gltf", ".glb", ".bvh")
+
+#: job -> (module under usdhands.jobs, function, options class)
+JOBS = {
+    "synthesize": ("synthesis", "synthesize", "SynthesizeOptions"),
+    "reduce": ("reduction", "reduce", "ReduceOptions"),
+    "expand": ("expansion", "expand", "ExpandOptions"),
+    "convert": ("conversion", "convert", "ConvertOptions"),
+    "check": ("validation", "check", "CheckOptions"),
+}
+OPTIONS_FILE = "batch_options.json"
+REPORT_FILE = "report.json"
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """Options of :func:`run_batch`.
+
+    Attributes
+    ----------
+    job : str
+        A key of :data:`JOBS`.
+    out : Path
+        Output folder (made when missing).
+    job_options : dataclass or None
+        The job's options (``SynthesizeOptions`` ...); None: its defaults.
+    workers : int
+        Worker processes (at least 1).
+    scheduler : str or None
+        None: local process pool; ``"local"``: a Dask LocalCluster; else a Dask scheduler address.
+    to : str or None
+        ``convert``: the output extension (``".usda"``, ``"glb"`` ...).
+    model : Path or None
+        ``expand``: the reduction model JSON.
+    dask_processes : bool
+        ``scheduler="local"``: worker processes (True) or threads of this process (False, for tests).
+    """
+
+    job: str
+    out: Path
+    job_options: object = None
+    workers: int = 1
+    scheduler: str | None = None
+    to: str | None = None
+    model: Path | None = None
+    dask_processes: bool = True
+
+
+@dataclass(frozen=True)
+class ClipRecord:
+    """One clip of a batch: ``status`` is ``"done"``, ``"skipped"`` or ``"failed"``."""
+
+    file: str
+    output: str
+    status: str
+    seconds: float = 0.0
+    error: str | None = None
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class BatchReport:
+    """What a batch did: a record per clip and the summary."""
+
+    job: str
+    clips: tuple[ClipRecord, ...]
+    seconds: float
+    workers: int
+    scheduler: str | None = None
+    notes: tuple[str, ...] = field(default=())
+
+    def count(self, status: str) -> int:
+        return sum(c.status == status for c in self.clips)
+
+    @property
+    def summary(self) -> dict:
+        done = self.count("done")
+        return {"done": done, "skipped": self.count("skipped"), "failed": self.count("failed"),
+                "seconds": round(self.seconds, 3),
+                "clips_per_second": round(done / self.seconds, 3) if self.seconds > 0 else 0.0}
+
+    def to_json(self) -> dict:
+        """The content of ``report.json``."""
+        return {"job": self.job, "workers": self.workers, "scheduler": self.scheduler, **self.summary,
+                "clips": [c.to_json() for c in self.clips]}
+
+
+def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
+              progress: Callable[[int, int, int, str], None] | None = None) -> BatchReport:
+    """Run ``options.job`` on every clip of ``inputs``; writes the outputs and ``report.json`` under ``options.out``.
+
+    Parameters
+    ----------
+    inputs : paths
+        Files, folders or text files listing paths.
+    options : BatchOptions
+    progress : callable, optional
+        ``progress(finished, total, failed, what)`` after each clip (skipped ones included).
+
+    Raises
+    ------
+    UsdHandsError
+        No inputs, an unknown job, bad options, or Dask missing for a ``scheduler``; a
+        failing clip does not raise (it is recorded).
+    """
+    if options.job not in JOBS:
+        raise UsdHandsError(f"unknown job {options.job!r}; expected one of {', '.join(JOBS)}")
+    if options.workers < 1:
+        raise UsdHandsError(f"--workers must be at least 1, got {options.workers}")
+    job_options = options.job_options if options.job_options is not None else _options_class(options.job)()
+    if options.job == "expand" and options.model is None:
+        raise UsdHandsError("--job expand needs --model MODEL.json")
+    if options.job == "convert" and not options.to:
+        raise UsdHandsError("--job convert needs --to EXT (usda, glb, bvh, ...)")
+    extensions = ANIMATION_EXTENSIONS
+    pairs = []
+    out = Path(options.out)
+    for src, rel in collect_inputs(inputs, extensions):
+        pairs.append((src, out / output_name(rel, options)))
+    if not pairs:
+        raise UsdHandsError("no input clips found")
+    resolved = {Path(p).resolve() for p, _ in pairs}
+    out.mkdir(parents=True, exist_ok=True)
+    recorded = _record_options(out, options, job_options)
+    todo, records = [], {}
+    for src, dst in pairs:
+        if dst.resolve() in resolved:
+            records[src] = ClipRecord(str(src), str(dst), "failed", 0.0, "the output would overwrite an input")
+        elif _up_to_date(src, dst, recorded, options.model):
+            records[src] = ClipRecord(str(src), str(dst), "skipped")
+        else:
+            todo.append((src, dst))
+    finished = [len(records)]
+
+    def report(record: ClipRecord) -> None:
+        records[Path(record.file)] = record
+        finished[0] += 1
+        if progress:
+            progress(finished[0], len(pairs), sum(r.status == "failed" for r in records.values()),
+                     Path(record.file).name)
+
+    if progress and records:
+        progress(finished[0], len(pairs), sum(r.status == "failed" for r in records.values()), "")
+    task = (options.job, job_options, options.model)
+    start = time.perf_counter()
+    if todo:
+        if options.scheduler is None:
+            _run_local(todo, task, options.workers, report)
+        else:
+            _run_dask(todo, task, options, report)
+    seconds = time.perf_counter() - start
+    result = BatchReport(options.job, tuple(records[src] for src, _ in pairs), seconds, options.workers,
+                         options.scheduler)
+    _write_json(out / REPORT_FILE, result.to_json())
+    return result
+
+
+# ----------------------------------------------------------------------------- inputs and outputs
+def collect_inputs(inputs: Sequence[str | os.PathLike], extensions=ANIMATION_EXTENSIONS) -> list[tuple[Path, Path]]:
+    """``(file, path relative to where it was found)`` for files, folders (recursive) and lists of paths."""
+    out: list[tuple[Path, Path]] = []
+    for item in inputs:
+        p = Path(item)
+        if p.is_dir():
+            for f in sorted(p.rglob("*")):
+                if f.is_file() and f.suffix.lower() in extensions:
+                    out.append((f, f.relative_to(p)))
+        elif p.suffix.lower() in extensions:
+            out.append((p, Path(p.name)))
+        elif p.is_file():
+            try:
+                lines = p.read_text(encoding="utf-8").splitlines()
+            except (OSError, UnicodeDecodeError) as e:
+                raise UsdHandsError(f"cannot read the list of inputs: {e}", path=p) from None
+            for n, line in enumerate(lines, 1):
+                line = line.strip()
+                if line and not line.startswith("#"):
+                    listed = Path(line) if Path(line).is_absolute() else p.parent / line
+                    if listed.suffix.lower() not in extensions and not listed.is_dir():
+                        raise UsdHandsError(f"not an animation file or folder: {line}", path=p, location=f"line {n}")
+                    out += collect_inputs([listed], extensions)
+        else:
+            raise UsdHandsError("no such file or folder" if not p.exists() else "not an animation file or a list",
+                                path=p)
+    seen, unique = set(), []
+    for src, rel in out:
+        key = src.resolve()
+        if key not in seen:
+            seen.add(key)
+            unique.append((src, rel))
+    return unique
+
+
+def output_name(rel: Path, options: BatchOptions) -> Path:
+    """Where under ``out`` the output of the clip at ``rel`` goes."""
+    if options.job == "convert":
+        return rel.with_suffix("." + options.to.lstrip(".").lower())
+    if options.job == "check":
+        return rel.with_name(rel.name + ".check.json")
+    return rel
+
+
+def _options_class(job: str):
+    module, _, cls = JOBS[job]
+    return getattr(importlib.import_module(f"usdhands.jobs.{module}"), cls)
+
+
+def _options_json(options: BatchOptions, job_options) -> dict:
+    values = dataclasses.asdict(job_options) if dataclasses.is_dataclass(job_options) else {}
+    return json.loads(json.dumps({"job": options.job, "options": values, "to": options.to,
+                                  "model": None if options.model is None else str(options.model)}, default=str))
+
+
+def _record_options(out: Path, options: BatchOptions, job_options) -> float:
+    """Write ``batch_options.json`` when the options differ from those recorded; its modification time."""
+    path = out / OPTIONS_FILE
+    current = _options_json(options, job_options)
+    try:
+        if json.loads(path.read_text()) == current:
+            return path.stat().st_mtime
+    except (OSError, ValueError):
+        pass
+    _write_json(path, current)
+    return path.stat().st_mtime
+
+
+def _up_to_date(src: Path, dst: Path, options_time: float, model: Path | None) -> bool:
+    try:
+        made = dst.stat().st_mtime
+        newest = max(src.stat().st_mtime, options_time, model.stat().st_mtime if model is not None else 0.0)
+    except OSError:
+        return False
+    return made >= newest
+
+
+def _write_json(path: Path, obj) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(obj, f, indent=2)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+# ----------------------------------------------------------------------------- one clip, in a worker
+def run_clip(job: str, job_options, model: Path | None, src: Path, dst: Path) -> ClipRecord:
+    """Run one job on one clip in this process; never raises for a bad clip (a ``failed`` record)."""
+    start = time.perf_counter()
+    try:
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        module, function, _ = JOBS[job]
+        run = getattr(importlib.import_module(f"usdhands.jobs.{module}"), function)
+        error = None
+        if job == "expand":
+            run(src, model, dst, job_options)
+        elif job == "check":
+            result = run([src], job_options)
+            _write_json(dst, result.to_json())
+            bad = result.files[0]
+            error = bad.error or (str(bad.findings[0]) if bad.findings else None)
+        else:
+            run(src, dst, job_options)
+    except UsdHandsError as e:
+        error = str(e)
+    except Exception as e:  # a bug on one clip must not end the batch: recorded with its type
+        error = f"{type(e).__name__}: {e}"
+    seconds = time.perf_counter() - start
+    return ClipRecord(str(src), str(dst), "failed" if error else "done", round(seconds, 4),
+                      None if error is None else error.splitlines()[0])
+
+
+def _warm_worker(job: str, job_options) -> None:
+    """Worker start-up: import the job's module and load the database once."""
+    module = JOBS[job][0]
+    importlib.import_module(f"usdhands.jobs.{module}")
+    if job == "synthesize":
+        from usdhands.jobs.inputs import cached_database
+
+        with contextlib.suppress(UsdHandsError):
+            cached_database(getattr(job_options, "db", None))
+
+
+# ----------------------------------------------------------------------------- local process pool
+def _run_local(todo, task, workers: int, report) -> None:
+    job, job_options, model = task
+    broken = []
+    with _pool(workers, job, job_options) as pool:
+        pending = {pool.submit(run_clip, job, job_options, model, src, dst): (src, dst) for src, dst in todo}
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                src, dst = pending.pop(f)
+                try:
+                    report(f.result())
+                except BrokenProcessPool:
+                    broken.append((src, dst))
+    # clips in flight when a worker died: retried once, each alone, so only a clip that kills
+    # its worker again fails
+    for src, dst in broken:
+        with _pool(1, job, job_options) as pool:
+            try:
+                report(pool.submit(run_clip, job, job_options, model, src, dst).result())
+            except BrokenProcessPool:
+                report(ClipRecord(str(src), str(dst), "failed", 0.0, "the worker process died (twice) on this clip"))
+
+
+def _pool(workers: int, job: str, job_options) -> ProcessPoolExecutor:
+    import multiprocessing
+
+    # forkserver/spawn: a fresh interpreter per worker (fork would copy the parent's threads and locks)
+    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
+                               initializer=_warm_worker, initargs=(job, job_options))
+
+
+# ----------------------------------------------------------------------------- Dask
+def _run_dask(todo, task, options: BatchOptions, report) -> None:
+    try:
+        import dask
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise UsdHandsError("--scheduler needs Dask: pip install 'usdhands[dask]'") from None
+    job, job_options, model = task
+    with contextlib.ExitStack() as stack:
+        # a worker that dies is retried once by the scheduler (a local one: this setting; a
+        # remote one: its own distributed.scheduler.allowed-failures)
+        stack.enter_context(dask.config.set({"distributed.scheduler.allowed-failures": 1}))
+        if options.scheduler == "local":
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=options.workers, threads_per_worker=1, processes=options.dask_processes,
+                dashboard_address=None))
+            client = stack.enter_context(Client(cluster))
+        else:
+            try:
+                client = stack.enter_context(Client(options.scheduler, timeout="10s"))
+            except (OSError, TimeoutError) as e:
+                raise UsdHandsError(f"cannot reach the Dask scheduler {options.scheduler}: {e}") from None
+        client.run(_warm_worker, job, job_options)
+        futures = {client.submit(run_clip, job, job_options, model, src, dst, pure=False): (src, dst)
+                   for src, dst in todo}
+        for future in as_completed(futures):
+            src, dst = futures[future]
+            try:
+                report(future.result())
+            except Exception as e:  # KilledWorker and the like: the clip took its worker down twice
+                report(ClipRecord(str(src), str(dst), "failed", 0.0, f"{type(e).__name__}: {e}".splitlines()[0]))
