@@ -13,7 +13,7 @@ import json
 import numpy as np
 import pytest
 
-from usdhands.commands.convert import convert
+from usdhands.jobs.conversion import convert
 from usdhands.formats.gltf_read import detect_fps
 from usdhands.formats.io import read_asset, write_asset
 from usdhands.model import Clip, Skeleton
