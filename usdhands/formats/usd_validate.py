@@ -17,7 +17,7 @@ __all__ = ["usd_compliance_errors"]
 def usd_compliance_errors(path: str | os.PathLike) -> list[str]:
     """Errors USD's compliance checks report for a file (empty when it passes).
 
-    Runs every registered validator (``UsdValidation``) on the composed stage, or
+    Runs every registered validator (``UsdValidation``) but usdhands' own on the composed stage, or
     ``UsdUtils.ComplianceChecker`` on older USD. Warnings are not returned.
     """
     from pxr import Usd
@@ -33,7 +33,10 @@ def usd_compliance_errors(path: str | os.PathLike) -> list[str]:
             return list(checker.GetErrors()) + list(checker.GetFailedChecks())
         from pxr import UsdValidation
 
-        validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+        # USD's own and plugins' validators; not usdhands' rules (keyword "usdhands"), which
+        # ``usdhands check`` runs and which a process may have registered
+        validators = [v for v in UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+                      if "usdhands" not in v.GetMetadata().GetKeywords()]
         context = UsdValidation.ValidationContext(validators)
         stage = Usd.Stage.Open(str(path))
         errors = context.Validate(stage)
