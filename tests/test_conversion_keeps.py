@@ -12,7 +12,7 @@ import json
 import numpy as np
 import pytest
 
-from usdhands.commands.convert import convert
+from usdhands.jobs.conversion import convert
 from usdhands.formats.io import read_asset, write_asset
 from usdhands.model import Clip, Skeleton
 from usdhands.model.asset import Asset

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from pxr import Usd
 
-from usdhands.commands.convert import convert
+from usdhands.jobs.conversion import convert
 from usdhands.formats.io import read_asset, write_asset, write_clip
 from usdhands.formats.usd_schema_data import read_finger_motion
 from usdhands.model import Clip, Skeleton
