@@ -111,8 +111,8 @@ def synthesis_times(clip, hm, mug) -> tuple[float, float]:
     from usdhands.algorithms.synthesis.config import SynthesisConfig
     from usdhands.algorithms.synthesis.database import load_database
     from usdhands.algorithms.synthesis.synthesize import synthesize_clip
-    from usdhands.commands._interaction_common import synthesis_interaction
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.props import synthesis_interaction
+    from usdhands.jobs.inputs import bundled_database_path
 
     db = load_database(bundled_database_path())
     cfg = SynthesisConfig()
