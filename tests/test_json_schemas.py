@@ -37,7 +37,7 @@ def test_bundled_database_manifest_is_valid(tmp_path):
     import shutil
 
     from usdhands.algorithms.synthesis.database import load_database
-    from usdhands.commands._synthesis_common import bundled_database_path
+    from usdhands.jobs.inputs import bundled_database_path
     from usdhands.errors import ConfigError
 
     manifest = json.loads((bundled_database_path() / "manifest.json").read_text())

@@ -38,10 +38,10 @@ def register(sub) -> None:
 
 def _bvh_units(text: str) -> str:
     """A --bvh-units value; the BVH module (and its imports) is loaded only when the option is given."""
-    from usdhands.formats.bvh import UNITS
+    from usdhands.jobs.conversion import BVH_UNITS
 
-    if text not in UNITS:
-        raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from {', '.join(sorted(UNITS))})")
+    if text not in BVH_UNITS:
+        raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from {', '.join(BVH_UNITS)})")
     return text
 
 

@@ -1,4 +1,4 @@
-"""``usdhands synthesize IN -o OUT``: finger motion for a body clip, from wrist motion (seed 000).
+"""``usdhands synthesize IN -o OUT``: finger motion for a body clip, from wrist motion (Jörg, Hodgins, Safonova 2012).
 
 Segments each hand's wrist motion, finds the k most similar database segments
 (eq. 1), picks the least-cost path through the graph of transitions (eq. 2–3),
@@ -15,7 +15,7 @@ from usdhands.commands._common import Progress, add_prop_arguments, print_json, 
 
 
 def register(sub) -> None:
-    p = sub.add_parser("synthesize", help="give a body clip finger motion from a database (seed 000)",
+    p = sub.add_parser("synthesize", help="give a body clip finger motion from a database (Jörg et al. 2012)",
                        description="Data-driven finger motion synthesis (Jorg, Hodgins, Safonova 2012).")
     p.add_argument("file", type=Path, help="input animation (.usd*, .gltf/.glb, .bvh)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output file (same format as the input)")
