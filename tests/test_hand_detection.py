@@ -415,7 +415,7 @@ def test_handmap_schema_violation_exact_error(tmp_path):
 def test_handmap_bad_json(tmp_path):
     p = tmp_path / "map.json"
     p.write_text("{\"left\": ")
-    with pytest.raises(ConfigError, match=r"map.json: not valid JSON: Expecting value \(line 1, column 10\)"):
+    with pytest.raises(ConfigError, match=r"map.json: hand map file is not valid JSON: Expecting value at line 1 column 10"):
         load_handmap(p, mixamo())
 
 

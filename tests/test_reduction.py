@@ -337,7 +337,7 @@ def test_model_load_errors(tmp_path):
         ReductionModel.load(tmp_path / "missing.json")
     bad = tmp_path / "bad.json"
     bad.write_text("{")
-    with pytest.raises(ConfigError, match="not JSON"):
+    with pytest.raises(ConfigError, match="not valid JSON"):
         ReductionModel.load(bad)
     v, names = _hand()
     d = reduce_curves(v, names).final.model.to_dict()

@@ -8,6 +8,13 @@ User mistakes and bad assets print one line ``usdhands: error: ...`` and exit wi
 status 2; no traceback. ``-v/--verbose`` and ``-q/--quiet`` are taken before or after the
 subcommand. Progress bars (on stderr, only on a terminal, none with ``-q``) are drawn
 here and in the commands from the library's progress callbacks; the library prints nothing.
+
+The one error line holds for misused options too (argparse's usage text is kept for
+``--help``), for control characters in file names (escaped, so the message stays one
+line), for numpy's RuntimeWarnings (silenced: a value they flag is refused by a check of
+its own), and for an operating-system error no check foresaw (the file it names and the
+reason). SIGTERM is handled like SIGINT: outputs being written are
+removed, one line, exit status 143.
 """
 
 from __future__ import annotations
@@ -17,12 +24,33 @@ import contextlib
 import importlib
 import logging
 import pkgutil
+import signal
 import sys
+import warnings
 
 from usdhands import __version__
 from usdhands.errors import UsdHandsError
 
 EXIT_USER_ERROR = 2
+#: Exit status after SIGTERM (128 + 15, as a shell reports a process it terminated).
+EXIT_TERMINATED = 143
+
+
+class UsageError(Exception):
+    """A command line argparse refuses; the CLI prints it as one ``usdhands: error:`` line."""
+
+
+class Terminated(KeyboardInterrupt):
+    """Raised by the SIGTERM handler: unwinds like Ctrl-C, so every ``atomic_output`` removes its temporary file."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def one_line(text: str) -> str:
+    """``text`` with control characters escaped (a file name holding a newline stays on one line)."""
+    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in text)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -39,6 +67,10 @@ class _Parser(argparse.ArgumentParser):
                           help="log details to stderr")
         self.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
                           help="no progress display on stderr")
+
+    def error(self, message: str):
+        """Raise :class:`UsageError` instead of printing the usage text (kept for ``--help``)."""
+        raise UsageError(f"{self.prog}: {message}" if self.prog != "usdhands" else message)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -65,7 +97,11 @@ def main(argv: list[str] | None = None) -> int:
     from usdhands.commands._common import set_quiet
 
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except UsageError as e:
+        print(f"usdhands: error: {one_line(str(e))} (see --help)", file=sys.stderr)
+        return EXIT_USER_ERROR
     set_quiet(args.quiet)
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
@@ -97,18 +133,36 @@ def _logging_to_stderr(level: int):
 def _run(args) -> int:
     from usdhands.commands._common import compile_progress
 
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if _main_thread() else None
     try:
-        with compile_progress():
+        with compile_progress(), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # numpy's overflow/invalid: checks refuse the values
             return int(args.func(args) or 0)
     except UsdHandsError as e:
-        print(f"usdhands: error: {e}", file=sys.stderr)
+        print(f"usdhands: error: {one_line(str(e))}", file=sys.stderr)
         return EXIT_USER_ERROR
     except BrokenPipeError:  # output piped into head and the like
         sys.stderr.close()
         return 0
+    except Terminated:
+        print("usdhands: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print("usdhands: interrupted", file=sys.stderr)
         return 130
+    except OSError as e:  # one no check foresaw (a name too long, a folder made read-only meanwhile)
+        where = e.filename if e.filename is not None else "usdhands"
+        print(f"usdhands: error: {one_line(str(where))}: {e.strerror or e}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 def entry_point() -> None:

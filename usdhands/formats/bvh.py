@@ -76,6 +76,9 @@ UNITS = {"cm": 0.01, "m": 1.0, "mm": 0.001, "dm": 0.1, "in": 0.0254, "inch": 0.0
 DEFAULT_ORDER = "ZXY"
 END_SUFFIX = "_end"
 _FMT = "%.6f"
+#: Deepest indentation written (tabs): deeper joints are indented no further, so a long chain
+#: does not make the file grow with the square of its depth.
+MAX_INDENT = 64
 
 _CHANNELS = {"xposition": ("p", 0), "yposition": ("p", 1), "zposition": ("p", 2),
              "xrotation": ("r", 0), "yrotation": ("r", 1), "zrotation": ("r", 2)}
@@ -218,6 +221,34 @@ def parse_bvh(path: str | os.PathLike) -> BvhFile:
 
 
 def _parse_joint(tok: _Tokens, joints: list, names: set, parent: int) -> None:
+    """Parse a ROOT and every joint below it into ``joints``.
+
+    Iterative (a stack of the open joints): a hierarchy 10,000 joints deep raised
+    RecursionError when each joint was a recursive call.
+    """
+    stack = [_parse_joint_head(tok, joints, names, parent)]
+    while stack:
+        me, name, end = stack[-1]
+        t, tline = tok.peek()
+        if t is None:
+            tok.error(tline, f"unexpected end of hierarchy inside {name!r}: missing '}}'")
+        if t == "}":
+            tok.next("'}'")
+            stack.pop()
+            continue
+        if end:
+            tok.error(tline, f"expected '}}' closing the End Site of {joints[joints[me].parent].name!r}, found {t!r}")
+        if t.upper() in ("JOINT", "END"):
+            stack.append(_parse_joint_head(tok, joints, names, me))
+            continue
+        tok.error(tline, f"expected 'JOINT', 'End Site' or '}}' in {name!r}, found {t!r}")
+
+
+def _parse_joint_head(tok: _Tokens, joints: list, names: set, parent: int) -> tuple[int, str, bool]:
+    """Read ``JOINT name { OFFSET ... CHANNELS ...`` (or ``End Site { OFFSET ...``) up to its children.
+
+    Returns the joint's index in ``joints``, its name and whether it is an End Site.
+    """
     kw, line = tok.next("'JOINT'")
     kwu = kw.upper()
     if kwu == "END":
@@ -244,7 +275,6 @@ def _parse_joint(tok: _Tokens, joints: list, names: set, parent: int) -> None:
     offset = np.array([tok.number("OFFSET x"), tok.number("OFFSET y"), tok.number("OFFSET z")])
     j = BvhJoint(name, parent, offset, [], end, line)
     joints.append(j)
-    me = len(joints) - 1
     if not end and tok.peek()[0] is not None and tok.peek()[0].upper() == "CHANNELS":
         tok.next("CHANNELS")
         t, cline = tok.next("a channel count")
@@ -258,19 +288,7 @@ def _parse_joint(tok: _Tokens, joints: list, names: set, parent: int) -> None:
                     tok.error(cl, f"CHANNELS {n} lists fewer than {n} channels")
                 tok.error(cl, f"unknown channel {c!r} (expected X/Y/Z position or rotation)")
             j.channels.append(c[0].upper() + c[1:].lower())
-    while True:
-        t, tline = tok.peek()
-        if t is None:
-            tok.error(tline, f"unexpected end of hierarchy inside {name!r}: missing '}}'")
-        if t == "}":
-            tok.next("'}'")
-            return
-        if end:
-            tok.error(tline, f"expected '}}' closing the End Site of {joints[parent].name!r}, found {t!r}")
-        if t.upper() in ("JOINT", "END"):
-            _parse_joint(tok, joints, names, me)
-            continue
-        tok.error(tline, f"expected 'JOINT', 'End Site' or '}}' in {name!r}, found {t!r}")
+    return len(joints) - 1, name, end
 
 
 #: Shortest and longest ``Frame Time`` read (seconds): 10000 fps down to one frame in 1000 s.
@@ -649,13 +667,14 @@ class BvhHandler:
         lines = ["HIERARCHY"]
         columns = []  # (joint, "p"/"r")
 
-        def emit(j: int, depth: int) -> None:
-            ind = "\t" * depth
+        def emit(j: int, depth: int) -> list:
+            """Lines opening joint ``j``; returns the children to emit before its closing brace."""
+            ind = "\t" * min(depth, MAX_INDENT)
             off = rest_t[j]
             if is_end[j]:
                 lines.extend([f"{ind}End Site", f"{ind}{{", f"{ind}\tOFFSET {_FMT % off[0]} {_FMT % off[1]} "
                               f"{_FMT % off[2]}", f"{ind}}}"])
-                return
+                return []
             kw = "ROOT" if sk.parents[j] < 0 else "JOINT"
             lines.extend([f"{ind}{kw} {names[j]}", f"{ind}{{",
                           f"{ind}\tOFFSET {_FMT % off[0]} {_FMT % off[1]} {_FMT % off[2]}"])
@@ -665,13 +684,19 @@ class BvhHandler:
             else:
                 lines.append(f"{ind}\tCHANNELS 3 {rot_ch}")
             columns.append((j, "r"))
-            for c in kids[j]:
-                emit(c, depth + 1)
-            lines.append(f"{ind}}}")
+            return kids[j]
 
-        for r in range(J):
-            if sk.parents[r] < 0:
-                emit(r, 0)
+        # depth first with a stack (a chain 10,000 joints deep overflowed the recursion)
+        stack = [(r, 0, False) for r in range(J - 1, -1, -1) if sk.parents[r] < 0]
+        while stack:
+            j, depth, closing = stack.pop()
+            if closing:
+                lines.append("\t" * min(depth, MAX_INDENT) + "}")
+                continue
+            children = emit(j, depth)
+            if not is_end[j]:
+                stack.append((j, depth, True))
+                stack.extend((c, depth + 1, False) for c in reversed(children))
         rotated = [j for j, kind in columns if kind == "r"]
         euler = _euler(clip.rotations[:, rotated], order) if clip.num_frames and rotated else None
         parts = []

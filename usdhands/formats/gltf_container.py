@@ -25,6 +25,7 @@ import numpy as np
 import pygltflib
 
 from usdhands.errors import AssetReadError
+from usdhands.input_files import check_json_depth, refuse_json_constant
 
 __all__ = [
     "GltfFile", "load_gltf", "read_accessor", "BinaryAppender", "save_gltf", "contained_file", "read_external",
@@ -91,11 +92,17 @@ class GltfFile:
 
 def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
     try:
-        data = json.loads(text)
+        data = json.loads(text, parse_constant=refuse_json_constant)
+        check_json_depth(text, path, what="glTF JSON")  # pygltflib recurses into what json parsed
+    except RecursionError:
+        check_json_depth(text, path, what="glTF JSON")
+        raise
     except UnicodeDecodeError as e:
         raise AssetReadError(f"glTF JSON is not UTF-8 ({e.reason} at byte {e.start})", path=path) from None
     except json.JSONDecodeError as e:
         raise AssetReadError(f"invalid glTF JSON: {e.msg} at line {e.lineno} column {e.colno}", path=path) from None
+    except ValueError as e:  # NaN/Infinity, an integer of more than 4300 digits
+        raise AssetReadError(f"invalid glTF JSON: {str(e).split(';')[0]}", path=path) from None
     if not isinstance(data, dict):
         raise AssetReadError(f"invalid glTF JSON: top level is a {type(data).__name__}, not an object", path=path)
     version = str((data.get("asset") or {}).get("version", ""))

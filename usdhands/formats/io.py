@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from usdhands.errors import AssetReadError, NoSkeletonError
+from usdhands.input_files import check_regular_file
 from usdhands.formats.registry import atomic_output, check_output_path, handler_for
 from usdhands.model.asset import Asset
 from usdhands.model.clip import Clip
@@ -35,13 +36,7 @@ def read_asset(path: str | os.PathLike, *, fps: float | None = None, **options) 
     """
     if fps is not None and not (fps > 0 and math.isfinite(fps)):
         raise ValueError(f"Expected fps > 0 and finite, got {fps}")
-    path = Path(path)
-    if not path.exists():
-        raise AssetReadError("no such file", path=path)
-    if path.is_dir():
-        raise AssetReadError("is a folder, not a file", path=path)
-    if not path.is_file():  # a FIFO blocks the read forever, /dev/zero never ends
-        raise AssetReadError("not a regular file", path=path)
+    path = check_regular_file(path)  # a named pipe blocked forever, /dev/zero ran out of memory
     asset = handler_for(path, "read").read(path, fps=fps, **options)
     for clip in asset.clips:
         clip.validate(str(path))

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import csv
+import io
 import re
 from importlib import resources
 from pathlib import Path
 
 from usdhands.errors import ConfigError, UsdHandsError
+from usdhands.input_files import read_text
 from usdhands.optional import require_matplotlib
 
 EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz", ".gltf", ".glb", ".bvh")
@@ -74,16 +76,13 @@ def labeller(regex: str | None, labels_file: Path | None):
         return by_regex
     if labels_file:
         table = {}
-        try:
-            with open(labels_file, newline="") as fh:
-                for n, row in enumerate(csv.reader(fh), 1):
-                    if not row or row[0].startswith("#"):
-                        continue
-                    if len(row) < 2:
-                        raise ConfigError(f"expected 'file,label', got {row!r}", path=labels_file, location=f"line {n}")
-                    table[row[0].strip()] = row[1].strip()
-        except FileNotFoundError:
-            raise ConfigError("no such labels file", path=labels_file) from None
+        text = read_text(labels_file, what="labels file", error=ConfigError)  # not UTF-8: one line
+        for n, row in enumerate(csv.reader(io.StringIO(text, newline="")), 1):
+            if not row or row[0].startswith("#"):
+                continue
+            if len(row) < 2:
+                raise ConfigError(f"expected 'file,label', got {row!r}", path=labels_file, location=f"line {n}")
+            table[row[0].strip()] = row[1].strip()
 
         def by_table(path: Path) -> str:
             for key in (str(path), path.name, path.stem):

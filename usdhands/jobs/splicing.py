@@ -333,16 +333,14 @@ def read_markers_csv(path: Path, frames: int) -> dict:
         that is not a finite number (with the row and column).
     """
     import csv
+    import io
 
     import numpy as np
 
-    try:
-        with open(path, newline="", encoding="utf-8") as f:
-            rows = [r for r in csv.reader(f) if r and any(c.strip() for c in r)]
-    except FileNotFoundError:
-        raise UsdHandsError("no such marker file", path=path) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise UsdHandsError(f"cannot read marker file: {e}", path=path) from None
+    from usdhands.input_files import read_text
+
+    text = read_text(path, what="marker file", error=UsdHandsError)  # a pipe or /dev/zero: refused, not read
+    rows = [r for r in csv.reader(io.StringIO(text, newline="")) if r and any(c.strip() for c in r)]
     if not rows:
         raise UsdHandsError("empty marker file: expected a header of <side>.<marker>.<axis> columns", path=path)
     header = [h.strip() for h in rows[0]]

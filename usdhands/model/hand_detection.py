@@ -54,7 +54,6 @@ has.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 import re
@@ -62,6 +61,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from usdhands.errors import ConfigError, NoHandsError
+from usdhands.input_files import read_json
 from usdhands.json_schemas import first_schema_error, load_schema
 from usdhands.model.handmap import FINGERS, SIDES, HandMap, HandSide
 from usdhands.model.skeleton import Skeleton
@@ -427,14 +427,7 @@ def load_handmap(path: str | os.PathLike, skeleton: Skeleton) -> HandMap:
     """
 
     path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError("no such hand map file", path=path) from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ConfigError(f"cannot read hand map: {e}", path=path) from None
-    except json.JSONDecodeError as e:
-        raise ConfigError(f"not valid JSON: {e.msg} (line {e.lineno}, column {e.colno})", path=path) from None
+    data = read_json(path, what="hand map file", error=ConfigError)
     error = first_schema_error(data, "handmap")
     if error is not None:
         where, message = error

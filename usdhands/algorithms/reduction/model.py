@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from usdhands.errors import ConfigError
+from usdhands.input_files import read_json
 from usdhands.json_schemas import first_schema_error, load_schema
 
 __all__ = ["Constant", "Relation", "ReductionModel", "MODEL_FORMAT", "MODEL_VERSION", "model_schema"]
@@ -318,16 +319,7 @@ class ReductionModel:
         """
 
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ConfigError("no such reduction model file", path=path) from None
-        except OSError as e:
-            raise ConfigError(f"cannot read reduction model: {e.strerror}", path=path) from None
-        try:
-            d = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise ConfigError(f"not JSON: {e.msg} at line {e.lineno} column {e.colno}", path=path) from None
+        d = read_json(path, what="reduction model file", error=ConfigError)
         error = first_schema_error(d, "reduction_model")
         if error is not None:
             where, message = error

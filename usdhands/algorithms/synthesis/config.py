@@ -16,11 +16,11 @@ omitted keys keep their defaults.
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from usdhands.errors import ConfigError
+from usdhands.input_files import read_json
 from usdhands.json_schemas import first_schema_error, load_schema
 
 __all__ = [
@@ -163,14 +163,7 @@ def load_synthesis_config(path: str | Path) -> SynthesisConfig:
     """
 
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError("no such configuration file", path=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(f"not valid JSON: {e}", path=path) from None
-    except OSError as e:  # a folder, no permission
-        raise ConfigError(f"cannot read the configuration: {e.strerror}", path=path) from None
+    data = read_json(path, what="configuration file", error=ConfigError)  # NaN, 5000-digit numbers refused
     error = first_schema_error(data, "synthesis_config")
     if error is not None:
         where, message = error

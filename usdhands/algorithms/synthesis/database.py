@@ -46,6 +46,7 @@ from usdhands.algorithms.synthesis.wrist_features import (
     NUM_WRIST_FEATURES, WRIST_FEATURE_NAMES, mirror_features, reach_cm, wrist_features,
 )
 from usdhands.errors import ConfigError
+from usdhands.input_files import read_json
 from usdhands.json_schemas import first_schema_error, load_schema
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
@@ -301,8 +302,11 @@ def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
             raise ConfigError("exists and is not a folder", path=path)
         if any(path.iterdir()) and not (path / "manifest.json").exists():
             raise ConfigError("is a non-empty folder that is not a finger database; refusing to overwrite", path=path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
+    except OSError as e:  # read-only, a file in the way, a name too long
+        raise ConfigError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
     try:
         os.chmod(tmp, 0o755)  # mkdtemp makes it private
         for name in ARRAYS:
@@ -316,6 +320,8 @@ def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
             shutil.rmtree(old)
         else:
             os.replace(tmp, path)
+    except OSError as e:  # the folder filled up or became unwritable while writing
+        raise ConfigError(f"cannot write the database: {e.strerror}", path=path) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return path
@@ -348,10 +354,7 @@ def load_database(path: str | os.PathLike, mmap: bool = True, *, check_schema: b
         raise ConfigError("no such finger database folder", path=path)
     if not mf.is_file():
         raise ConfigError("not a finger database: manifest.json is missing", path=path)
-    try:
-        manifest = json.loads(mf.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(f"manifest is not valid JSON: {e}", path=mf) from None
+    manifest = read_json(mf, what="manifest", error=ConfigError)
     if isinstance(manifest, dict) and manifest.get("format") == FORMAT and manifest.get("version") != VERSION:
         old = manifest.get("version") == 1
         why = ("; it stores rotation-vector wrist features, which wrap: rebuild it from its clips with "
