@@ -181,3 +181,237 @@ def test_file_name_with_a_newline_is_escaped(tmp_path):
     bad.write_bytes(b"junk")
     check_promise(["inspect", bad], folder=tmp_path, inputs=[bad], names=str(bad).replace("\n", "\\n"),
                   message="truncated .glb")
+
+
+def humanoid_usda_text(sample_assets) -> str:
+    return (sample_assets / "humanoid.usda").read_text()
+
+
+def test_usd_time_sample_at_1e12(sample_assets, tmp_path):
+    """np.arange over a trillion frames: 'Unable to allocate 7.28 TiB'."""
+    bad = tmp_path / "far.usda"
+    bad.write_text(humanoid_usda_text(sample_assets).replace(
+        "quatf[] rotations.timeSamples = {", "quatf[] rotations.timeSamples = {\n 1000000000000: [(1, 0, 0, 0)],", 1))
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message="more than 1,000,000 are refused")
+
+
+def test_usd_meters_per_unit_zero(sample_assets, tmp_path):
+    bad = tmp_path / "mpu0.usda"
+    bad.write_text(humanoid_usda_text(sample_assets).replace("metersPerUnit = 0.01", "metersPerUnit = 0"))
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message="metersPerUnit 0 is not a positive finite number")
+
+
+def test_usd_all_zero_bind_transforms(sample_assets, tmp_path):
+    """LinAlgError: Singular matrix when convert inverted the binds for glTF."""
+    import re
+
+    text = humanoid_usda_text(sample_assets)
+    start = text.index("uniform matrix4d[] bindTransforms = [")
+    end = text.index("\n", start)
+    count = len(re.findall(r"\( \(", text[start:end]))
+    zero = "( (0, 0, 0, 0), (0, 0, 0, 0), (0, 0, 0, 0), (0, 0, 0, 0) )"
+    bad = tmp_path / "zerobind.usda"
+    bad.write_text(text[:start] + "uniform matrix4d[] bindTransforms = [" + ", ".join([zero] * count) + "]"
+                   + text[end:])
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message="bindTransforms of joint 'Hips' is singular")
+
+
+@pytest.mark.parametrize("edit,message", [
+    (lambda t: t.replace("elementSize = 5", "elementSize = 3", 1), "elementSize 3 / 5"),
+    (lambda t: t.replace("elementSize = 5", "elementSize = 2147483647", 2), "elementSize 2147483647 / 2147483647"),
+    (lambda t: t.replace("int[] primvars:skel:jointIndices = [", "int[] primvars:skel:jointIndices = [7, ", 1),
+     "have 2081 / 2080 values"),
+    (lambda t: t.replace("int[] primvars:skel:jointIndices = [0,", "int[] primvars:skel:jointIndices = [2000000000,",
+                         1), "skel:jointIndices outside 0..64"),
+])
+@pytest.mark.parametrize("ext", ["usda", "usdc"])
+def test_usd_skinning_checked_before_usdskel_sees_it(edit, message, ext, sample_assets, tmp_path):
+    """A mutated .usdc mesh crashed the interpreter (exit 139) in UsdSkel's influence computation."""
+    text = humanoid_usda_text(sample_assets)
+    mutated = edit(text)
+    assert mutated != text
+    bad = tmp_path / f"skin.{ext}"
+    if ext == "usda":
+        bad.write_text(mutated)
+    else:
+        from pxr import Sdf
+
+        layer = Sdf.Layer.CreateAnonymous(".usda")
+        assert layer.ImportFromString(mutated)
+        assert layer.Export(str(bad))
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message=message)
+
+
+def test_corrupt_usdc_values_fail_in_one_line(sample_assets, tmp_path):
+    """A .usdc whose compressed value section is damaged opens, then raised pxr.Tf.ErrorException (LZ4)."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    assert layer.ImportFromString(humanoid_usda_text(sample_assets))
+    good = tmp_path / "good.usdc"
+    assert layer.Export(str(good))
+    data = bytearray(good.read_bytes())
+    # the crate's table of contents sits at the end; damage the compressed sections before it
+    bad = tmp_path / "bad.usdc"
+    toc = int.from_bytes(data[16:24], "little")
+    for k in range(toc - 4000, toc - 100, 7):
+        data[k] ^= 0x5A
+    bad.write_bytes(bytes(data))
+    good.unlink()
+    run = check_promise(["inspect", bad], folder=tmp_path, inputs=[bad], names=bad, message="")
+    assert "Traceback" not in run.stderr
+
+
+def gltf_with_data_uri(sample_assets, edit) -> str:
+    """The sample take as a .gltf with an embedded buffer, ``edit(doc)`` applied to its JSON."""
+    import base64
+
+    from hostile import gltf_json
+
+    src = sample_assets / "gestures" / "ok_00.glb"
+    raw = src.read_bytes()
+    doc = gltf_json(src)
+    n = int.from_bytes(raw[12:16], "little")
+    binary = raw[20 + n + 8:]
+    doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(binary).decode()
+    edit(doc)
+    return json.dumps(doc)
+
+
+def rotation_output(doc) -> dict:
+    anim = doc["animations"][0]
+    channel = next(c for c in anim["channels"] if c["target"]["path"] == "rotation")
+    return doc["accessors"][anim["samplers"][channel["sampler"]]["output"]]
+
+
+def _set_byte_offset(doc):
+    doc["bufferViews"][0]["byteOffset"] = -1e308
+
+
+def _rotation_unsigned_int(doc):
+    rotation_output(doc)["componentType"] = 5125
+
+
+def _stride_below_element(doc):
+    acc = rotation_output(doc)
+    doc["bufferViews"][acc["bufferView"]]["byteStride"] = 4
+
+
+@pytest.mark.parametrize("edit,message", [
+    (_set_byte_offset, "byteOffset -1e+308 is not an integer from 0 to 2^53"),
+    (_rotation_unsigned_int, "have componentType 5125 not normalized; glTF allows FLOAT or normalized"),
+    (_stride_below_element, "byteStride 4 is smaller than one VEC4 element (16 bytes)"),
+])
+def test_gltf_accessor_lies(edit, message, sample_assets, tmp_path):
+    """OverflowError on byteOffset -1e308; UNSIGNED_INT rotations and a 4-byte stride for VEC4 floats
+    were read silently (integers as rotations, overlapping elements)."""
+    bad = tmp_path / "bad.gltf"
+    bad.write_text(gltf_with_data_uri(sample_assets, edit))
+    check_promise(["convert", bad, tmp_path / "out.usda"], folder=tmp_path, inputs=[bad], names=bad,
+                  message=message)
+
+
+def node_chain(n: int, skin: bool) -> str:
+    nodes = [{"name": f"n{i}", "children": [i + 1], "translation": [0, 0.01, 0]} for i in range(n - 1)]
+    nodes.append({"name": f"n{n - 1}"})
+    doc = {"asset": {"version": "2.0"}, "nodes": nodes, "scenes": [{"nodes": [0]}], "scene": 0}
+    if skin:
+        doc["skins"] = [{"joints": list(range(n))}]
+    return json.dumps(doc)
+
+
+@pytest.mark.parametrize("n,skin", [(100_000, False), (20_000, True)])
+def test_gltf_node_chains_past_the_limit(n, skin, tmp_path):
+    """inspect had not finished after 600 s (100,000 nodes); a 20,000-joint skin took 76 s."""
+    bad = tmp_path / "chain.gltf"
+    bad.write_text(node_chain(n, skin))
+    check_promise(["inspect", bad], folder=tmp_path, inputs=[bad], names=bad,
+                  message=f"{n:,} nodes: more than 10,000 are refused", cpu=30)
+
+
+def test_gltf_skin_chain_at_the_limit_reads(tmp_path):
+    """10,000 joints in one chain: read within the CPU bound (hierarchy work is linear)."""
+    src = tmp_path / "chain.gltf"
+    src.write_text(node_chain(10_000, True))
+    run = run_bounded(["inspect", "--json", src], cpu=60)
+    assert run.code == 0, run.stderr[-2000:]
+    assert json.loads(run.stdout)["skeletons"][0]["num_joints"] == 10_000
+
+
+def test_expand_with_an_overflowing_model_names_the_model(ok_glb, tmp_path):
+    """A scale of 1e308 overflowed (RuntimeWarning lines) and the error named the output."""
+    model = tmp_path / "model.json"
+    assert run_bounded(["reduce", ok_glb, "--model", model]).code == 0
+    d = json.loads(model.read_text())
+    d["relations"][0]["scale"] = 1e308
+    big = tmp_path / "big.json"
+    big.write_text(json.dumps(d))
+    check_promise(["expand", ok_glb, "--model", big, "-o", tmp_path / "out.glb"], folder=tmp_path,
+                  inputs=[ok_glb, big, model], names=big, message="scale 1e+308")
+
+
+def test_bvh_root_at_1e308_is_refused_not_written(sample_assets, tmp_path):
+    """The .glb written had infinite translations, which usdhands itself then refused."""
+    lines = (sample_assets / "humanoid.bvh").read_text().splitlines()
+    first = next(k for k, line in enumerate(lines) if line.startswith("Frame Time")) + 1
+    values = lines[first].split()
+    values[0] = "1e308"
+    lines[first] = " ".join(values)
+    bad = tmp_path / "far.bvh"
+    bad.write_text("\n".join(lines) + "\n")
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message="translations beyond 1e+30")
+
+
+def test_usd_quaternion_of_magnitude_1e38_converts_to_a_valid_glb(sample_assets, tmp_path, gltf_validator):
+    """The .glb kept the 1e38 quaternion and failed the Khronos validator: rotations are normalized."""
+    text = humanoid_usda_text(sample_assets)
+    start = text.index("quatf[] rotations.timeSamples = {")
+    first = text.index("(", text.index(": [", start))
+    close = text.index(")", first)
+    src = tmp_path / "big.usda"
+    src.write_text(text[:first] + "(1e38, 0, 0, 0)" + text[close + 1:])
+    out = tmp_path / "out.glb"
+    run = run_bounded(["convert", src, out])
+    assert run.code == 0, run.stderr
+    report = gltf_validator(out)[0]
+    assert report["numErrors"] == 0, report
+    assert run_bounded(["inspect", out]).code == 0
+
+
+def test_sigterm_mid_write_leaves_nothing(sample_assets, tmp_path):
+    """14 of 25 runs left .out.XXXX.usdc (and USD's own temporary) beside the target."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from hostile import ROOT, listing
+
+    src = tmp_path / "long.glb"
+    shutil.copy(sample_assets / "conversation.glb", src)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    terminated = 0
+    for attempt in range(3):
+        out = tmp_path / "out.usda"
+        proc = subprocess.Popen([sys.executable, "-m", "usdhands", "convert", str(src), str(out)], env=env,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline:  # wait for the temporary output
+            if any(name.startswith(".out.") for name in os.listdir(tmp_path)):
+                proc.send_signal(signal.SIGTERM)
+                break
+            time.sleep(0.002)
+        _, err = proc.communicate(timeout=120)
+        if proc.returncode == 0:
+            out.unlink()
+            continue
+        assert proc.returncode == 143, (proc.returncode, err)
+        assert err.strip().splitlines() == ["usdhands: terminated"]
+        terminated += 1
+        assert listing(tmp_path) == ["long.glb"], "temporary output left behind"
+    assert terminated >= 1

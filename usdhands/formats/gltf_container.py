@@ -90,6 +90,13 @@ class GltfFile:
         return self._cache[key]
 
 
+#: Most nodes, and most objects in all top-level arrays (accessors, animations, ...), of a glTF
+#: document read. pygltflib decodes about a thousand objects a second: a 100,000-node chain
+#: ran for more than 10 minutes. A character has a few hundred nodes.
+MAX_NODES = 10_000
+MAX_OBJECTS = 100_000
+
+
 def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
     try:
         data = json.loads(text, parse_constant=refuse_json_constant)
@@ -108,6 +115,13 @@ def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
     version = str((data.get("asset") or {}).get("version", ""))
     if not version.startswith("2."):
         raise AssetReadError(f"not a glTF 2.0 file (asset.version {version or 'missing'!r})", path=path)
+    nodes = data.get("nodes")
+    if isinstance(nodes, list) and len(nodes) > MAX_NODES:
+        raise AssetReadError(f"{len(nodes):,} nodes: more than {MAX_NODES:,} are refused", path=path)
+    objects = sum(len(v) for v in data.values() if isinstance(v, list))
+    if objects > MAX_OBJECTS:
+        raise AssetReadError(f"{objects:,} objects in the top-level arrays: more than {MAX_OBJECTS:,} are refused",
+                             path=path)
     try:
         return pygltflib.GLTF2.gltf_from_json(text)
     except Exception as e:  # dataclasses_json raises a variety of types on wrong shapes
@@ -284,9 +298,10 @@ def read_accessor(doc: GltfFile, index: int, *, as_float: bool = True) -> np.nda
     ncomp = TYPE_SIZES.get(acc.type)
     if dtype is None or ncomp is None or acc.count is None:
         raise doc.error(f"bad accessor (componentType {acc.componentType}, type {acc.type!r})", where)
-    count = int(acc.count)
+    count = _size(doc, acc.count, "count", where)
     if acc.bufferView is not None:
-        values = _read_view(doc, acc.bufferView, int(acc.byteOffset or 0), count, dtype, acc.type, where)
+        values = _read_view(doc, acc.bufferView, _size(doc, acc.byteOffset or 0, "byteOffset", where), count, dtype,
+                            acc.type, where)
     else:
         values = np.zeros((count, ncomp), dtype=dtype)
     if acc.sparse is not None and acc.sparse.count:
@@ -294,17 +309,19 @@ def read_accessor(doc: GltfFile, index: int, *, as_float: bool = True) -> np.nda
         idx_dtype = COMPONENT_DTYPES.get(sp.indices.componentType)
         if idx_dtype is None:
             raise doc.error(f"bad sparse indices componentType {sp.indices.componentType}", where)
-        idx = _read_view(doc, sp.indices.bufferView, int(sp.indices.byteOffset or 0), sp.count, idx_dtype,
-                         "SCALAR", where + ".sparse.indices")[:, 0].astype(np.int64)
-        val = _read_view(doc, sp.values.bufferView, int(sp.values.byteOffset or 0), sp.count, dtype, acc.type,
-                         where + ".sparse.values")
+        n = _size(doc, sp.count, "sparse.count", where)
+        idx = _read_view(doc, sp.indices.bufferView, _size(doc, sp.indices.byteOffset or 0, "byteOffset", where), n,
+                         idx_dtype, "SCALAR", where + ".sparse.indices")[:, 0].astype(np.int64)
+        val = _read_view(doc, sp.values.bufferView, _size(doc, sp.values.byteOffset or 0, "byteOffset", where), n,
+                         dtype, acc.type, where + ".sparse.values")
         if idx.size and (idx.min() < 0 or idx.max() >= count):
             raise doc.error(f"sparse index {int(idx.max())} out of range 0..{count - 1}", where)
         values = np.array(values)
         values[idx] = val
     if not as_float:
         return values
-    out = values.astype(np.float64)
+    with np.errstate(invalid="ignore"):  # a signalling NaN warned here; readers refuse NaN values themselves
+        out = values.astype(np.float64)
     if acc.normalized and dtype.kind in "iu":
         info = np.iinfo(dtype)
         out = out / info.max
@@ -313,18 +330,37 @@ def read_accessor(doc: GltfFile, index: int, *, as_float: bool = True) -> np.nda
     return out
 
 
+#: Largest byte offset, length or element count read from a glTF document (2**53: exact in a JSON number).
+MAX_SIZE = 2 ** 53
+
+
+def _size(doc: GltfFile, value, what: str, where: str) -> int:
+    """A byte offset, length or count of the JSON as an int, refused in one line unless 0 <= value < 2**53.
+
+    ``byteOffset: -1e308`` raised OverflowError from numpy; a float or a string passed through int().
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value or not 0 <= value < MAX_SIZE \
+            or int(value) != value:
+        numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
+        shown = f"{float(value):g}" if numeric and (isinstance(value, float) or abs(value) >= MAX_SIZE) \
+            else repr(value)[:40]
+        raise doc.error(f"{what} {shown} is not an integer from 0 to 2^53", where)
+    return int(value)
+
+
 def _read_view(doc: GltfFile, view_index: int, byte_offset: int, count: int, dtype: np.dtype, type_: str,
                where: str) -> np.ndarray:
     """``count`` elements of ``type_`` from a buffer view, honouring byteStride and column padding."""
     g = doc.gltf
-    if view_index is None or not 0 <= view_index < len(g.bufferViews):
+    if not isinstance(view_index, int) or not 0 <= view_index < len(g.bufferViews):
         raise doc.error(f"bufferView {view_index} out of range (there are {len(g.bufferViews)})", where)
     view = g.bufferViews[view_index]
-    if not 0 <= view.buffer < len(doc.buffers):
-        raise doc.error(f"buffer {view.buffer} out of range", f"bufferViews[{view_index}]")
+    vwhere = f"bufferViews[{view_index}]"
+    if not isinstance(view.buffer, int) or not 0 <= view.buffer < len(doc.buffers):
+        raise doc.error(f"buffer {view.buffer} out of range", vwhere)
     buf = doc.buffers[view.buffer]
-    vstart = int(view.byteOffset or 0)
-    vlen = int(view.byteLength)
+    vstart = _size(doc, view.byteOffset or 0, "byteOffset", vwhere)
+    vlen = _size(doc, view.byteLength, "byteLength", vwhere)
     if vstart + vlen > len(buf):
         raise doc.error(f"bufferView runs past the end of buffer {view.buffer} "
                         f"({vstart + vlen} > {len(buf)} bytes)", f"bufferViews[{view_index}]")
@@ -336,7 +372,9 @@ def _read_view(doc: GltfFile, view_index: int, byte_offset: int, count: int, dty
     col_stride = (col_bytes + 3) // 4 * 4 if rows else col_bytes
     ncols = ncomp // rows if rows else 1
     elem = col_stride * ncols if rows else ncomp * isz
-    stride = int(view.byteStride or 0) or elem
+    stride = _size(doc, view.byteStride or 0, "byteStride", vwhere) or elem
+    if stride < elem:  # overlapping elements: silently wrong values (VEC4 floats read with byteStride 4)
+        raise doc.error(f"byteStride {stride} is smaller than one {type_} element ({elem} bytes)", vwhere)
     if count == 0:
         return np.zeros((0, ncomp), dtype=dtype)
     need = byte_offset + stride * (count - 1) + elem

@@ -58,7 +58,12 @@ def clip_to_gltf_space(clip: Clip) -> Clip:
 # -- animation data ----------------------------------------------------------------
 
 def _continuous(q: np.ndarray) -> np.ndarray:
-    """Flip quaternion signs along time (axis 0) so neighbours have a non-negative dot product."""
+    """Unit quaternions, signs flipped along time (axis 0) so neighbours have a non-negative dot product.
+
+    glTF requires unit rotations: a USD quaternion of magnitude 1e38 was written as it was
+    and failed the Khronos validator.
+    """
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     if q.shape[0] < 2:
         return q
     d = np.sum(q[1:] * q[:-1], axis=-1)
@@ -187,7 +192,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
             gltf.nodes.append(pygltflib.Node(
                 name=short_joint_name(sk.joint_names[j]),
                 translation=[float(v) for v in sk.rest_translations[j]],
-                rotation=[float(v) for v in sk.rest_rotations[j]],
+                rotation=[float(v) for v in sk.rest_rotations[j] / np.linalg.norm(sk.rest_rotations[j])],
                 scale=[float(v) for v in sk.rest_scales[j]]))
         for j, p in enumerate(sk.parents):
             if p < 0:

@@ -15,7 +15,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-from pxr import Gf, Usd, UsdGeom, UsdSkel
+from pxr import Gf, Tf, Usd, UsdGeom, UsdSkel
 
 from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatchError
 from usdhands.formats.usd_common import (
@@ -28,6 +28,7 @@ from usdhands.formats.usd_common import (
     quiet_diagnostics,
     skeleton_tokens_and_names,
     skeleton_world_xforms,
+    tf_error_reason,
 )
 from usdhands.formats.usd_schema_data import read_finger_motion
 from usdhands.model.asset import Asset, SkinnedMesh
@@ -73,7 +74,10 @@ def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
     path = Path(path)
     stage = open_stage(path)
     with quiet_diagnostics():
-        return _read_stage(stage, path, fps)
+        try:
+            return _read_stage(stage, path, fps)
+        except Tf.ErrorException as e:  # a corrupt .usdc fails when its values are read (LZ4), after Open
+            raise AssetReadError(f"cannot read as USD: {tf_error_reason(e, path)}", path=path) from None
 
 
 def read_stage(stage: Usd.Stage, *, fps: float | None = None, path: str | os.PathLike | None = None) -> Asset:
@@ -91,6 +95,8 @@ def read_stage(stage: Usd.Stage, *, fps: float | None = None, path: str | os.Pat
 #: Frame rates (and timeCodesPerSecond) read from USD: one frame in 1000 s up to 10000 per second.
 MIN_RATE = 1e-3
 MAX_RATE = 1e4
+#: Most frames one animation is sampled at (a time sample at time code 1e12 asked for 7 TiB).
+MAX_FRAMES = 1_000_000
 
 
 def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
@@ -98,6 +104,8 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
     if not (MIN_RATE <= tcps <= MAX_RATE):  # also NaN; 0 divided by zero, 1e300 collapsed float32 key times
         raise AssetReadError(f"timeCodesPerSecond {tcps:g} is outside {MIN_RATE:g}..{MAX_RATE:g}", path=path)
     mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+    if not (mpu > 0 and np.isfinite(mpu)):  # 0 raised ValueError from the Skeleton
+        raise AssetReadError(f"metersPerUnit {mpu:g} is not a positive finite number", path=path)
     up = str(UsdGeom.GetStageUpAxis(stage)).upper()
     up = up if up in ("Y", "Z") else "Y"
     cache = UsdSkel.Cache()
@@ -260,6 +268,8 @@ def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_u
     rest = None if rest is None or len(rest) == 0 else rest
     if rest is not None and len(rest) != J:
         raise JointMismatchError(f"restTransforms has {len(rest)} entries for {J} joints", path=path, location=where)
+    if bind_np is not None:  # all-zero binds passed here and failed as LinAlgError when convert inverted them
+        _check_xforms(bind_np, names, "bindTransforms", path, where)
     if world is not None and bind_np is not None:
         bind_np = np.asarray(world, dtype=np.float64) @ bind_np
     if rest is not None:
@@ -267,7 +277,6 @@ def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_u
         if world is not None:
             local[parents < 0] = np.asarray(world, dtype=np.float64) @ local[parents < 0]
     elif bind_np is not None:
-        _check_xforms(bind_np, names, "bindTransforms", path, where)
         local = np.empty_like(bind_np)
         for j, p in enumerate(parents):
             local[j] = bind_np[j] if p < 0 else np.linalg.solve(bind_np[p], bind_np[j])
@@ -333,8 +342,11 @@ def frame_times(samples: list[float], tcps: float, fps: float | None) -> tuple[n
             return samples, tcps / float(steps[0])
         fps = tcps
     step = tcps / float(fps)
-    n = int(np.floor((last - first) / step + 1e-6)) + 1
-    return first + np.arange(n) * step, float(fps)
+    n = np.floor((last - first) / step + 1e-6) + 1
+    if not n <= MAX_FRAMES:
+        raise InvalidAnimationError(f"time samples from {first:g} to {last:g} make {n:.3g} frames at {fps:g} fps "
+                                    f"(more than {MAX_FRAMES:,} are refused)")
+    return first + np.arange(int(n)) * step, float(fps)
 
 
 def _check_authored_rotations(prim: Usd.Prim, joints: list[str], path: Path, where: str) -> None:
@@ -382,7 +394,10 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
     cols = np.array([index[t] for t in joints], dtype=np.int64)
     K = len(joints)
     samples = list(anim_query.GetJointTransformTimeSamples())
-    times, rate = frame_times(samples, tcps, fps)
+    try:
+        times, rate = frame_times(samples, tcps, fps)
+    except InvalidAnimationError as e:
+        raise InvalidAnimationError(e.message, path=path, location=where) from None
     if not (MIN_RATE <= rate <= MAX_RATE):  # time samples a millionth of a code apart
         raise InvalidAnimationError(f"time samples give {rate:g} frames per second (outside {MIN_RATE:g}..{MAX_RATE:g})",
                                     path=path, location=str(anim_query.GetPrim().GetPath()))
@@ -498,6 +513,48 @@ def _uv_primvar(api: UsdGeom.PrimvarsAPI) -> UsdGeom.Primvar | None:
     return None
 
 
+#: Most influences per point (skel:jointIndices elementSize) read; rigs use 4 to 8.
+MAX_INFLUENCES = 256
+
+
+def _check_influences(prim: Usd.Prim, n_points: int, n_joints: int, path: Path, where: str) -> None:
+    """Refuse joint influences UsdSkel should not be handed: sizes that disagree, indices out of range.
+
+    A mutated .usdc mesh crashed the interpreter (segmentation fault) inside UsdSkel's
+    influence computation; inconsistent ones were silently dropped (an unskinned mesh).
+    """
+    binding = UsdSkel.BindingAPI(prim)
+    ip, wp = binding.GetJointIndicesPrimvar(), binding.GetJointWeightsPrimvar()
+    if not (ip and ip.HasAuthoredValue()) and not (wp and wp.HasAuthoredValue()):
+        return
+    if not (ip and ip.HasAuthoredValue() and wp and wp.HasAuthoredValue()):
+        raise JointMismatchError("skel:jointIndices and skel:jointWeights must both be authored", path=path,
+                                 location=where)
+    early = Usd.TimeCode.EarliestTime()
+    indices, weights = ip.Get(early), wp.Get(early)
+    if indices is None or weights is None:
+        raise JointMismatchError("skel:jointIndices or skel:jointWeights has no readable value", path=path,
+                                 location=where)
+    k_i, k_w = ip.GetElementSize(), wp.GetElementSize()
+    if k_i != k_w or not 1 <= k_i <= MAX_INFLUENCES:
+        raise JointMismatchError(f"skel:jointIndices / jointWeights elementSize {k_i} / {k_w}: expected the same "
+                                 f"size from 1 to {MAX_INFLUENCES}", path=path, location=where)
+    interp_i, interp_w = ip.GetInterpolation(), wp.GetInterpolation()
+    if interp_i != interp_w or interp_i not in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying,
+                                                UsdGeom.Tokens.constant):
+        raise JointMismatchError(f"skel:jointIndices / jointWeights interpolation {interp_i} / {interp_w}: expected "
+                                 "both vertex or both constant", path=path, location=where)
+    expected = k_i if interp_i == UsdGeom.Tokens.constant else k_i * n_points
+    if len(indices) != expected or len(weights) != expected:
+        raise JointMismatchError(f"skel:jointIndices / jointWeights have {len(indices)} / {len(weights)} values; "
+                                 f"{interp_i} influences of size {k_i} need {expected}", path=path, location=where)
+    idx = np.asarray(indices, dtype=np.int64)
+    if idx.size and (idx.min() < 0 or idx.max() >= n_joints):
+        raise JointMismatchError(f"skel:jointIndices outside 0..{n_joints - 1}", path=path, location=where)
+    if not np.isfinite(np.asarray(weights, dtype=np.float64)).all():
+        raise JointMismatchError("skel:jointWeights holds NaN or infinite weights", path=path, location=where)
+
+
 def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.ndarray | None = None) -> SkinnedMesh:
     prim = sq.GetPrim()
     where = str(prim.GetPath())
@@ -514,6 +571,7 @@ def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.nda
         raise JointMismatchError(f"faceVertexIndices outside 0..{V - 1}", path=path, location=where)
 
     # joint influences, in the skeleton's joint order
+    _check_influences(prim, V, len(sq.GetJointOrder() or tokens), path, where)
     idx, w = sq.ComputeJointInfluences(early) or (None, None)
     K = int(sq.GetNumInfluencesPerComponent())
     joint_indices = joint_weights = None

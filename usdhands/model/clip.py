@@ -13,6 +13,11 @@ from usdhands.model.skeleton import Skeleton, forward_kinematics, readonly
 __all__ = ["Clip"]
 
 
+#: Largest translation or scale component a clip may hold: far beyond any scene, and far
+#: enough below 32-bit floats' 3.4e38 (glTF, USD) that unit conversions cannot overflow them.
+MAX_MAGNITUDE = 1e30
+
+
 @dataclass(frozen=True, eq=False)
 class Clip:
     """A skeleton animated over time.
@@ -72,7 +77,8 @@ class Clip:
 
     # -- checks ---------------------------------------------------------------
     def validate(self, path: str | None = None) -> "Clip":
-        """Raise :class:`InvalidAnimationError` for zero frames, NaN or zero-length quaternions."""
+        """Raise :class:`InvalidAnimationError` for zero frames, NaN or zero-length quaternions, or
+        translations and scales beyond :data:`MAX_MAGNITUDE`."""
         if self.num_frames == 0:
             raise InvalidAnimationError(f"animation {self.name!r} has zero frames", path=path)
         for label, arr in (("rotations", self.rotations), ("translations", self.translations),
@@ -82,6 +88,13 @@ class Clip:
                 f, j = np.argwhere(bad)[0]
                 raise InvalidAnimationError(
                     f"animation {self.name!r} has NaN or infinite {label} "
+                    f"(joint {self.skeleton.joint_names[j]!r}, frame {f})", path=path)
+        for label, arr in (("translations", self.translations), ("scales", self.scales)):
+            bad = (np.abs(arr) > MAX_MAGNITUDE).any(axis=-1)
+            if bad.any():  # written as 32-bit floats they became infinite (BVH root positions of 1e308)
+                f, j = np.argwhere(bad)[0]
+                raise InvalidAnimationError(
+                    f"animation {self.name!r} has {label} beyond {MAX_MAGNITUDE:g} "
                     f"(joint {self.skeleton.joint_names[j]!r}, frame {f})", path=path)
         norms = np.linalg.norm(self.rotations, axis=-1)
         bad = norms < 1e-6

@@ -331,6 +331,10 @@ class ReductionModel:
         for r in model.relations:
             if not (math.isfinite(r.scale) and math.isfinite(r.offset)):
                 raise ConfigError(f"relation of {r.dependent!r} has a non-finite scale or offset", path=path)
+            if not (abs(r.scale) <= MAX_COEFFICIENT and abs(r.offset) <= MAX_COEFFICIENT):
+                # a scale of 1e308 overflowed in expand, and the error then named the output
+                raise ConfigError(f"relation of {r.dependent!r} has scale {r.scale:g} / offset {r.offset:g} beyond "
+                                  f"{MAX_COEFFICIENT:g}", path=path)
         for c in model.constants:  # NaN passed and expand silently kept the input's curve
             if not math.isfinite(c.value):
                 raise ConfigError(f"constant {c.curve!r} has a non-finite value {c.value}", path=path)
@@ -338,6 +342,11 @@ class ReductionModel:
             if not math.isfinite(float(mean)):
                 raise ConfigError(f"mean of {curve!r} is not finite ({mean})", path=path)
         return model
+
+
+#: Largest |scale| and |offset| (degrees) of a relation read from a file: far past any fit of
+#: finger curves, small enough that rebuilt angles stay finite.
+MAX_COEFFICIENT = 1e6
 
 
 def model_schema() -> dict:
