@@ -121,3 +121,23 @@ def gltf_json(path: Path) -> dict:
         n = int.from_bytes(raw[12:16], "little")
         return json.loads(raw[20:20 + n])
     return json.loads(raw)
+
+
+def run_batch(cases: list[list], *, memory: int = MEMORY_LIMIT, cpu: int = 300, wall: float = 900) -> list[dict]:
+    """Run many command lines in one bounded subprocess (tests/hostile_worker.py); one result dict each.
+
+    A crash or a hang of the whole batch fails here, naming the batch's output.
+    """
+    full_env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    worker = Path(__file__).resolve().parent / "hostile_worker.py"
+    proc = subprocess.Popen([sys.executable, str(worker)], env=full_env, stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=_limits(memory, cpu),
+                            start_new_session=True)
+    try:
+        out, err = proc.communicate(json.dumps([[str(a) for a in argv] for argv in cases]).encode(), timeout=wall)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        raise AssertionError(f"hostile batch did not finish in {wall} s") from None
+    assert proc.returncode == 0, (proc.returncode, err.decode(errors="replace")[-3000:])
+    return json.loads(out)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
+import signal
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -207,6 +208,9 @@ def _current_umask() -> int:
     return mask
 
 
+_CLEANUP_SIGNALS = {signal.SIGTERM, signal.SIGINT}
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
@@ -216,13 +220,19 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     path = Path(path)
     if path.is_dir():
         raise OutputPathError("is a folder; give the output a file name", path=path)
+    # SIGTERM/SIGINT held back until the temporary file's name is known to the cleanup below:
+    # a signal right after mkstemp left .out.XXXX files behind
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _CLEANUP_SIGNALS)
+    tmp_path = None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    except OSError as e:  # read-only or missing folder
-        raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+        except OSError as e:  # read-only or missing folder
+            raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
+        os.close(fd)
+        tmp_path = Path(tmp)
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)  # a pending signal is raised here, inside the cleanup
+        held = None
         yield tmp_path
         # mkstemp creates the file 0600; give the output the mode a plain open() would
         with contextlib.suppress(OSError):
@@ -232,6 +242,10 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         except OSError as e:
             raise OutputPathError(f"cannot replace the output: {e.strerror}", path=path) from None
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
+        if tmp_path is not None:
+            with contextlib.suppress(FileNotFoundError):
+                tmp_path.unlink()
         raise
+    finally:
+        if held is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)

@@ -1,0 +1,231 @@
+"""A hostile corpus, generated from the samples, run through every command.
+
+Each class of bad input of issue 8 (missing, folder, named pipe, /dev/zero, empty,
+truncated, not UTF-8, JSON nested 100,000 deep, NaN, huge integers, lying offsets,
+absurd sizes, a newline in the name, outputs that cannot be written, unknown options)
+is built by code, given to every command in :data:`COMMANDS` as its main input and to
+each side-file option in :data:`SIDE_FILES`, and must keep the promise: exit status 2,
+exactly one stderr line ``usdhands: error: FILE: ...`` naming the bad file (USD's own
+diagnostics included: file descriptor 2 is captured), nothing written or left behind,
+every input unchanged. Each command's cases run in one subprocess under resource
+limits (tests/hostile.py).
+
+Adding a command is one line in :data:`COMMANDS` (and one in :data:`SIDE_FILES` for
+its side-file options).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import struct
+from pathlib import Path
+
+import pytest
+
+from hostile import deep_json, listing, run_batch, sha  # noqa: E402  (tests/ is on sys.path)
+
+#: command -> its argument list; {input} is the hostile (or good) main input, {ext} its extension,
+#: {out} an output path without extension, {good} a good clip, {body} a body-only clip,
+#: {model} a reduction model
+COMMANDS: dict[str, list[str]] = {
+    "inspect": ["inspect", "{input}"],
+    "handmap": ["handmap", "{input}", "-o", "{out}.json"],
+    "convert": ["convert", "{input}", "{out}.usda"],
+    "db build": ["db", "build", "{input}", "-o", "{out}_db"],
+    "synthesize": ["synthesize", "{input}", "-o", "{out}{ext}"],
+    "evaluate": ["evaluate", "{input}", "{good}", "--labels", "(.)"],
+    "splice": ["splice", "{body}", "{input}", "-o", "{out}.glb"],
+    "reduce": ["reduce", "{input}", "-o", "{out}{ext}"],
+    "expand": ["expand", "{input}", "--model", "{model}", "-o", "{out}{ext}"],
+}
+
+#: command -> side-file option -> (kind of file it takes, "json" or "csv"; option of the
+#: command's template it replaces, or None)
+SIDE_FILES: dict[str, dict[str, tuple[str, str | None]]] = {
+    "inspect": {"--handmap": ("json", None)},
+    "handmap": {"--handmap": ("json", None)},
+    "synthesize": {"--handmap": ("json", None), "--config": ("json", None)},
+    "evaluate": {"--config": ("json", None), "--labels-file": ("csv", "--labels")},
+    "splice": {"--hands-markers": ("csv", None)},
+    "reduce": {"--handmap": ("json", None)},
+    "expand": {"--model": ("json", "--model")},
+}
+
+
+def _glb(doc_text: str, binary: bytes = b"") -> bytes:
+    j = doc_text.encode()
+    j += b" " * (-len(j) % 4)
+    chunks = struct.pack("<II", len(j), 0x4E4F534A) + j
+    if binary:
+        binary += b"\0" * (-len(binary) % 4)
+        chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
+    return b"glTF" + struct.pack("<II", 2, 12 + len(chunks)) + chunks
+
+
+def _split_glb(raw: bytes) -> tuple[dict, bytes]:
+    n = int.from_bytes(raw[12:16], "little")
+    return json.loads(raw[20:20 + n]), raw[20 + n + 8:]
+
+
+def main_input_cases(folder: Path, samples: Path) -> dict[str, tuple[Path, str]]:
+    """Hostile main inputs: class -> (path, piece of the expected message)."""
+    ok = (samples / "gestures" / "ok_00.glb").read_bytes()
+    doc, binary = _split_glb(ok)
+    usda = (samples / "humanoid.usda").read_text()
+    bvh_lines = (samples / "humanoid.bvh").read_text().splitlines()
+    cases: dict[str, tuple[Path, str]] = {}
+
+    def add(name: str, filename: str, content, message: str) -> None:
+        path = folder / filename
+        if isinstance(content, str):
+            path.write_text(content)
+        elif isinstance(content, bytes):
+            path.write_bytes(content)
+        else:
+            content(path)
+        cases[name] = (path, message)
+
+    add("missing", "missing.glb", lambda p: None, "no such file")
+    add("folder", "folder.glb", lambda p: p.mkdir(), "")  # evaluate reads a folder's files
+    add("fifo", "pipe.glb", lambda p: os.mkfifo(p), "is a named pipe")
+    add("devzero", "zero.bvh", lambda p: p.symlink_to("/dev/zero"), "is a device")
+    add("empty", "empty.glb", b"", "")
+    add("truncated", "half.glb", ok[:len(ok) // 2], "truncated .glb")
+    add("newline_in_name", "new\nline.glb", ok[:30], "")
+    add("deep_json", "deep.gltf", '{"asset": {"version": "2.0"}, "extras": ' + deep_json(100_000) + "}",
+        "nested 100001 deep")
+    add("nan_json", "nan.glb", _glb(json.dumps(doc).replace('"scene": 0', '"scene": NaN', 1), binary),
+        "NaN is not a JSON number")
+    big = dict(doc, bufferViews=[dict(v, byteOffset=-1e308) for v in doc["bufferViews"]])
+    add("byte_offset", "offset.glb", _glb(json.dumps(big), binary), "is not an integer from 0 to 2^53")
+    many = {"asset": {"version": "2.0"}, "nodes": [{"children": [i + 1]} for i in range(100_000)] + [{}]}
+    add("many_nodes", "many.gltf", json.dumps(many), "more than 10,000 are refused")
+    add("usda_not_utf8", "latin.usda", usda.encode()[:200] + b"\xff\xfe\xfd" + usda.encode()[200:], "")
+    add("usd_far_time", "far.usda", usda.replace("quatf[] rotations.timeSamples = {",
+                                                 "quatf[] rotations.timeSamples = {\n 1e12: [(1, 0, 0, 0)],", 1),
+        "more than 1,000,000 are refused")
+    add("usd_mpu_zero", "mpu0.usda", usda.replace("metersPerUnit = 0.01", "metersPerUnit = 0"),
+        "metersPerUnit 0")
+    first = next(k for k, line in enumerate(bvh_lines) if line.startswith("Frame Time")) + 1
+    far = list(bvh_lines)
+    far[first] = " ".join(["1e308"] + far[first].split()[1:])
+    add("bvh_far_root", "far.bvh", "\n".join(far) + "\n", "beyond 1e+30")
+    motion = bvh_lines.index("MOTION")
+    add("bvh_unclosed", "open.bvh", "\n".join(bvh_lines[:motion - 1] + bvh_lines[motion:]) + "\n", "")
+    return cases
+
+
+def side_file_cases(folder: Path, kind: str) -> dict[str, tuple[Path, str]]:
+    """Hostile side files of a kind ("json" or "csv"): class -> (path, piece of the expected message)."""
+    ext = ".json" if kind == "json" else ".csv"
+    cases: dict[str, tuple[Path, str]] = {}
+
+    def add(name: str, content, message: str) -> None:
+        path = folder / f"{name}{ext}"
+        if isinstance(content, (str, bytes)):
+            path.write_bytes(content.encode() if isinstance(content, str) else content)
+        else:
+            content(path)
+        cases[name] = (path, message)
+
+    add("missing", lambda p: None, "no such")
+    add("folder", lambda p: p.mkdir(), "is a folder")
+    add("fifo", lambda p: os.mkfifo(p), "is a named pipe")
+    add("devzero", lambda p: p.symlink_to("/dev/zero"), "is a device")
+    add("not_utf8", b"\xff\xfe\x00\x81 not text\n", "not UTF-8")
+    if kind == "json":
+        add("deep", '{"a": ' + deep_json(100_000) + "}", "nested 100001 deep")
+        add("nan", '{"a": NaN}', "NaN is not a JSON number")
+        add("bigint", '{"a": ' + "7" * 5000 + "}", "4300 digits")
+    return cases
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory, sample_assets):
+    """Good inputs (a take, a body-only clip, a reduction model) and the hostile files, in one folder."""
+    from usdhands.cli import main
+
+    folder = tmp_path_factory.mktemp("hostile")
+    good = folder / "good_ok.glb"
+    shutil.copy(sample_assets / "gestures" / "ok_00.glb", good)
+    body = folder / "good_body.glb"
+    shutil.copy(sample_assets / "conversation_bodyonly.glb", body)
+    model = folder / "good_model.json"
+    assert main(["reduce", str(good), "--model", str(model)]) == 0
+    (folder / "main").mkdir()
+    main_cases = main_input_cases(folder / "main", sample_assets)
+    side = {}
+    for kind in ("json", "csv"):
+        (folder / kind).mkdir()
+        side[kind] = side_file_cases(folder / kind, kind)
+    return {"folder": folder, "good": good, "body": body, "model": model, "main": main_cases, "side": side}
+
+
+def _fill(template: list[str], corpus, input_path: Path, out: Path) -> list[str]:
+    values = {"input": input_path, "good": corpus["good"], "body": corpus["body"], "model": corpus["model"],
+              "out": out, "ext": input_path.suffix or ".glb"}
+    return [a.format(**values) for a in template]
+
+
+def _check(results, expected, corpus):
+    inputs = [corpus["good"], corpus["body"], corpus["model"]]
+    failures = []
+    for (label, path, message), result in zip(expected, results):
+        lines = result["stderr"].rstrip("\n").split("\n") if result["stderr"].strip() else []
+        shown = str(path).replace("\n", "\\n")
+        ok = (result["code"] == 2 and len(lines) == 1 and lines[0].startswith(f"usdhands: error: {shown}")
+              and message in lines[0])
+        if not ok:
+            failures.append(f"{label}: exit {result['code']}, stderr {result['stderr'][-400:]!r}")
+    return failures, inputs
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_every_hostile_input_keeps_the_promise(command, corpus):
+    folder = corpus["folder"]
+    out_folder = folder / "out" / command.replace(" ", "_")
+    out_folder.mkdir(parents=True)
+    cases, expected = [], []
+    for name, (path, message) in corpus["main"].items():
+        cases.append(_fill(COMMANDS[command], corpus, path, out_folder / "out"))
+        expected.append((f"input {name}", path, message))
+    for option, (kind, replaces) in SIDE_FILES.get(command, {}).items():
+        for name, (path, message) in corpus["side"][kind].items():
+            argv = _fill(COMMANDS[command], corpus, corpus["good"], out_folder / "out")
+            if replaces is not None:  # drop the template's option this one stands for
+                k = argv.index(replaces)
+                del argv[k:k + 2]
+            argv += [option, str(path)]
+            cases.append(argv)
+            expected.append((f"{option} {name}", path, message))
+    # outputs that cannot be written, and a misused option (the message names the output or nothing)
+    before = {p: sha(p) for p in (corpus["good"], corpus["body"], corpus["model"])}
+    files_before = listing(folder)
+    results = run_batch(cases)
+    failures, inputs = _check(results, expected, corpus)
+    assert failures == [], "\n".join(failures)
+    assert listing(folder) == files_before, "an output or a temporary file was left behind"
+    assert {p: sha(p) for p in inputs} == before
+
+
+@pytest.mark.parametrize("command", sorted(c for c in COMMANDS if "{out}" in " ".join(COMMANDS[c])))
+def test_unwritable_outputs_and_bad_options(command, corpus):
+    folder = corpus["folder"]
+    templates = COMMANDS[command]
+    cases, expected = [], []
+    blocker = folder / "a_file"
+    blocker.touch()
+    for label, out in (("folder is a file", blocker / "out"), ("name too long", folder / ("n" * 300))):
+        argv = _fill(templates, corpus, corpus["good"], out)
+        shown = next(a for a in argv if a.startswith(str(out)))
+        cases.append(argv)
+        expected.append((label, shown, ""))
+    cases.append(_fill(templates, corpus, corpus["good"], folder / "out") + ["--bogus"])
+    expected.append(("unknown option", "", "unrecognized arguments: --bogus"))
+    files_before = listing(folder)
+    results = run_batch(cases)
+    failures, _ = _check(results, expected, corpus)
+    assert failures == [], "\n".join(failures)
+    assert listing(folder) == files_before
