@@ -106,7 +106,10 @@ def _node_trs(doc: GltfFile, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     s = np.asarray(n.scale if n.scale is not None else (1.0, 1.0, 1.0), dtype=np.float64)
     if t.shape != (3,) or q.shape != (4,) or s.shape != (3,):
         raise doc.error("node TRS has the wrong number of components", f"nodes[{i}]")
-    if not np.isfinite(q).all() or np.linalg.norm(q) < 1e-12:
+    trs = np.concatenate([t, q, s])
+    if not np.isfinite(trs).all() or np.abs(trs).max() > 1e30:  # 1e308 overflowed the norm below
+        raise doc.error("node translation, rotation or scale is not finite (or absurdly large)", f"nodes[{i}]")
+    if np.linalg.norm(q) < 1e-12:
         raise doc.error(f"node rotation {q.tolist()} is not a quaternion", f"nodes[{i}]")
     return t, q / np.linalg.norm(q), s
 

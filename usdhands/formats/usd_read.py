@@ -78,6 +78,8 @@ def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
             return _read_stage(stage, path, fps)
         except Tf.ErrorException as e:  # a corrupt .usdc fails when its values are read (LZ4), after Open
             raise AssetReadError(f"cannot read as USD: {tf_error_reason(e, path)}", path=path) from None
+        except UnicodeDecodeError as e:  # a token or name of a corrupt .usdc that is not UTF-8
+            raise AssetReadError(f"cannot read as USD: a name or token is not UTF-8 ({e.reason})", path=path) from None
 
 
 def read_stage(stage: Usd.Stage, *, fps: float | None = None, path: str | os.PathLike | None = None) -> Asset:
