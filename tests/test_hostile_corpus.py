@@ -89,8 +89,8 @@ def main_input_cases(folder: Path, samples: Path) -> dict[str, tuple[Path, str]]
 
     add("missing", "missing.glb", lambda p: None, "no such file")
     add("folder", "folder.glb", lambda p: p.mkdir(), "")  # evaluate reads a folder's files
-    add("fifo", "pipe.glb", lambda p: os.mkfifo(p), "is a named pipe")
-    add("devzero", "zero.bvh", lambda p: p.symlink_to("/dev/zero"), "is a device")
+    add("fifo", "pipe.glb", lambda p: os.mkfifo(p), "not a regular file")
+    add("devzero", "zero.bvh", lambda p: p.symlink_to("/dev/zero"), "not a regular file")
     add("empty", "empty.glb", b"", "")
     add("truncated", "half.glb", ok[:len(ok) // 2], "truncated .glb")
     add("newline_in_name", "new\nline.glb", ok[:30], "")
@@ -132,8 +132,8 @@ def side_file_cases(folder: Path, kind: str) -> dict[str, tuple[Path, str]]:
 
     add("missing", lambda p: None, "no such")
     add("folder", lambda p: p.mkdir(), "is a folder")
-    add("fifo", lambda p: os.mkfifo(p), "is a named pipe")
-    add("devzero", lambda p: p.symlink_to("/dev/zero"), "is a device")
+    add("fifo", lambda p: os.mkfifo(p), "not a regular file")
+    add("devzero", lambda p: p.symlink_to("/dev/zero"), "not a regular file")
     add("not_utf8", b"\xff\xfe\x00\x81 not text\n", "not UTF-8")
     if kind == "json":
         add("deep", '{"a": ' + deep_json(100_000) + "}", "nested 100001 deep")
