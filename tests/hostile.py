@@ -141,3 +141,16 @@ def run_batch(cases: list[list], *, memory: int = MEMORY_LIMIT, cpu: int = 300, 
         raise AssertionError(f"hostile batch did not finish in {wall} s") from None
     assert proc.returncode == 0, (proc.returncode, err.decode(errors="replace")[-3000:])
     return json.loads(out)
+
+
+def glb_bytes(doc: dict | str, binary: bytes = b"") -> bytes:
+    """A GLB file from a JSON document (or its text) and an optional binary chunk."""
+    import struct
+
+    j = (doc if isinstance(doc, str) else json.dumps(doc)).encode()
+    j += b" " * (-len(j) % 4)
+    chunks = struct.pack("<II", len(j), 0x4E4F534A) + j
+    if binary:
+        binary += b"\0" * (-len(binary) % 4)
+        chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
+    return b"glTF" + struct.pack("<II", 2, 12 + len(chunks)) + chunks

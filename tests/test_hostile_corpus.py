@@ -19,12 +19,11 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import struct
 from pathlib import Path
 
 import pytest
 
-from hostile import deep_json, listing, run_batch, sha  # noqa: E402  (tests/ is on sys.path)
+from hostile import deep_json, glb_bytes, listing, run_batch, sha  # noqa: E402  (tests/ is on sys.path)
 
 #: command -> its argument list; {input} is the hostile (or good) main input, {ext} its extension,
 #: {out} an output path without extension, {good} a good clip, {body} a body-only clip,
@@ -52,16 +51,6 @@ SIDE_FILES: dict[str, dict[str, tuple[str, str | None]]] = {
     "reduce": {"--handmap": ("json", None)},
     "expand": {"--model": ("json", "--model")},
 }
-
-
-def _glb(doc_text: str, binary: bytes = b"") -> bytes:
-    j = doc_text.encode()
-    j += b" " * (-len(j) % 4)
-    chunks = struct.pack("<II", len(j), 0x4E4F534A) + j
-    if binary:
-        binary += b"\0" * (-len(binary) % 4)
-        chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
-    return b"glTF" + struct.pack("<II", 2, 12 + len(chunks)) + chunks
 
 
 def _split_glb(raw: bytes) -> tuple[dict, bytes]:
@@ -96,10 +85,10 @@ def main_input_cases(folder: Path, samples: Path) -> dict[str, tuple[Path, str]]
     add("newline_in_name", "new\nline.glb", ok[:30], "")
     add("deep_json", "deep.gltf", '{"asset": {"version": "2.0"}, "extras": ' + deep_json(100_000) + "}",
         "nested 100001 deep")
-    add("nan_json", "nan.glb", _glb(json.dumps(doc).replace('"scene": 0', '"scene": NaN', 1), binary),
+    add("nan_json", "nan.glb", glb_bytes(json.dumps(doc).replace('"scene": 0', '"scene": NaN', 1), binary),
         "NaN is not a JSON number")
     big = dict(doc, bufferViews=[dict(v, byteOffset=-1e308) for v in doc["bufferViews"]])
-    add("byte_offset", "offset.glb", _glb(json.dumps(big), binary), "is not an integer from 0 to 2^53")
+    add("byte_offset", "offset.glb", glb_bytes(json.dumps(big), binary), "is not an integer from 0 to 2^53")
     many = {"asset": {"version": "2.0"}, "nodes": [{"children": [i + 1]} for i in range(100_000)] + [{}]}
     add("many_nodes", "many.gltf", json.dumps(many), "more than 10,000 are refused")
     add("usda_not_utf8", "latin.usda", usda.encode()[:200] + b"\xff\xfe\xfd" + usda.encode()[200:], "")

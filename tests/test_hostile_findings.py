@@ -12,22 +12,10 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import struct
 
 import pytest
 
-from hostile import check_promise, deep_json, run_bounded  # noqa: E402  (tests/ is on sys.path)
-
-
-def glb_bytes(doc: dict | str, bin_chunk: bytes = b"") -> bytes:
-    """A GLB file from a JSON document (or its text) and an optional binary chunk."""
-    j = (doc if isinstance(doc, str) else json.dumps(doc)).encode()
-    j += b" " * (-len(j) % 4)
-    chunks = struct.pack("<II", len(j), 0x4E4F534A) + j
-    if bin_chunk:
-        bin_chunk += b"\0" * (-len(bin_chunk) % 4)
-        chunks += struct.pack("<II", len(bin_chunk), 0x004E4942) + bin_chunk
-    return b"glTF" + struct.pack("<II", 2, 12 + len(chunks)) + chunks
+from hostile import check_promise, deep_json, glb_bytes, run_bounded  # noqa: E402  (tests/ is on sys.path)
 
 
 def deep_gltf_text(depth: int) -> str:
