@@ -208,7 +208,40 @@ def _current_umask() -> int:
     return mask
 
 
-_CLEANUP_SIGNALS = {signal.SIGTERM, signal.SIGINT}
+_CLEANUP_SIGNALS = (signal.SIGTERM, signal.SIGINT)
+
+
+class _DeferredSignals:
+    """SIGTERM/SIGINT recorded instead of handled until :meth:`replay` (main thread only).
+
+    Blocking the signals (pthread_sigmask) did not close the window: USD's worker threads
+    take the signal and Python runs its handler in the main thread all the same.
+    """
+
+    def __init__(self):
+        import threading
+
+        self.saved: dict = {}
+        self.pending: list[int] = []
+        if threading.current_thread() is threading.main_thread():
+            for sig in _CLEANUP_SIGNALS:
+                self.saved[sig] = signal.signal(sig, lambda signum, frame: self.pending.append(signum))
+
+    def restore(self) -> None:
+        for sig, handler in self.saved.items():
+            signal.signal(sig, handler)
+        self.saved = {}
+
+    def replay(self) -> None:
+        """Restore the handlers and run the one of each signal that came meanwhile (it raises)."""
+        saved = dict(self.saved)
+        self.restore()
+        for sig in self.pending:
+            handler = saved.get(sig)
+            if callable(handler):
+                handler(sig, None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(sig)
 
 
 @contextlib.contextmanager
@@ -220,9 +253,9 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     path = Path(path)
     if path.is_dir():
         raise OutputPathError("is a folder; give the output a file name", path=path)
-    # SIGTERM/SIGINT held back until the temporary file's name is known to the cleanup below:
+    # SIGTERM/SIGINT deferred until the temporary file's name is known to the cleanup below:
     # a signal right after mkstemp left .out.XXXX files behind
-    held = signal.pthread_sigmask(signal.SIG_BLOCK, _CLEANUP_SIGNALS)
+    deferred = _DeferredSignals()
     tmp_path = None
     try:
         try:
@@ -231,8 +264,7 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
             raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
         os.close(fd)
         tmp_path = Path(tmp)
-        signal.pthread_sigmask(signal.SIG_SETMASK, held)  # a pending signal is raised here, inside the cleanup
-        held = None
+        deferred.replay()  # a signal that came meanwhile raises here, inside the cleanup
         yield tmp_path
         # mkstemp creates the file 0600; give the output the mode a plain open() would
         with contextlib.suppress(OSError):
@@ -247,5 +279,4 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
                 tmp_path.unlink()
         raise
     finally:
-        if held is not None:
-            signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        deferred.restore()
