@@ -48,10 +48,8 @@ def check_regular_file(path: str | os.PathLike, *, what: str = "file", error: ty
         raise error(f"cannot read {what} ({e.strerror or e})", path=path) from None
     if stat.S_ISDIR(mode):
         raise error("is a folder, not a file", path=path)
-    if not stat.S_ISREG(mode):
-        kind = ("a named pipe" if stat.S_ISFIFO(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
-                else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
-        raise error(f"is {kind}, not a regular file", path=path)
+    if not stat.S_ISREG(mode):  # a named pipe, a device, a socket: the words of the CLI's check_paths
+        raise error("not a regular file", path=path)
     return path
 
 
