@@ -432,3 +432,12 @@ def test_fuzz_usdc_token_not_utf8(tmp_path):
     bad.write_bytes(bytes(data))
     check_promise(["inspect", bad], folder=tmp_path, inputs=[bad], names=bad,
                   message="cannot read as USD: a name or token is not UTF-8")
+
+
+def test_fuzz_usda_attribute_of_unknown_type(sample_assets, tmp_path):
+    """TypeError: object of type 'UnregisteredValue' has no len() (48 atheris findings on .usda)."""
+    bad = tmp_path / "unknown.usda"
+    bad.write_text(humanoid_usda_text(sample_assets).replace("uniform matrix4d[] bindTransforms",
+                                                             "uniform matrix4q[] bindTransforms"))
+    check_promise(["inspect", bad], folder=tmp_path, inputs=[bad], names=bad,
+                  message="an attribute holds a value of an unknown type")

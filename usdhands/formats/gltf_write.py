@@ -57,13 +57,21 @@ def clip_to_gltf_space(clip: Clip) -> Clip:
 
 # -- animation data ----------------------------------------------------------------
 
+def _unit(q: np.ndarray) -> np.ndarray:
+    """``q`` scaled to length 1 unless it is within 1e-6 of it already."""
+    n = float(np.linalg.norm(q))
+    return q if abs(n - 1.0) <= 1e-6 else q / n
+
+
 def _continuous(q: np.ndarray) -> np.ndarray:
     """Unit quaternions, signs flipped along time (axis 0) so neighbours have a non-negative dot product.
 
     glTF requires unit rotations: a USD quaternion of magnitude 1e38 was written as it was
     and failed the Khronos validator.
     """
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    norms = np.linalg.norm(q, axis=-1, keepdims=True)
+    if np.abs(norms - 1.0).max(initial=0.0) > 1e-6:  # unit ones are written as they are (same bytes as before)
+        q = q / norms
     if q.shape[0] < 2:
         return q
     d = np.sum(q[1:] * q[:-1], axis=-1)
@@ -192,7 +200,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
             gltf.nodes.append(pygltflib.Node(
                 name=short_joint_name(sk.joint_names[j]),
                 translation=[float(v) for v in sk.rest_translations[j]],
-                rotation=[float(v) for v in sk.rest_rotations[j] / np.linalg.norm(sk.rest_rotations[j])],
+                rotation=[float(v) for v in _unit(sk.rest_rotations[j])],
                 scale=[float(v) for v in sk.rest_scales[j]]))
         for j, p in enumerate(sk.parents):
             if p < 0:

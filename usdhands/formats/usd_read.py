@@ -80,6 +80,11 @@ def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
             raise AssetReadError(f"cannot read as USD: {tf_error_reason(e, path)}", path=path) from None
         except UnicodeDecodeError as e:  # a token or name of a corrupt .usdc that is not UTF-8
             raise AssetReadError(f"cannot read as USD: a name or token is not UTF-8 ({e.reason})", path=path) from None
+        except TypeError as e:  # an attribute of a type USD does not know (UnregisteredValue) where arrays belong
+            if "UnregisteredValue" not in str(e):
+                raise
+            raise AssetReadError("cannot read as USD: an attribute holds a value of an unknown type", path=path) \
+                from None
 
 
 def read_stage(stage: Usd.Stage, *, fps: float | None = None, path: str | os.PathLike | None = None) -> Asset:
