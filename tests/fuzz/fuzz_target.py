@@ -143,9 +143,12 @@ class Target:
             previous = signal.signal(signal.SIGPROF, _alarm)
             signal.setitimer(signal.ITIMER_PROF, READ_SECONDS)
         try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("error", RuntimeWarning)  # a numpy warning is a value nobody checked
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", RuntimeWarning)
                 self._read(path)
+            flagged = [w for w in caught if issubclass(w.category, RuntimeWarning)]
+            if flagged:  # a read that succeeded past a numpy warning: a value nobody checked
+                return f"RuntimeWarning: {flagged[0].message}"
             return None
         except UsdHandsError as e:
             if "\n" in str(e):
