@@ -326,17 +326,7 @@ def run_clip(job: str, job_options, model: Path | None, src: Path, dst: Path) ->
 
 
 def _warm_worker(job: str, job_options) -> None:
-    """Worker start-up: one compute thread, the job's module imported and the database loaded once.
-
-    A worker per core runs best single-threaded: numba's parallel kernels in every worker
-    fought over the cores (200 short clips, 1 worker: 9.0 s with numba's default threads,
-    4.7 s with one).
-    """
-    import sys
-
-    os.environ.setdefault("NUMBA_NUM_THREADS", "1")  # read when numba is first imported
-    if "numba" in sys.modules:
-        sys.modules["numba"].set_num_threads(1)
+    """Worker start-up: import the job's module and load the database once."""
     module = JOBS[job][0]
     importlib.import_module(f"usdhands.jobs.{module}")
     if job == "synthesize":
