@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.commands._common import Progress, print_json_with_plots, print_table, write_plots
 from usdhands.errors import UsdHandsError
 
 
@@ -18,14 +18,10 @@ def run_folds(args, items, cfg, feature_sets) -> int:
     if args.plot is not None:
         from usdhands.jobs.plots.synthesis import plot_kfold_errors, plot_worst_window
 
-        args.plot.mkdir(parents=True, exist_ok=True)
-        written = [plot_kfold_errors(result, args.plot / "kfold_errors.png"),
-                   plot_worst_window(result, args.plot / "kfold_worst_window.png")]
+        written = write_plots(args.plot, [(lambda p: plot_kfold_errors(result, p), "kfold_errors.png"),
+                                          (lambda p: plot_worst_window(result, p), "kfold_worst_window.png")])
     if args.json:
-        out = dict(result)
-        if written:
-            out["plots"] = [str(w) for w in written]
-        print_json(out)
+        print_json_with_plots(result, written)
         return 0
     truth = result["truth"]
     print(f"{result['folds']}-fold held-out synthesis over {result['windows']} windows of {result['tracks']} hand "

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from usdhands.commands._common import Progress, print_json, print_table
+from usdhands.commands._common import Progress, print_json, print_json_with_plots, print_table, write_plots
 from usdhands.jobs.option_checks import check_fps, check_seed
 from usdhands.jobs.outputs import MAIN_INPUT, check_paths
 from usdhands.errors import UsdHandsError
@@ -152,14 +152,10 @@ def run(args) -> int:
     if args.plot is not None:
         from usdhands.jobs.plots.synthesis import plot_confusion, plot_predictors
 
-        args.plot.mkdir(parents=True, exist_ok=True)
-        written = [plot_predictors(result, args.plot / "predictors.png"),
-                   plot_confusion(result, args.plot / "confusion.png")]
+        written = write_plots(args.plot, [(lambda p: plot_predictors(result, p), "predictors.png"),
+                                          (lambda p: plot_confusion(result, p), "confusion.png")])
     if args.json:
-        out = dict(result)
-        if written:
-            out["plots"] = [str(w) for w in written]
-        print_json(out)
+        print_json_with_plots(result, written)
         return 0
     print(f"leave-one-out over {result['segments']} segments of {len(items)} clips, k={result['k']} "
           f"({len(es.idle)} idle hands left out; {'rest kept' if args.keep_rest else 'rest trimmed at both ends'})")
