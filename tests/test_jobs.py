@@ -104,6 +104,11 @@ def test_options_are_frozen_and_default_like_the_cli():
     sp = parser.parse_args(["splice", "a.glb", "b.glb", "-o", "o.glb"])
     sopts = usdhands.SpliceOptions()
     assert (sopts.side, sopts.yaw, sopts.transfer, sopts.blend) == (sp.side, sp.yaw, sp.transfer, sp.blend)
+    cor = parser.parse_args(["correct", "in.usda", "--props", "p.obj", "-o", "o.usda"])
+    copts = usdhands.CorrectOptions()
+    assert (copts.margin, copts.self_collision, copts.attach, copts.prop_units, copts.prop_up, copts.as_layer,
+            copts.animation, copts.plot) == (cor.margin, cor.self_collision, tuple(cor.attach), cor.prop_units,
+                                             cor.prop_up, cor.layer, cor.animation, cor.plot)
     with pytest.raises(dataclasses.FrozenInstanceError):
         opts.k = 3
 
@@ -114,3 +119,46 @@ def test_import_usdhands_loads_no_job_until_used():
             "'usdhands.jobs.synthesis' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[] True False"
+
+
+@pytest.fixture(scope="module")
+def correct_scene(tmp_path_factory):
+    """A hand closing into a cylinder under its palm (fingers 15+ mm deep), and the cylinder as OBJ."""
+    import numpy as np
+    import trimesh
+    from interaction_data import closing_hand_clip, cylinder_under_palm
+
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+
+    d = tmp_path_factory.mktemp("correct_job")
+    clip = closing_hand_clip(frames=24, noise_deg=1.0)
+    write_asset(Asset("closing", (clip.skeleton,), (clip,)), d / "closing.usda")
+    prop = cylinder_under_palm()
+    trimesh.Trimesh(np.asarray(prop.vertices), np.asarray(prop.faces)).export(d / "cyl.obj")
+    return d
+
+
+@pytest.mark.parametrize("extra,options", [
+    ((), {}),
+    (("--margin", "1", "--as-layer"), {"margin": 1.0, "as_layer": True}),
+])
+def test_correct_job_writes_the_commands_bytes(correct_scene, dirs, capsys, extra, options):
+    a, b = dirs
+    src, cyl = correct_scene / "closing.usda", correct_scene / "cyl.obj"
+    cli = _cli(capsys, "correct", src, "--props", cyl, "-o", a / "out.usda", *extra, "--json")
+    result = usdhands.correct(src, b / "out.usda", usdhands.CorrectOptions(props=(cyl,), **options))
+    assert (a / "out.usda").read_bytes() == (b / "out.usda").read_bytes()
+    job = result.to_json()
+    assert cli.pop("seconds") >= 0 and job.pop("seconds") >= 0
+    _same_json(cli, job, a, b)
+    assert list(job)[3:10] == ["props", "penetration_before_mm", "penetration_after_mm", "frames_corrected",
+                               "jitter_before", "jitter_after", "max_change_deg"]
+    assert set(job["penetration_after_mm"]) == {"max", "mean", "frames"}
+    assert result.penetration_before_mm["max"] > 15 and result.penetration_after_mm["max"] <= 0.5
+
+
+def test_correct_job_without_props_is_refused(correct_scene, tmp_path):
+    with pytest.raises(UsdHandsError, match="--props: name at least one prop"):
+        usdhands.correct(correct_scene / "closing.usda", tmp_path / "o.usda")
+    assert list(tmp_path.iterdir()) == []

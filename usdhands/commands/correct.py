@@ -11,12 +11,9 @@ bit-for-bit unchanged and body joints are never touched.
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
-from usdhands.commands._common import add_layer_argument, add_prop_arguments, print_json, print_table
-from usdhands.jobs.outputs import MAIN_INPUT, check_paths, layer_options
-from usdhands.jobs.props import build_colliders, check_prop_options, read_scene_props
+from usdhands.commands._common import Progress, add_layer_argument, add_prop_arguments, print_json, print_table
 
 
 def register(sub) -> None:
@@ -36,57 +33,35 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def options_from(args):
+    """The job's options from parsed arguments."""
+    from usdhands.jobs.correction import CorrectOptions
+
+    return CorrectOptions(props=tuple(args.props), margin=args.margin, self_collision=args.self_collision,
+                          attach=tuple(args.attach), prop_units=args.prop_units, prop_up=args.prop_up,
+                          interaction_config=args.interaction_config, as_layer=args.layer, handmap=args.handmap,
+                          animation=args.animation, plot=args.plot)
+
+
 def run(args) -> int:
-    from usdhands.algorithms.interaction.correction import correct_clip
-    from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
-    from usdhands.jobs.inputs import check_plot_folder, handmap_for
-    from usdhands.formats.io import read_clip, write_clip
+    from usdhands.jobs.correction import correct
 
-    check_paths({MAIN_INPUT: args.file, "--props": args.props, "--handmap": args.handmap,
-                 "--interaction-config": args.interaction_config}, {"-o": args.output})
-    write_opts = layer_options(args.layer, args.file, args.output)
-    check_prop_options(args)
-    check_plot_folder(args.plot)
-    config = load_interaction_config(args.interaction_config) if args.interaction_config else InteractionConfig()
-    clip = read_clip(args.file, animation=args.animation)
-    handmap = handmap_for(clip, args.file, args.handmap)
-    props = read_scene_props(args, clip)
-    colliders, _ = build_colliders(args, clip, handmap, props, path=args.file)
-    start = time.perf_counter()
-    out, report = correct_clip(clip, handmap, colliders, margin_mm=args.margin, config=config)
-    seconds = time.perf_counter() - start
-    from dataclasses import asdict
-
-    from usdhands.model.provenance import provenance_record
-
-    record = provenance_record("interaction", parameters={
-        "props": [str(p) for p in args.props], "margin_mm": args.margin, "config": asdict(config)})
-    written = write_clip(args.file, out, args.output, provenance=record, **write_opts)
-    if report.unresolved:
-        chains = sorted({c for c, _ in report.unresolved})
-        print(f"usdhands: note: {len(report.unresolved)} chain frames touch even with the finger open "
-              f"({', '.join(chains)}): the palm or wrist is in a prop there and only body motion could clear it",
-              file=sys.stderr)
-    if args.plot is not None:
-        from usdhands.commands._interaction_plots import plot_correction
-
-        plot_correction(args.plot, clip, out, handmap, colliders, report, config)
-    summary = {"file": str(args.file), "output": str(written), "frames": int(clip.num_frames),
-               "props": [str(p) for p in args.props], **report.to_dict(),
-               "chains_corrected": report.chains_corrected, "unresolved_frames": len(report.unresolved),
-               "seconds": round(seconds, 3)}
+    result = correct(args.file, args.output, options_from(args), progress=Progress("correct"))
+    for w in result.warnings:
+        print(f"usdhands: note: {w}", file=sys.stderr)
+    summary = result.to_json()
     if args.json:
         print_json(summary)
-    else:
-        rows = []
-        for key in ("penetration_before_mm", "penetration_after_mm"):
-            s = summary[key]
-            rows.append((key, f"max {s['max']:.3f}  mean {s['mean']:.3f}  frames {s['frames']}"))
-        rows += [("frames_corrected", summary["frames_corrected"]),
-                 ("jitter_before", f"{summary['jitter_before']:.1f} deg/s^2"),
-                 ("jitter_after", f"{summary['jitter_after']:.1f} deg/s^2"),
-                 ("max_change_deg", f"{summary['max_change_deg']:.2f}"),
-                 ("chains_corrected", ", ".join(report.chains_corrected) or "none")]
-        print_table(rows, ("measure", "value"))
-        print(f"wrote {written}")
+        return 0
+    rows = []
+    for key in ("penetration_before_mm", "penetration_after_mm"):
+        s = summary[key]
+        rows.append((key, f"max {s['max']:.3f}  mean {s['mean']:.3f}  frames {s['frames']}"))
+    rows += [("frames_corrected", summary["frames_corrected"]),
+             ("jitter_before", f"{summary['jitter_before']:.1f} deg/s^2"),
+             ("jitter_after", f"{summary['jitter_after']:.1f} deg/s^2"),
+             ("max_change_deg", f"{summary['max_change_deg']:.2f}"),
+             ("chains_corrected", ", ".join(result.chains_corrected) or "none")]
+    print_table(rows, ("measure", "value"))
+    print(f"wrote {result.output}")
     return 0

@@ -14,13 +14,14 @@ reduce             ``reduce(source, output=None, options, model_output)``  Reduc
 expand             ``expand(source, model, output, options)``            ExpandOptions/Result
 convert            ``convert(source, output, options)``                  ConvertOptions/Result
 check              ``check(paths, options)`` (writes nothing)            CheckOptions/Result
+correct            ``correct(source, output, options)``                  CorrectOptions/Result
 =================  ====================================================  =====================
 
 Adding a job (the pattern): a module named for what it does (``usdhands/jobs/correction.py``: a
 module named like the function would be shadowed by it) with ``<Name>Options``
 (frozen dataclass, CLI defaults), ``<Name>Result`` (frozen dataclass with ``to_json()``) and
 ``<name>(inputs..., output, options, progress=None)``; its names in :data:`JOBS` below (and in
-``usdhands/__init__.py``'s ``_LAZY``); the
+``usdhands/__init__.py``'s ``_LAZY_JOBS``); the
 command ``usdhands/commands/<name>.py`` builds the options from its arguments, calls the job
 and prints the result. Heavy imports stay inside the job function so ``import usdhands``
 stays fast.
@@ -41,6 +42,7 @@ JOBS = {
     "expand": "expansion", "ExpandOptions": "expansion", "ExpandResult": "expansion",
     "convert": "conversion", "ConvertOptions": "conversion", "ConvertResult": "conversion",
     "check": "validation", "CheckOptions": "validation", "CheckResult": "validation",
+    "correct": "correction", "CorrectOptions": "correction", "CorrectResult": "correction",
 }
 
 __all__ = sorted(JOBS)

@@ -3,7 +3,7 @@
 The functions take ``options``: any object with the prop options as attributes (``props``,
 ``margin``, ``self_collision``, ``attach``, ``prop_units``, ``prop_up``,
 ``interaction_config``, and ``collision_weight`` for synthesis), such as
-:class:`usdhands.jobs.synthesis.SynthesizeOptions` or the ``correct`` command's arguments.
+:class:`usdhands.jobs.synthesis.SynthesizeOptions` or :class:`usdhands.jobs.correction.CorrectOptions`.
 """
 
 from __future__ import annotations
