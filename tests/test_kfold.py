@@ -115,3 +115,48 @@ def test_evaluate_folds_command(tmp_path, capsys):
                           (["--folds", "2", "--feature-sets", "hand_pos"], "Cannot read feature set 'hand_pos'")):
         status, out, err = _run(capsys, "evaluate", *paths, *argv)
         assert status == 2 and out == "" and err.startswith(f"usdhands: error: {message}"), (argv, err)
+
+
+def test_nothing_of_the_held_out_take_reaches_synthesis():
+    """K-fold synthesizes with ``segments=`` (the segments outside the held-out windows): the
+    result must be exactly that of a database built without the held-out take, although
+    the held-out take's fingers jitter by ±30° every frame and so raise the step limits
+    (and the moving DOFs) of the whole database: a statistic taken from all frames leaks."""
+    from usdhands.algorithms.synthesis.config import SynthesisConfig
+    from usdhands.algorithms.synthesis.database import build_database
+    from usdhands.algorithms.synthesis.synthesize import synthesize_hand
+    from usdhands.model.rotations import euler_deg_to_quat, quat_multiply
+
+    clips = [c for _, c in gesture_set(2, seed=3)]
+    held = clips[0]
+    rot = held.rotations.copy()
+    jitter = np.zeros((len(rot), 3))
+    jitter[:, 2] = np.where(np.arange(len(rot)) % 2 == 0, 30.0, -30.0)  # flexion of this rig's fingers
+    jitter[:, 0] = jitter[:, 2] / 30  # and a twist, which never moves in the other takes
+    for j, name in enumerate(held.skeleton.joint_names):
+        if name.startswith("RightHand") and name[-1].isdigit():
+            rot[:, j] = quat_multiply(rot[:, j], euler_deg_to_quat(jitter, "XYZ"))
+    hm = tiny_handmap()
+    items = [DatabaseClip(held.replace(rotations=rot), hm, "held")] + [DatabaseClip(c, hm, "x") for c in clips[1:]]
+    full, clean = build_database(items), build_database(items[1:])
+    cfg = SynthesisConfig().with_values(stitching={"step_percentile": 90.0})
+    t = int(np.nonzero((full.tracks[:, 2] == 0) & (full.tracks[:, 3] == 1))[0][0])
+    a, b = full.tracks[t, :2]
+    feats = np.asarray(full.features[a:b], dtype=np.float64)
+    outside = full.segment_clip() != 0
+    got = synthesize_hand(feats, full, "right", cfg, segments=outside)
+    want = synthesize_hand(feats, clean, "right", cfg)
+    np.testing.assert_allclose(got.curves, want.curves, atol=1e-9)
+    # the case is one where a leak changes the result: the jitter moves DOFs that never move
+    # elsewhere and raises the step limits, and the limits bind in the synthesized motion
+    frames = full.segment_frames(outside)
+    assert full.moving_dofs().sum() > full.moving_dofs(frames).sum()
+    assert (full.moving_dofs(frames) == clean.moving_dofs()).all()
+    leaky, own = full.step_limits(90.0), full.step_limits(90.0, frames)
+    np.testing.assert_allclose(own, clean.step_limits(90.0))
+    steps = np.abs(np.diff(got.curves[:, full.dof_index], axis=0)).max(axis=0)
+    binding = np.isclose(steps, own, rtol=0, atol=1e-9) & (own > 0)
+    assert binding.any() and (leaky[binding] > own[binding] + 0.1).all()
+    # leave-one-out (exclude_clips) is held to the same rule
+    np.testing.assert_allclose(synthesize_hand(feats, full, "right", cfg, exclude_clips=(0,)).curves, want.curves,
+                               atol=1e-9)

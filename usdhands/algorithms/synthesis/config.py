@@ -81,8 +81,11 @@ class StitchingConfig:
     blend_duration_s: float = 0.5
     warp_smoothing_s: float = 0.2
     step_percentile: float = 99.5
+    candidate_mix: float = 0.7
 
     def __post_init__(self) -> None:
+        if not 0 <= self.candidate_mix <= 1:
+            raise ValueError(f"Expected 0 <= candidate_mix <= 1, got {self.candidate_mix}")
         if not 0 < self.step_percentile <= 100:
             raise ValueError(f"Expected 0 < step_percentile <= 100, got {self.step_percentile}")
         if self.warp_smoothing_s < 0:

@@ -122,27 +122,56 @@ class FingerDatabase:
         m[self.dof_index] = True
         return m
 
-    def moving_dofs(self) -> np.ndarray:
+    def moving_dofs(self, frames: np.ndarray | None = None) -> np.ndarray:
         """``(M,)`` bool: columns of ``fingers`` that move anywhere (range over 1e-3°).
 
-        The transition cost and the seam thresholds average over these only.
+        The transition cost and the seam thresholds average over these only. ``frames``
+        ``(F,)`` bool limits the frames looked at (k-fold: those outside the held-out
+        windows, so nothing of them reaches synthesis).
         """
-        cache = self.__dict__.setdefault("_cache", {})
-        if "moving" not in cache:
-            f = np.asarray(self.fingers)
-            cache["moving"] = (f.max(axis=0) - f.min(axis=0)) > 1e-3 if len(f) else np.zeros(f.shape[1], bool)
-        return cache["moving"]
+        def compute(sel):
+            f = np.asarray(self.fingers)[sel]
+            return (f.max(axis=0) - f.min(axis=0)) > 1e-3 if len(f) else np.zeros(f.shape[1], bool)
 
-    def step_limits(self, percentile: float) -> np.ndarray:
+        return self._cached("moving", frames, compute)
+
+    def step_limits(self, percentile: float, frames: np.ndarray | None = None) -> np.ndarray:
         """``(M,)`` float: per column of ``fingers``, the ``percentile`` of its frame steps
-        inside tracks, degrees (:func:`~usdhands.algorithms.synthesis.output_warp.step_limits`)."""
+        inside tracks, degrees (:func:`~usdhands.algorithms.synthesis.output_warp.step_limits`);
+        ``frames`` as in :meth:`moving_dofs`."""
         from usdhands.algorithms.synthesis.output_warp import step_limits
 
+        return self._cached(("steps", float(percentile)), frames,
+                            lambda sel: step_limits(self.fingers, self.tracks, percentile,
+                                                    None if isinstance(sel, slice) else sel))
+
+    def _cached(self, key, frames, compute):
+        """``compute(frames or slice(None))``, remembered per key and frame selection."""
         cache = self.__dict__.setdefault("_cache", {})
-        key = ("steps", float(percentile))
-        if key not in cache:
-            cache[key] = step_limits(self.fingers, self.tracks, percentile)
-        return cache[key]
+        if frames is None:
+            full = (key, None)
+            if full not in cache:
+                cache[full] = compute(slice(None))
+            return cache[full]
+        frames = np.asarray(frames, dtype=bool)
+        if frames.shape != (self.num_frames,):
+            raise ValueError(f"Expected frames ({self.num_frames},) bool, got {frames.shape}")
+        sel_key = (key, np.packbits(frames).tobytes())
+        if sel_key not in cache:
+            if len(cache) > 64:  # k-fold asks for one selection per fold; keep the cache bounded
+                cache.clear()
+            cache[sel_key] = compute(frames)
+        return cache[sel_key]
+
+    def segment_frames(self, segments: np.ndarray) -> np.ndarray:
+        """``(F,)`` bool: frames inside the segments selected by ``segments`` ``(N,)`` bool."""
+        sel = np.asarray(segments, dtype=bool)
+        if sel.shape != (len(self.segments),):
+            raise ValueError(f"Expected segments ({len(self.segments)},) bool, got {sel.shape}")
+        edges = np.zeros(self.num_frames + 1, dtype=np.int64)
+        np.add.at(edges, self.segments[sel, 0], 1)
+        np.add.at(edges, self.segments[sel, 1], -1)
+        return np.cumsum(edges[:-1]) > 0
 
     def segment_side(self) -> np.ndarray:
         """``(N,)`` int: 0 left, 1 right."""

@@ -17,17 +17,27 @@ fist merges two real steps into one: a pop of twice the real speed). Here instea
   interpolation between the two neighbouring database frames (adjacent frames of
   captured fingers differ by a few degrees, where interpolating Euler curves and
   slerp agree closely);
+- :func:`play_segments`: every input segment gets the weighted sum of some database
+  segments' fingers, each played along its own smoothed warp (synthesis plays the
+  path's candidate mixed with all ``k`` candidates of the row, see
+  :func:`~usdhands.algorithms.synthesis.synthesize.candidate_weights`);
 - :func:`step_limits` / :func:`limit_steps`: after stitching, no DOF may move by more
   per frame than the database's own high-percentile step (99.5th by default), so
   what remains of a pop (a seam blend, a fast warp) is spread over a few frames,
   never larger than what the captured motion does.
+
+:func:`play_segments_fast` and :func:`limit_steps_fast` are the compiled twins (numba,
+:mod:`~usdhands.algorithms.synthesis._play_kernel`, parallel over input segments) that
+synthesis runs once the search has loaded numba (:func:`compiled_kernels_loaded`);
+before that, the NumPy functions, which the tests hold the twins to.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["smooth_warp", "sample_rows", "step_limits", "limit_steps"]
+__all__ = ["smooth_warp", "sample_rows", "step_limits", "limit_steps", "limit_steps_fast", "play_segments",
+           "play_segments_fast", "compiled_kernels_loaded"]
 
 #: Share of the straight warp (constant speed) mixed into the smoothed DTW warp, so the
 #: warp's slope never falls to zero: a DTW path that waits on one database frame for
@@ -82,7 +92,8 @@ def sample_rows(rows: np.ndarray, at: np.ndarray) -> np.ndarray:
     return rows[i0] * (1.0 - f) + rows[i1] * f
 
 
-def step_limits(fingers: np.ndarray, tracks: np.ndarray, percentile: float) -> np.ndarray:
+def step_limits(fingers: np.ndarray, tracks: np.ndarray, percentile: float,
+                frames: np.ndarray | None = None) -> np.ndarray:
     """Per DOF, the ``percentile`` of the absolute frame-to-frame steps inside tracks.
 
     Parameters
@@ -93,6 +104,9 @@ def step_limits(fingers: np.ndarray, tracks: np.ndarray, percentile: float) -> n
         ``[start, stop)`` of each track (steps across tracks do not count).
     percentile : float
         In ``(0, 100]``.
+    frames : (F,) bool, optional
+        Frames that may be looked at (k-fold: those outside the held-out windows); a
+        step counts only when both its frames are among them.
 
     Returns
     -------
@@ -105,6 +119,11 @@ def step_limits(fingers: np.ndarray, tracks: np.ndarray, percentile: float) -> n
     inside = np.ones(len(steps), dtype=bool)
     ends = np.asarray(tracks)[:, 1] - 1  # step from a track's last frame to the next track's first
     inside[ends[(ends >= 0) & (ends < len(steps))]] = False
+    if frames is not None:
+        frames = np.asarray(frames, dtype=bool)
+        if frames.shape != (len(f),):
+            raise ValueError(f"Expected frames ({len(f)},) bool, got {frames.shape}")
+        inside &= frames[:-1] & frames[1:]
     if not inside.any():
         return np.zeros(f.shape[1])
     steps = steps[inside]
@@ -131,3 +150,112 @@ def limit_steps(curves: np.ndarray, limits: np.ndarray) -> np.ndarray:
     for t in range(first + 1, len(x)):
         out[t] = out[t - 1] + np.clip(x[t] - out[t - 1], -lim, lim)
     return out
+
+
+def limit_steps_fast(curves: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """:func:`limit_steps` compiled with numba: same arguments, same result."""
+    from usdhands.algorithms.synthesis import _play_kernel as kern
+
+    x = np.ascontiguousarray(curves, dtype=np.float64)
+    lim = np.ascontiguousarray(limits, dtype=np.float64)
+    if x.ndim != 2 or lim.shape != (x.shape[1],):
+        raise ValueError(f"Expected curves (T, C) and limits (C,), got {x.shape} and {lim.shape}")
+    out = np.empty_like(x)
+    if len(x):
+        kern.limit(x, lim, out)
+    return out
+
+
+def _play_arrays(query_weighted, db_weighted, fingers, seg_ranges, query_bounds, cand, weights, bands):
+    qf = np.ascontiguousarray(query_weighted, dtype=np.float64)
+    df = np.ascontiguousarray(db_weighted, dtype=np.float64)
+    rows = np.asarray(fingers)
+    sr = np.ascontiguousarray(seg_ranges, dtype=np.int64).reshape(-1, 2)
+    qb = np.ascontiguousarray(query_bounds, dtype=np.int64).reshape(-1, 2)
+    c = np.ascontiguousarray(cand, dtype=np.int64)
+    w = np.ascontiguousarray(weights, dtype=np.float64)
+    bd = np.ascontiguousarray(bands, dtype=np.float64)
+    if c.shape != w.shape or c.shape != bd.shape or c.ndim != 2 or len(c) != len(qb):
+        raise ValueError(f"Expected cand, weights and bands ({len(qb)}, k), got {c.shape}, {w.shape} and {bd.shape}")
+    if qf.ndim != 2 or df.ndim != 2 or qf.shape[1] != df.shape[1] or rows.ndim != 2 or len(rows) != len(df):
+        raise ValueError(f"Expected features (T, D), (F, D) and fingers (F, M), got {qf.shape}, {df.shape} and "
+                         f"{rows.shape}")
+    if len(qb) and ((qb[:, 0] < 0).any() or (qb[:, 1] > len(qf)).any() or (qb[:, 1] <= qb[:, 0]).any()):
+        raise ValueError(f"query_bounds must hold non-empty ranges inside 0..{len(qf)}")
+    used = c[(w > 0) & (c >= 0)]
+    if ((used >= len(sr)).any() or (sr[used, 0] < 0).any() or (sr[used, 1] > len(df)).any()
+            or (sr[used, 1] <= sr[used, 0]).any()):
+        raise ValueError("cand must name non-empty database segments inside the features")
+    return qf, df, rows, sr, qb, c, w, bd
+
+
+def play_segments(query_weighted: np.ndarray, db_weighted: np.ndarray, fingers: np.ndarray,
+                  seg_ranges: np.ndarray, query_bounds: np.ndarray, cand: np.ndarray, weights: np.ndarray,
+                  bands: np.ndarray, fps: float, smoothing_s: float) -> np.ndarray:
+    """The fingers played on the input segments: per segment a weighted sum of database segments.
+
+    Parameters
+    ----------
+    query_weighted : (T, D) float
+        Weighted input features (the warp aligns these).
+    db_weighted : (F, D) float
+        Weighted database features.
+    fingers : (F, M) float
+        Database finger curves, degrees.
+    seg_ranges : (S, 2) int
+        ``[start, stop)`` frames of the database segments ``cand`` refers to.
+    query_bounds : (N, 2) int
+        ``[start, stop)`` of the input segments.
+    cand : (N, k) int
+        Database segments (rows of ``seg_ranges``) per input segment; -1: none.
+    weights : (N, k) float
+        Weight of each; 0 skips it (the weights of a row normally sum to 1).
+    bands : (N, k) float
+        DTW band of each pair (:func:`~usdhands.algorithms.synthesis.segment_cost.dtw_align`).
+    fps, smoothing_s : float
+        As in :func:`smooth_warp`.
+
+    Returns
+    -------
+    (T, M) float
+        Rows outside every input segment are 0. Each candidate is aligned to its input
+        segment by DTW, its warp smoothed (:func:`smooth_warp`) and its fingers sampled
+        along it (:func:`sample_rows`); a pair no warp fits is stretched linearly.
+    """
+    from usdhands.algorithms.synthesis.segment_cost import dtw_align
+
+    qf, df, rows, sr, qb, c, w, bd = _play_arrays(query_weighted, db_weighted, fingers, seg_ranges, query_bounds,
+                                                  cand, weights, bands)
+    out = np.zeros((len(qf), rows.shape[1]))
+    for i, (q0, q1) in enumerate(qb):
+        for j in range(c.shape[1]):
+            if w[i, j] <= 0 or c[i, j] < 0:
+                continue
+            a, b = sr[c[i, j]]
+            _, warp = dtw_align(qf[q0:q1], df[a:b], bd[i, j])
+            at = np.linspace(0, b - a - 1, q1 - q0) if len(warp) == 0 else smooth_warp(warp, b - a, fps, smoothing_s)
+            out[q0:q1] += w[i, j] * sample_rows(rows[a:b], at)
+    return out
+
+
+def play_segments_fast(query_weighted: np.ndarray, db_weighted: np.ndarray, fingers: np.ndarray,
+                       seg_ranges: np.ndarray, query_bounds: np.ndarray, cand: np.ndarray, weights: np.ndarray,
+                       bands: np.ndarray, fps: float, smoothing_s: float) -> np.ndarray:
+    """:func:`play_segments` compiled with numba (parallel over input segments): same arguments, same result."""
+    from usdhands.algorithms.synthesis import _play_kernel as kern
+
+    qf, df, rows, sr, qb, c, w, bd = _play_arrays(query_weighted, db_weighted, fingers, seg_ranges, query_bounds,
+                                                  cand, weights, bands)
+    out = np.zeros((len(qf), rows.shape[1]))
+    if len(qb):
+        kern.play(qf, df, rows, sr, qb, c, w, bd, int(round(smoothing_s * fps)), LINEAR_SHARE, out)
+    return out
+
+
+def compiled_kernels_loaded() -> bool:
+    """Whether this process has loaded synthesis's numba kernels (the search's): then the
+    compiled twins cost nothing to start and are the faster choice."""
+    import sys
+
+    kernel = sys.modules.get("usdhands.algorithms.synthesis._dtw_kernel")
+    return kernel is not None and bool(kernel.search.signatures)

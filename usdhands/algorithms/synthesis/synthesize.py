@@ -28,9 +28,11 @@ import numpy as np
 from usdhands.algorithms.synthesis.database import FingerDatabase, same_rate, segment_track
 from usdhands.algorithms.synthesis.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
 from usdhands.algorithms.synthesis.motion_graph import least_cost_path, transition_costs
-from usdhands.algorithms.synthesis.output_warp import limit_steps, sample_rows, smooth_warp
+from usdhands.algorithms.synthesis.output_warp import (
+    compiled_kernels_loaded, limit_steps, limit_steps_fast, play_segments, play_segments_fast,
+)
 from usdhands.algorithms.synthesis.segmentation import wrist_speed
-from usdhands.algorithms.synthesis.segment_cost import SearchResult, dtw_align_fast, knn_segments, weight_features
+from usdhands.algorithms.synthesis.segment_cost import SearchResult, knn_segments, weight_features
 from usdhands.algorithms.synthesis.stitching import SeamReport, stitch_fragments
 from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.algorithms.synthesis.wrist_features import NUM_WRIST_FEATURES, reach_cm, world_xforms_for, wrist_features
@@ -40,7 +42,7 @@ from usdhands.model.handmap import SIDES, HandMap
 _log = logging.getLogger(__name__)
 
 __all__ = ["HandSynthesis", "ClipSynthesis", "synthesize_hand", "synthesize_clip", "db_side_segments",
-           "resample_rows", "segment_weights"]
+           "resample_rows", "segment_weights", "candidate_weights", "played_weights"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,8 +201,14 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         qw = weight_features(feats, weights)
     dw = weight_features(db.features, weights) if db_weighted is None else db_weighted
     seg_idx = db_side_segments(db, side, exclude_clips)
-    if segments is not None:
-        seg_idx = seg_idx[np.asarray(segments, dtype=bool)[seg_idx]]
+    usable = None  # frames the model may learn from (None: all of the database)
+    if segments is not None or len(exclude_clips):
+        usable_segments = np.ones(len(db.segments), dtype=bool) if segments is None else \
+            np.asarray(segments, dtype=bool).copy()
+        if len(exclude_clips):
+            usable_segments &= ~np.isin(db.segment_clip(), np.asarray(list(exclude_clips), dtype=np.int64))
+        seg_idx = seg_idx[usable_segments[seg_idx]]
+        usable = db.segment_frames(usable_segments)
     if not len(seg_idx):
         raise ValueError(f"The database has no {side}-hand segments to choose from")
     k = min(sc.k, len(seg_idx))  # more candidates than segments: (k, k) transition arrays for nothing
@@ -230,32 +238,64 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     N = len(cand)
     starts, ends, vstart, vend = _candidate_ends(db, cand)
     tc = cfg.transition
-    moving = db.moving_dofs()
+    moving = db.moving_dofs(usable)
     transitions = [transition_costs(ends[i], vend[i], starts[i + 1], vstart[i + 1], tc.w_joint, tc.w_velocity,
                                     moving) for i in range(N - 1)]
     path, _ = least_cost_path(costs, transitions, cfg.path.w_segment, cfg.path.w_transition,
                               cfg.path.normalize_terms)
     chosen = cand[np.arange(N), path]
     st = cfg.stitching
-    fragments = []
-    for i in range(N):
-        a, b = int(db.segments[chosen[i], 0]), int(db.segments[chosen[i], 1])
-        q0, q1 = int(bounds[i]), int(bounds[i + 1])
-        band = sc.dtw_band if sc.length_factor * (b - a) >= (q1 - q0) and (b - a) <= sc.length_factor * (q1 - q0) else 1.0
-        _, warp = dtw_align_fast(qw[q0:q1], dw[a:b], band)
-        if len(warp) == 0:  # only for widened candidates that cannot be warped: stretch linearly
-            at = np.linspace(0, b - a - 1, q1 - q0)
-        else:
-            at = smooth_warp(warp, b - a, db.fps, st.warp_smoothing_s)
-        fragments.append(sample_rows(db.fingers[a:b], at))
+    played = played_weights(costs, cand, path, st.candidate_mix)
+    lens = db.segments[np.maximum(cand, 0), 1] - db.segments[np.maximum(cand, 0), 0]  # (N, k)
+    n = (qb[:, 1] - qb[:, 0])[:, None]
+    bands = np.where((sc.length_factor * lens >= n) & (lens <= sc.length_factor * n), sc.dtw_band, 1.0)
+    compiled = compiled_kernels_loaded()  # numba only where the search loaded it anyway
+    play = play_segments_fast if compiled else play_segments
+    out = play(qw, dw, db.fingers, db.segments[:, :2], qb, cand, played, bands, db.fps, st.warp_smoothing_s)
+    fragments = [out[q0:q1] for q0, q1 in qb]
     _log.info("%s hand: %d segment(s) of the wrist motion; chose database segments %s (path cost %.3g)", side, N,
               " ".join(str(int(c)) for c in chosen), float(sum(costs[i, path[i]] for i in range(N))))
     compact, seams = stitch_fragments(fragments, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s,
                                       moving)
-    compact = limit_steps(compact, db.step_limits(st.step_percentile))
+    compact = (limit_steps_fast if compiled else limit_steps)(compact, db.step_limits(st.step_percentile, usable))
     curves = np.zeros((len(feats), NUM_DOFS))
     curves[:, db.dof_index] = compact
     return HandSynthesis(side, bounds, speed, cand, costs, transitions, path, chosen, curves, seams, res)
+
+
+def candidate_weights(costs: np.ndarray) -> np.ndarray:
+    """Weights ``(k,)`` summing to 1 of a row's candidates, proportional to ``1 / cS²`` (eq. 1 costs).
+
+    Missing candidates (``inf``) get 0; candidates of zero cost (the input's own
+    motion is in the database) share all the weight. The square makes the weights fall
+    fast with the cost: a candidate twice as far as the best counts a quarter as much
+    (with ``1 / cS``, on the small test set of the tests, where only two of the five
+    candidates show the held-out gesture, mixing hurt; see docs/synthesis.md).
+    """
+    c = np.asarray(costs, dtype=np.float64)
+    ok = np.isfinite(c)
+    w = np.zeros(len(c))
+    if not ok.any():
+        return w
+    zero = ok & (c <= 0)
+    if zero.any():
+        w[zero] = 1.0
+    else:
+        w[ok] = (c[ok].min() / c[ok]) ** 2
+    return w / w.sum()
+
+
+def played_weights(costs: np.ndarray, cand: np.ndarray, path: np.ndarray, mix: float) -> np.ndarray:
+    """Weight ``(N, k)`` of every candidate in the fragment played for each input segment.
+
+    ``(1 − mix)`` for the path's candidate plus ``mix`` times :func:`candidate_weights`
+    of the row (``costs (N, k)``, ``cand (N, k)`` with -1 for none, ``path (N,)``).
+    """
+    w = np.zeros(np.shape(costs))
+    for i in range(len(w)):
+        w[i] = mix * candidate_weights(np.where(cand[i] >= 0, costs[i], np.inf))
+        w[i, path[i]] += 1.0 - mix
+    return w
 
 
 def segment_weights(config: SynthesisConfig) -> list[float]:
