@@ -56,7 +56,9 @@ def test_gltf_usd_gltf_round_trip_keeps_motion_and_meshes(shared_assets, tmp_pat
         np.testing.assert_allclose(cb.world_positions()[:, ib], ca.world_positions()[:, ia], atol=1e-5 * extent)
         angle = np.radians(quat_angle_deg(ca.rotations[:, ia][:, inner], cb.rotations[:, ib][:, inner]))
         assert angle.max() < 1e-4
-    assert len(b.meshes) == len(a.meshes) == 4
+    # 4 skinned primitives and 15 rigid ones (mesh nodes below joints), all 7,214 vertices
+    assert len(b.meshes) == len(a.meshes) == 19
+    assert sum(len(m.points) for m in b.meshes) == 7214
     for ma, mb in zip(a.meshes, b.meshes):
         np.testing.assert_allclose(mb.points, ma.points, atol=1e-5)
         np.testing.assert_allclose(mb.normals, ma.normals, atol=1e-5)

@@ -473,7 +473,14 @@ def test_robot_expressive_read(shared_assets):
     assert {"Wave", "ThumbsUp", "Idle", "Dance"} <= {c.name for c in asset.clips}
     wave = asset.clip("Wave")
     assert wave.fps == 24.0 and wave.num_frames == 45
-    assert len(asset.meshes) == 4 and all(m.joint_indices.shape[1] == 4 for m in asset.meshes)
+    # 2 skinned nodes (2 primitives each, 4 influences) and 12 mesh nodes below joints (15 primitives,
+    # following their joint rigidly): every one of the 7,214 vertices
+    skinned = [m for m in asset.meshes if m.rigid_joint() is None]
+    rigid = [m for m in asset.meshes if m.rigid_joint() is not None]
+    assert len(skinned) == 4 and all(m.joint_indices.shape[1] == 4 for m in skinned)
+    assert len(rigid) == 15 and all(m.joint_indices.shape[1] == 1 for m in rigid)
+    assert sum(len(m.points) for m in asset.meshes) == 7214
+    assert {sk.joint_names[m.rigid_joint()] for m in rigid if m.group == "Head"} == {"Head"}
 
 
 def test_robot_expressive_write_clip_changes_fingers_only(shared_assets, tmp_path):

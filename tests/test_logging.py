@@ -15,11 +15,25 @@ from usdhands.model.hand_detection import detect_hands
 PACKAGE = Path(__file__).resolve().parents[1] / "usdhands"
 
 
-def test_reader_names_what_it_left_out(shared_assets, caplog):
+def _robot_with_camera_and_loose_mesh(shared_assets, tmp_path) -> Path:
+    """RobotExpressive with a camera and a mesh node on no skeleton (things convert cannot carry)."""
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(str(shared_assets / "robot_expressive" / "RobotExpressive.glb"))
+    g.cameras.append(pygltflib.Camera(type="perspective", perspective=pygltflib.Perspective(yfov=0.8, znear=0.1)))
+    g.nodes.append(pygltflib.Node(name="Cam", camera=0))
+    g.nodes.append(pygltflib.Node(name="Loose", mesh=0, translation=[2.0, 0.0, 0.0]))
+    g.scenes[g.scene or 0].nodes += [len(g.nodes) - 2, len(g.nodes) - 1]
+    out = tmp_path / "robot_extra.glb"
+    g.save_binary(str(out))
+    return out
+
+
+def test_reader_names_what_it_left_out(shared_assets, tmp_path, caplog):
     with caplog.at_level("INFO", logger="usdhands"):
-        asset = read_asset(shared_assets / "robot_expressive" / "RobotExpressive.glb")
-    assert "9 morph target(s)" in asset.left_out and "3 material(s)" in asset.left_out
-    assert "12 mesh node(s) not skinned (6106 vertices; 1108 skinned vertices read)" in asset.left_out
+        asset = read_asset(_robot_with_camera_and_loose_mesh(shared_assets, tmp_path))
+    assert "1 camera(s)" in asset.left_out
+    assert "1 mesh node(s) on no skeleton (64 vertices; 7214 vertices read)" in asset.left_out
     logged = [r for r in caplog.records if r.name == "usdhands.formats.gltf_read"]
     assert {r.getMessage().split("not read: ")[1] for r in logged} == set(asset.left_out)
 
@@ -35,15 +49,19 @@ def test_hands_found_are_logged(shared_assets, caplog):
 
 
 def test_verbose_flag_shows_decisions_and_convert_warns_once(shared_assets, tmp_path, capsys):
-    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    src = _robot_with_camera_and_loose_mesh(shared_assets, tmp_path)
     assert main(["convert", str(src), str(tmp_path / "a.usda")]) == 0
     err = capsys.readouterr().err.splitlines()
     warned = [line for line in err if "not converted" in line]
-    assert len(warned) == 1 and "9 morph target(s)" in warned[0] and "3 material(s)" in warned[0]
+    assert len(warned) == 1 and "1 camera(s)" in warned[0] and "1 mesh node(s) on no skeleton" in warned[0]
     assert not any("not read:" in line for line in err)  # INFO stays hidden without -v
     assert main(["-v", "convert", str(src), str(tmp_path / "b.usda")]) == 0
     err = capsys.readouterr().err
-    assert "not read: 9 morph target(s)" in err
+    assert "not read: 1 camera(s)" in err
+    # the plain robot: everything is carried, no warning
+    assert main(["convert", str(shared_assets / "robot_expressive" / "RobotExpressive.glb"),
+                 str(tmp_path / "c.usda")]) == 0
+    assert "not converted" not in capsys.readouterr().err
 
 
 def test_library_never_configures_logging():

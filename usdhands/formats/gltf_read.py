@@ -31,7 +31,8 @@ import numpy as np
 
 from usdhands.errors import AssetReadError
 from usdhands.formats.gltf_container import GltfFile, load_gltf
-from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.formats.gltf_materials import read_materials
+from usdhands.model.asset import Asset, BlendShape, BlendShapeWeights, SkinnedMesh
 from usdhands.model.clip import Clip
 from usdhands.model.provenance import provenance_record
 from usdhands.model.rotations import quat_slerp, trs_to_xform, xform_to_trs
@@ -651,6 +652,66 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     return Clip(sk, rate, rot, tra, sca, name=name, start_time=t0)
 
 
+def sample_morph_weights(doc: GltfFile, anim_index: int, clip: Clip, tokens: dict[int, list[tuple[str, str]]],
+                         defaults: dict[int, list[float]]) -> BlendShapeWeights | None:
+    """The ``weights`` channels of an animation on the morphed nodes of ``tokens``, sampled at ``clip``'s
+    frames: one column per target of every node the animation keys (None when it keys none)."""
+    anim = doc.gltf.animations[anim_index]
+    keyed = [(c, ch) for c, ch in enumerate(anim.channels)
+             if ch.target is not None and ch.target.path == "weights" and ch.target.node in tokens]
+    if not keyed:
+        return None
+    names: list[str] = []
+    columns: dict[int, list[int]] = {}
+    for _, ch in keyed:
+        node = ch.target.node
+        if node not in columns:
+            columns[node] = []
+            for t, _ in tokens[node]:
+                if t not in names:
+                    names.append(t)
+                columns[node].append(names.index(t))
+    at = clip.times
+    out = np.zeros((clip.num_frames, len(names)))
+    for node, cols in columns.items():
+        d = defaults.get(node, [])
+        for k, col in enumerate(cols):
+            out[:, col] = d[k] if k < len(d) else 0.0
+    snap = snap_time(clip.fps)
+    for c, ch in keyed:
+        node = ch.target.node
+        where = f"animations[{anim_index}].channels[{c}]"
+        if ch.sampler is None or not 0 <= ch.sampler < len(anim.samplers):
+            raise doc.error(f"sampler {ch.sampler} out of range", where)
+        smp = anim.samplers[ch.sampler]
+        interp = smp.interpolation or "LINEAR"
+        if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
+            raise doc.error(f"unknown interpolation {interp!r}", where)
+        times = doc.accessor(smp.input)[:, 0]
+        values = doc.accessor(smp.output).reshape(-1)
+        B = len(tokens[node])
+        rows = times.shape[0] * (3 if interp == "CUBICSPLINE" else 1)
+        if values.size != rows * B or not times.size:
+            raise doc.error(f"weights sampler has {values.size} output values for {times.shape[0]} keys of "
+                            f"{B} targets", where)
+        if np.any(np.diff(times) < 0) or not np.isfinite(times).all():
+            raise doc.error("sampler input times decrease or are not finite", where)
+        out[:, columns[node]] = sample_channel(times, values.reshape(rows, B), interp, at, False, snap)
+    return BlendShapeWeights(tuple(names), out)
+
+
+def clip_interpolation(doc: GltfFile, anim_index: int, nodes: set[int]) -> str | None:
+    """``"STEP"`` or ``"CUBICSPLINE"`` when every sampler of the animation's channels on ``nodes``
+    has that interpolation; None for LINEAR or a mix."""
+    anim = doc.gltf.animations[anim_index]
+    kinds = set()
+    for ch in anim.channels:
+        if ch.target is not None and ch.target.node in nodes and ch.sampler is not None \
+                and 0 <= ch.sampler < len(anim.samplers):
+            kinds.add(anim.samplers[ch.sampler].interpolation or "LINEAR")
+    return kinds.pop() if len(kinds) == 1 and kinds & {"STEP", "CUBICSPLINE"} else None
+
+
 # -- meshes --------------------------------------------------------------------
 
 def _triangles(mode: int, idx: np.ndarray) -> np.ndarray | None:
@@ -668,22 +729,102 @@ def _triangles(mode: int, idx: np.ndarray) -> np.ndarray | None:
     return None
 
 
+def _rigid_parent(scene: GltfScene, node: int) -> tuple[int, int, np.ndarray] | None:
+    """The nearest joint above a mesh node: ``(binding, joint, local)`` with ``local`` (4, 4) the
+    node's transform relative to that joint (the nodes in between at rest), or None."""
+    up = scene.parents
+    chain = [node]
+    p = int(up[node])
+    while p >= 0:
+        b = scene.binding_of_node(p)
+        if b is not None:
+            local = np.eye(4)
+            for n in reversed(chain):
+                t, q, s = scene.local_trs[n]
+                local = local @ trs_to_xform(t, q, s)
+            return b, scene.bindings[b].node_to_joint[p], local
+        chain.append(p)
+        p = int(up[p])
+    return None
+
+
+def mesh_node_binding(scene: GltfScene, node: int) -> int | None:
+    """The skeleton (binding index) a mesh node's meshes are read onto: its skin's, or the one of
+    the nearest joint above it; None when it is on none."""
+    n = scene.doc.gltf.nodes[node]
+    if n.skin is not None and n.skin in scene.skin_binding:
+        return scene.skin_binding[n.skin]
+    parent = _rigid_parent(scene, node)
+    return None if parent is None else parent[0]
+
+
+def blend_shape_tokens(scene: GltfScene) -> dict[int, list[tuple[str, str]]]:
+    """Mesh node -> ``(weight channel name, target name)`` of each of its morph targets.
+
+    The target's name (``mesh.extras.targetNames``, else ``target<i>``) where no other
+    morphed node has a target of that name, else ``<node name>_<target name>``.
+    """
+    g = scene.doc.gltf
+    names: dict[int, list[str]] = {}
+    for ni, node in enumerate(g.nodes):
+        if node.mesh is None or not 0 <= node.mesh < len(g.meshes):
+            continue
+        mesh = g.meshes[node.mesh]
+        count = max((len(p.targets or []) for p in mesh.primitives), default=0)
+        if not count:
+            continue
+        extras = mesh.extras if isinstance(mesh.extras, dict) else {}
+        given = extras.get("targetNames")
+        given = [str(x) for x in given] if isinstance(given, list) and len(given) == count else []
+        names[ni] = [given[i] if given and given[i] else f"target{i}" for i in range(count)]
+    seen: dict[str, int] = {}
+    for ni, ts in names.items():
+        for t in set(ts):
+            seen[t] = seen.get(t, 0) + 1
+    out = {}
+    for ni, ts in names.items():
+        node_name = g.nodes[ni].name or f"node{ni}"
+        out[ni] = [(t if seen[t] == 1 else f"{node_name}_{t}", t) for t in ts]
+    return out
+
+
 def read_meshes(scene: GltfScene) -> list[SkinnedMesh]:
-    """Every triangle primitive of a skinned mesh node, as one :class:`SkinnedMesh` each."""
+    """Every triangle primitive of a mesh node on a skeleton, as one :class:`SkinnedMesh` each.
+
+    Skinned nodes keep their skin's influences; a mesh node below a joint (a rigid part:
+    RobotExpressive's head, arms and legs) follows that joint with full weight, its
+    ``geom_bind_xform`` placing it where the node tree does at bind time. Morph targets
+    become ``blend_shapes``; the primitive's material its ``material``.
+    """
     doc = scene.doc
     g = doc.gltf
     out: list[SkinnedMesh] = []
     used_names: set[str] = set()
+    tokens = blend_shape_tokens(scene)
     for ni, node in enumerate(g.nodes):
-        if node.mesh is None or node.skin is None or node.skin not in scene.skin_binding:
+        if node.mesh is None:
             continue
-        b = scene.skin_binding[node.skin]
-        binding = scene.bindings[b]
-        skin = g.skins[node.skin]
-        skin_to_joint = np.array([binding.node_to_joint[n] for n in skin.joints], dtype=np.int64)
-        geom_bind = _geom_bind(scene, node.skin, binding)
+        if node.skin is not None and node.skin in scene.skin_binding:
+            b = scene.skin_binding[node.skin]
+            binding = scene.bindings[b]
+            skin = g.skins[node.skin]
+            skin_to_joint = np.array([binding.node_to_joint[n] for n in skin.joints], dtype=np.int64)
+            geom_bind = _geom_bind(scene, node.skin, binding)
+            rigid = None
+        else:
+            parent = _rigid_parent(scene, ni)
+            if parent is None:
+                continue  # not on a skeleton (named by left_out_of)
+            b, rigid, local = parent
+            binding = scene.bindings[b]
+            bind = binding.skeleton.bind_xforms
+            geom_bind = (bind[rigid] if bind is not None else binding.skeleton.rest_world_xforms()[rigid]) @ local
+            skin_to_joint = None
+        if not 0 <= node.mesh < len(g.meshes):
+            raise doc.error(f"mesh {node.mesh} out of range (there are {len(g.meshes)})", f"nodes[{ni}]")
         mesh = g.meshes[node.mesh]
         base = mesh.name or node.name or f"mesh{node.mesh}"
+        defaults = list(mesh.weights or [])
         for pi, prim in enumerate(mesh.primitives):
             mode = 4 if prim.mode is None else prim.mode
             attrs = _attributes(prim)
@@ -703,15 +844,43 @@ def read_meshes(scene: GltfScene) -> list[SkinnedMesh]:
             if attrs.get("TEXCOORD_0") is not None:
                 uv = doc.accessor(attrs["TEXCOORD_0"])
                 uvs = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
-            ji, jw = _influences(doc, attrs, skin_to_joint, points.shape[0], where)
+            if rigid is None:
+                ji, jw = _influences(doc, attrs, skin_to_joint, points.shape[0], where)
+            else:
+                ji = np.full((points.shape[0], 1), rigid, dtype=np.int64)
+                jw = np.ones((points.shape[0], 1))
             name = base if len(mesh.primitives) == 1 else f"{base}_{pi}"
             name = _unique_names(sorted(used_names) + [name])[-1] if name in used_names else name
             used_names.add(name)
+            shapes = _blend_shapes(doc, prim, tokens.get(ni, []), defaults, points.shape[0], where)
+            material = prim.material if isinstance(prim.material, int) and 0 <= prim.material < len(g.materials) \
+                else None
             out.append(SkinnedMesh(
                 name=name, points=points, face_vertex_counts=np.full(tri.shape[0], 3, dtype=np.int64),
                 face_vertex_indices=tri.reshape(-1), normals=normals, uvs=uvs, joint_indices=ji,
-                joint_weights=jw, geom_bind_xform=geom_bind, skeleton_index=b))
+                joint_weights=jw, geom_bind_xform=geom_bind, skeleton_index=b,
+                group=mesh.name or None, node=node.name or None, material=material, blend_shapes=shapes))
     return out
+
+
+def _blend_shapes(doc: GltfFile, prim, names: list[tuple[str, str]], defaults: list, nverts: int,
+                  where: str) -> tuple:
+    """The primitive's morph targets as :class:`BlendShape` (dense offsets)."""
+    shapes = []
+    for ti, target in enumerate(prim.targets or []):
+        target = dict(target) if isinstance(target, dict) else dict(vars(target))
+        pos = target.get("POSITION")
+        offsets = doc.accessor(pos) if pos is not None else np.zeros((nverts, 3))
+        nrm = target.get("NORMAL")
+        normal_offsets = doc.accessor(nrm) if nrm is not None else None
+        for label, arr in (("POSITION", offsets), ("NORMAL", normal_offsets)):
+            if arr is not None and arr.shape != (nverts, 3):
+                raise doc.error(f"morph target {ti} {label} has {arr.shape[0]} values for {nverts} vertices", where)
+        name, original = names[ti] if ti < len(names) else (f"target{ti}", f"target{ti}")
+        w = defaults[ti] if ti < len(defaults) and isinstance(defaults[ti], (int, float)) else 0.0
+        shapes.append(BlendShape(name=name, offsets=offsets, normal_offsets=normal_offsets, default_weight=float(w),
+                                 source_name=original if original != name else None))
+    return tuple(shapes)
 
 
 def _attributes(prim) -> dict:
@@ -784,19 +953,35 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
         doc = scene.doc
         clips: list[Clip] = []
         provenance: dict[str, dict] = {}
+        meshes = read_meshes(scene)
+        tokens = blend_shape_tokens(scene)
+        morph_nodes: dict[int, dict[int, list]] = {}  # binding -> morphed node -> tokens
+        for ni, ts in tokens.items():
+            b = mesh_node_binding(scene, ni)
+            if b is not None:
+                morph_nodes.setdefault(b, {})[ni] = ts
+        defaults = {ni: [float(w) for w in (doc.gltf.meshes[doc.gltf.nodes[ni].mesh].weights or [])] for ni in tokens}
+        weights: dict[str, BlendShapeWeights] = {}
+        interpolation: dict[str, str] = {}
         for ai, anim in enumerate(doc.gltf.animations):
             name = anim.name or f"animation{ai}"
             record = recorded_provenance(doc, ai)
             k = 0
-            for binding in scene.bindings:
+            for b, binding in enumerate(scene.bindings):
                 clip = sample_animation(doc, ai, binding, fps, name if k == 0 else f"{name}:{binding.skeleton.name}")
                 if clip is not None:
                     clips.append(clip)
                     if record is not None:
                         provenance[clip.name] = record
+                    w = sample_morph_weights(doc, ai, clip, morph_nodes.get(b, {}), defaults)
+                    if w is not None:
+                        weights[clip.name] = w
+                    kind = clip_interpolation(doc, ai, set(binding.node_to_joint) | set(morph_nodes.get(b, {})))
+                    if kind is not None:
+                        interpolation[clip.name] = kind
                     k += 1
-        meshes = read_meshes(scene)
-        left_out = left_out_of(scene, meshes)
+        materials, images, not_kept = read_materials(doc)
+        left_out = left_out_of(scene, meshes) + not_kept
     for thing in left_out:
         _log.info("%s: not read: %s", path, thing)
     non_skin = {}
@@ -806,7 +991,8 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
         if names:
             non_skin[b] = names
     return Asset(str(path), tuple(b.skeleton for b in scene.bindings), tuple(clips), tuple(meshes),
-                 provenance=provenance, left_out=left_out, non_skin_joints=non_skin)
+                 provenance=provenance, left_out=left_out, non_skin_joints=non_skin, blend_shape_weights=weights,
+                 interpolation=interpolation, materials=materials, images=images)
 
 
 def left_out_of(scene: GltfScene, meshes: list[SkinnedMesh]) -> tuple[str, ...]:
@@ -820,36 +1006,31 @@ def left_out_of(scene: GltfScene, meshes: list[SkinnedMesh]) -> tuple[str, ...]:
             out.append(f"{count} {what}")
 
     read_vertices = sum(int(np.asarray(m.points).shape[0]) for m in meshes)
-    rigid_nodes = [i for i, node in enumerate(g.nodes) if node.mesh is not None
-                   and (node.skin is None or node.skin not in scene.skin_binding)]
-    rigid_vertices = 0
-    for i in rigid_nodes:
+    off_nodes = [i for i, node in enumerate(g.nodes) if node.mesh is not None and mesh_node_binding(scene, i) is None]
+    off_vertices = 0
+    for i in off_nodes:
         for prim in g.meshes[g.nodes[i].mesh].primitives:
             pos = _attributes(prim).get("POSITION")
             if pos is not None and 0 <= pos < len(g.accessors):
-                rigid_vertices += int(g.accessors[pos].count or 0)
-    if rigid_nodes:
-        out.append(f"{len(rigid_nodes)} mesh node(s) not skinned ({rigid_vertices} vertices; "
-                   f"{read_vertices} skinned vertices read)")
-    n(sum(len(p.targets or []) for m in g.meshes for p in m.primitives), "morph target(s)")
-    n(len(g.materials), "material(s)")
-    n(len(g.textures), "texture(s)")
+                off_vertices += int(g.accessors[pos].count or 0)
+    if off_nodes:
+        out.append(f"{len(off_nodes)} mesh node(s) on no skeleton ({off_vertices} vertices; "
+                   f"{read_vertices} vertices read)")
+    morphed = {i for i in blend_shape_tokens(scene) if mesh_node_binding(scene, i) is not None}
     n(len(g.cameras), "camera(s)")
-    weights = sum(1 for a in g.animations for ch in a.channels if ch.target is not None and ch.target.path == "weights")
-    n(weights, "morph weight channel(s)")
+    weights = sum(1 for a in g.animations for ch in a.channels if ch.target is not None and ch.target.path == "weights"
+                  and ch.target.node not in morphed)
+    n(weights, "morph weight channel(s) on nodes off the skeletons")
     joints = set()
     for b in scene.bindings:
         joints.update(b.node_to_joint)
     other = sum(1 for a in g.animations for ch in a.channels if ch.target is not None and ch.target.path in _TRS_PATHS
                 and ch.target.node not in joints)
+    n(sum(1 for a in g.animations if not any(ch.target is not None and ch.target.node in joints and ch.target.path
+                                              in _TRS_PATHS for ch in a.channels)), "animation(s) moving no joint")
     n(other, "channel(s) on nodes outside the skeletons")
-    interp = {}
-    for a in g.animations:
-        for smp in a.samplers:
-            if smp.interpolation in ("STEP", "CUBICSPLINE"):
-                interp[smp.interpolation] = interp.get(smp.interpolation, 0) + 1
-    for k, v in sorted(interp.items()):
-        out.append(f"{v} {k} sampler(s) (sampled per frame)")
+    mixed = sum(1 for a in g.animations if len({s.interpolation or "LINEAR" for s in a.samplers}) > 1)
+    n(mixed, "animation(s) mixing LINEAR, STEP and CUBICSPLINE samplers (sampled per frame, kept as LINEAR)")
     if g.extensionsUsed:
         out.append(f"extension(s) {', '.join(g.extensionsUsed)}")
     return tuple(out)

@@ -28,7 +28,8 @@ from usdhands.formats.gltf_read import (
 from usdhands.model.asset import Asset, SkinnedMesh
 from usdhands.model.clip import Clip
 from usdhands.model.provenance import provenance_record
-from usdhands.model.rotations import quat_angle_deg
+from usdhands.formats.gltf_materials import write_materials
+from usdhands.model.rotations import quat_angle_deg, trs_to_xform, xform_to_trs
 from usdhands.model.skeleton import short_joint_name
 from usdhands.model.units import asset_to, clip_to, skeleton_to
 
@@ -93,13 +94,42 @@ def _key_times(clip: Clip) -> np.ndarray:
     return t32
 
 
+def _cubic_values(values: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """CUBICSPLINE sampler output ``(3T, ...)``: (in-tangent, value, out-tangent) per key, the tangents
+    the finite-difference slopes of the values (per second), so the spline passes through every frame."""
+    if len(times) < 2:
+        slope = np.zeros_like(values)
+    else:
+        slope = np.gradient(values, times.astype(np.float64), axis=0)
+    out = np.empty((3 * values.shape[0],) + values.shape[1:], dtype=values.dtype)
+    out[0::3], out[1::3], out[2::3] = slope, values, slope
+    return out
+
+
 class _AnimationWriter:
     """Adds samplers and channels for per-joint arrays of one clip to an animation."""
 
-    def __init__(self, app: BinaryAppender, animation: pygltflib.Animation, times: np.ndarray):
+    def __init__(self, app: BinaryAppender, animation: pygltflib.Animation, times: np.ndarray,
+                 interpolation: str = "LINEAR"):
         self.app = app
         self.anim = animation
+        self.times = times
+        self.interpolation = interpolation if interpolation in ("STEP", "CUBICSPLINE") else "LINEAR"
         self.input = app.add_accessor(times.reshape(-1, 1), "SCALAR", min_max=True)
+
+    def _sampler(self, output: int) -> int:
+        self.anim.samplers.append(pygltflib.AnimationSampler(input=self.input, output=output,
+                                                             interpolation=self.interpolation))
+        return len(self.anim.samplers) - 1
+
+    def add_weights(self, node: int, values: np.ndarray) -> None:
+        """A ``weights`` channel on a morphed mesh node: ``values`` (T, B)."""
+        data = np.asarray(values, dtype=np.float32)
+        if self.interpolation == "CUBICSPLINE":
+            data = _cubic_values(data, self.times)
+        acc = self.app.add_accessor(data.reshape(-1, 1), "SCALAR")
+        self.anim.channels.append(pygltflib.AnimationChannel(
+            sampler=self._sampler(acc), target=pygltflib.AnimationChannelTarget(node=node, path="weights")))
 
     def add(self, path: str, joints: list[int], nodes: list[int], values: np.ndarray,
             replace: dict[tuple[int, str], int] | None = None) -> None:
@@ -114,14 +144,14 @@ class _AnimationWriter:
         if not joints:
             return
         data = np.ascontiguousarray(values[:, joints].transpose(1, 0, 2), dtype=np.float32)
+        if self.interpolation == "CUBICSPLINE":
+            data = np.ascontiguousarray(_cubic_values(data.transpose(1, 0, 2), self.times).transpose(1, 0, 2))
         T, C = data.shape[1], data.shape[2]
         view = self.app.add_view(data.tobytes())
         type_ = {3: "VEC3", 4: "VEC4"}[C]
         for k, node in enumerate(nodes):
             acc = self.app.add_accessor(data[k], type_, view=view, byte_offset=k * T * C * 4)
-            self.anim.samplers.append(pygltflib.AnimationSampler(input=self.input, output=acc,
-                                                                 interpolation="LINEAR"))
-            s = len(self.anim.samplers) - 1
+            s = self._sampler(acc)
             existing = None if replace is None else replace.get((node, path))
             if existing is not None:
                 self.anim.channels[existing].sampler = s
@@ -181,6 +211,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
         How the finger motion of every clip was made, recorded in each animation's
         ``extras.usdhands.provenance``; by default the asset's record of each clip.
     """
+    options.pop("final_path", None)  # images are embedded: where the file ends up does not matter
     if options:
         raise TypeError(f"unexpected options for glTF write: {sorted(options)}")
     path = Path(path)
@@ -216,14 +247,8 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
         skel_nodes.append(nodes)
         skel_skins.append(len(gltf.skins) - 1)
 
-    for mesh in asset.meshes:
-        si = mesh.skeleton_index
-        if not 0 <= si < len(asset.skeletons):
-            raise ValueError(f"mesh {mesh.name!r} has skeleton_index {si}, the asset has {len(asset.skeletons)}")
-        name = asset.source_names.get(mesh.name) or mesh.name.rsplit("/", 1)[-1]  # as for animations below
-        mi = _add_mesh(gltf, app, mesh, asset.skeletons[si].num_joints, name)
-        gltf.nodes.append(pygltflib.Node(name=name, mesh=mi, skin=skel_skins[si]))
-        scene_nodes.append(len(gltf.nodes) - 1)
+    material_index = write_materials(gltf, app, asset.materials, asset.images)
+    morph_nodes = _write_meshes(gltf, app, asset, skel_nodes, skel_skins, scene_nodes, material_index)
 
     # the name recorded where the source could not hold it, else a USD prim path's last element
     shorts = [asset.source_names.get(c.name) or c.name.rsplit("/", 1)[-1] for c in asset.clips]
@@ -238,7 +263,8 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
         anim = pygltflib.Animation(name=short if shorts.count(short) == 1 else clip.name)
         _record_fps(anim, c.fps)
         _record_provenance(anim, provenance if provenance is not None else asset.provenance.get(clip.name))
-        w = _AnimationWriter(app, anim, _key_times(c))
+        kind = asset.interpolation.get(clip.name, "LINEAR")
+        w = _AnimationWriter(app, anim, _key_times(c), kind)
         J = sk.num_joints
         nodes = skel_nodes[si]
         w.add("rotation", list(range(J)), nodes, _continuous(c.rotations))
@@ -246,6 +272,14 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
                                          ("scale", c.scales, sk.rest_scales, SCALE_TOLERANCE)):
             moving = [j for j in np.nonzero(_differs_from_rest(values, rest, tol))[0]]
             w.add(path_, moving, [nodes[j] for j in moving], values)
+        shapes = asset.blend_shape_weights.get(clip.name)
+        for node, (k, names, defaults) in morph_nodes.items():
+            if k != si or shapes is None or not set(names) & set(shapes.names):
+                continue
+            col = {n: i for i, n in enumerate(shapes.names)}
+            values = np.stack([shapes.weights[:, col[n]] if n in col else np.full(c.num_frames, d)
+                               for n, d in zip(names, defaults)], axis=1)
+            w.add_weights(node, values)
         gltf.animations.append(anim)
 
     gltf.scenes = [pygltflib.Scene(nodes=scene_nodes)]
@@ -315,14 +349,82 @@ def _clean_influences(ji: np.ndarray, jw: np.ndarray, num_joints: int) -> tuple[
     return ji, w32
 
 
-def _add_mesh(gltf: pygltflib.GLTF2, app: BinaryAppender, mesh: SkinnedMesh, num_joints: int, name: str) -> int:
-    """Append one skinned mesh (points moved by its geom bind transform); returns the mesh index."""
-    xf = np.asarray(mesh.geom_bind_xform, dtype=np.float64)
+def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel_nodes: list[list[int]],
+                  skel_skins: list[int], scene_nodes: list[int], material_index: list[int]) -> dict:
+    """Every mesh of ``asset`` as glTF meshes: the parts of one ``group`` (a source mesh's primitives)
+    become one mesh with several primitives; a mesh following one joint rigidly becomes a mesh node
+    below that joint's node, the others skinned nodes at the scene root.
+
+    Returns
+    -------
+    dict node -> (skeleton index, blend shape names, default weights)
+        The morphed mesh nodes, for the animations' ``weights`` channels.
+    """
+    groups: dict[tuple, list[SkinnedMesh]] = {}
+    for mesh in asset.meshes:
+        si = mesh.skeleton_index
+        if not 0 <= si < len(asset.skeletons):
+            raise ValueError(f"mesh {mesh.name!r} has skeleton_index {si}, the asset has {len(asset.skeletons)}")
+        rigid = mesh.rigid_joint()
+        key = (si, rigid, mesh.group, mesh.node) if mesh.group is not None else (si, rigid, id(mesh), None)
+        groups.setdefault(key, []).append(mesh)
+    morph_nodes = {}
+    for (si, rigid, _, node_name), parts in groups.items():
+        sk = asset.skeletons[si]
+        first = parts[0]
+        short = asset.source_names.get(first.name) or first.name.rsplit("/", 1)[-1]
+        mesh_name = first.group or short
+        names = list(dict.fromkeys(b.name for m in parts for b in m.blend_shapes))
+        defaults = []
+        for n in names:
+            defaults.append(next(b.default_weight for m in parts for b in m.blend_shapes if b.name == n))
+        local = None
+        if rigid is not None:
+            bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
+            local = np.linalg.inv(bind[rigid]) @ np.asarray(first.geom_bind_xform, dtype=np.float64)
+            if not all(np.allclose(np.linalg.inv(bind[rigid]) @ m.geom_bind_xform, local, atol=1e-9) for m in parts):
+                local = None
+                rigid = None
+        prims = []
+        for m in parts:
+            xf = np.eye(4) if rigid is not None else np.asarray(m.geom_bind_xform, dtype=np.float64)
+            mat = material_index[m.material] if m.material is not None and m.material < len(material_index) else None
+            prims.append(_add_primitive(app, m, sk.num_joints, xf, rigid is None, names, mat))
+        extras = {}
+        if names:
+            extras["targetNames"] = [next((b.source_name or b.name) for m in parts for b in m.blend_shapes
+                                          if b.name == n) for n in names]
+        gltf.meshes.append(pygltflib.Mesh(name=mesh_name, primitives=prims, extras=extras,
+                                          weights=[float(d) for d in defaults] if names else None))
+        node = pygltflib.Node(name=node_name or mesh_name, mesh=len(gltf.meshes) - 1)
+        if rigid is None:
+            node.skin = skel_skins[si]
+            gltf.nodes.append(node)
+            scene_nodes.append(len(gltf.nodes) - 1)
+        else:
+            t, q, sc = xform_to_trs(local)
+            if not np.allclose(trs_to_xform(t, q, sc), local, atol=1e-6 * max(1.0, np.abs(local).max())):
+                node.matrix = [float(v) for v in local.T.reshape(-1)]  # shear: the matrix as it is
+            else:
+                node.translation = [float(v) for v in t]
+                node.rotation = [float(v) for v in _unit(q)]
+                node.scale = [float(v) for v in sc]
+            gltf.nodes.append(node)
+            gltf.nodes[skel_nodes[si][rigid]].children.append(len(gltf.nodes) - 1)
+        if names:
+            morph_nodes[len(gltf.nodes) - 1] = (si, names, defaults)
+    return morph_nodes
+
+
+def _add_primitive(app: BinaryAppender, mesh: SkinnedMesh, num_joints: int, xf: np.ndarray, skinned: bool,
+                   target_names: list[str], material: int | None) -> pygltflib.Primitive:
+    """One triangle primitive of ``mesh``, points moved by ``xf`` (4, 4); joints and weights when
+    ``skinned``; one morph target per name of ``target_names`` (zero where the mesh lacks it)."""
     pts = np.asarray(mesh.points, dtype=np.float64)
     pts = pts @ xf[:3, :3].T + xf[:3, 3]
     attrs = {"POSITION": app.add_accessor(pts.astype(np.float32), "VEC3", target=ARRAY_BUFFER, min_max=True)}
+    lin = np.linalg.inv(xf[:3, :3]).T
     if mesh.normals is not None:
-        lin = np.linalg.inv(xf[:3, :3]).T
         n = np.asarray(mesh.normals, dtype=np.float64) @ lin.T
         length = np.linalg.norm(n, axis=1, keepdims=True)
         ok = (length[:, 0] > 1e-12) & np.isfinite(length[:, 0])
@@ -332,19 +434,29 @@ def _add_mesh(gltf: pygltflib.GLTF2, app: BinaryAppender, mesh: SkinnedMesh, num
         uv = np.asarray(mesh.uvs, dtype=np.float64)
         uv = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
         attrs["TEXCOORD_0"] = app.add_accessor(uv.astype(np.float32), "VEC2", target=ARRAY_BUFFER)
-    if mesh.joint_indices is not None and mesh.joint_weights is not None:
+    if skinned and mesh.joint_indices is not None and mesh.joint_weights is not None:
         ji, jw = _clean_influences(mesh.joint_indices, mesh.joint_weights, num_joints)
         jdtype = np.uint8 if num_joints <= 256 else np.uint16
         for s in range(ji.shape[1] // 4):
             attrs[f"JOINTS_{s}"] = app.add_accessor(ji[:, 4 * s:4 * s + 4].astype(jdtype), "VEC4",
                                                     target=ARRAY_BUFFER)
             attrs[f"WEIGHTS_{s}"] = app.add_accessor(jw[:, 4 * s:4 * s + 4], "VEC4", target=ARRAY_BUFFER)
+    targets = []
+    by_name = {b.name: b for b in mesh.blend_shapes}
+    for name in target_names:
+        b = by_name.get(name)
+        off = np.zeros_like(pts) if b is None else np.asarray(b.offsets, dtype=np.float64) @ xf[:3, :3].T
+        target = pygltflib.Attributes(POSITION=app.add_accessor(off.astype(np.float32), "VEC3", target=ARRAY_BUFFER,
+                                                                min_max=True))
+        if mesh.normals is not None and b is not None and b.normal_offsets is not None:
+            dn = np.asarray(b.normal_offsets, dtype=np.float64) @ lin.T
+            target.NORMAL = app.add_accessor(dn.astype(np.float32), "VEC3", target=ARRAY_BUFFER)
+        targets.append(target)
     tri = _triangulate(mesh.face_vertex_counts, mesh.face_vertex_indices)
     idtype = np.uint16 if pts.shape[0] <= 65535 else np.uint32
     indices = app.add_accessor(tri.reshape(-1, 1).astype(idtype), "SCALAR", target=ELEMENT_ARRAY_BUFFER)
-    prim = pygltflib.Primitive(attributes=pygltflib.Attributes(**attrs), indices=indices, mode=4)
-    gltf.meshes.append(pygltflib.Mesh(name=name, primitives=[prim]))
-    return len(gltf.meshes) - 1
+    return pygltflib.Primitive(attributes=pygltflib.Attributes(**attrs), indices=indices, mode=4,
+                               targets=targets or None, material=material)
 
 
 # -- a source file with one animation changed ------------------------------------------

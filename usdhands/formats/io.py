@@ -71,6 +71,8 @@ def write_asset(asset: Asset, path: str | os.PathLike, *, inputs: tuple = (), **
     handler = handler_for(path, "write")
     for clip in asset.clips:
         clip.validate(str(path))
+    if asset.images and handler.name in ("usd", "gltf"):  # textures are placed relative to the final file
+        options = {**options, "final_path": path}
     with atomic_output(path) as tmp:
         handler.write(asset, tmp, **options)
     return path

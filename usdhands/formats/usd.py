@@ -29,12 +29,13 @@ class UsdHandler:
         """Every Skeleton, SkelAnimation and skinned Mesh of a file (:func:`read_usd`)."""
         return read_usd(path, fps=fps)
 
-    def write(self, asset: Asset, path: Path, *, provenance: dict | None = None, **options) -> None:
+    def write(self, asset: Asset, path: Path, *, provenance: dict | None = None,
+              final_path: str | os.PathLike | None = None, **options) -> None:
         """A standalone stage (:func:`write_usd`); ``provenance`` becomes every animation's
-        ``UsdHandsFingerMotionAPI``."""
+        ``UsdHandsFingerMotionAPI``; texture images go beside ``final_path``."""
         if options:
             raise TypeError(f"Unexpected options for USD write: {sorted(options)}")
-        write_usd(asset, path, provenance=provenance)
+        write_usd(asset, path, provenance=provenance, final_path=final_path)
 
     def write_clip(self, source: Path, clip: Clip, path: Path, *, final_path: str | os.PathLike | None = None,
                    animation: str | None = None, as_layer: bool = False, hand_map=None, provenance=None,

@@ -19,7 +19,8 @@ from usdhands.errors import AssetReadError
 from usdhands.model.rotations import quat_canonical, quat_multiply, trs_to_xform, xform_to_trs
 
 __all__ = [
-    "SOURCE_JOINT_NAMES_KEY", "SOURCE_SKELETON_KEY", "quiet_diagnostics", "open_stage",
+    "SOURCE_JOINT_NAMES_KEY", "SOURCE_SKELETON_KEY", "SOURCE_NAME_KEY", "SOURCE_MESH_KEY", "SOURCE_NODE_KEY",
+    "DEFAULT_WEIGHT_KEY", "INTERPOLATION_KEY", "quiet_diagnostics", "open_stage",
     "tf_error_reason", "matrices_to_numpy", "numpy_to_matrices", "valid_identifier",
     "unique_name", "joint_tokens_for", "skeleton_tokens_and_names", "bound_animation_path",
     "skeleton_world_xforms", "fold_into_roots",
@@ -32,6 +33,14 @@ SOURCE_SKELETON_KEY = "usdhands:skeleton"
 #: customData of a SkelAnimation: the animation's name in the file it was converted from, when
 #: the prim name had to differ (``dance-01`` -> prim ``dance_01``); readers restore it.
 SOURCE_NAME_KEY = "usdhands:sourceName"
+#: customData of a Mesh: the source mesh it is a part of (a glTF mesh with several primitives)
+SOURCE_MESH_KEY = "usdhands:sourceMesh"
+#: customData of a Mesh: the name of the node that carried it in the source (glTF node)
+SOURCE_NODE_KEY = "usdhands:sourceNode"
+#: customData of a BlendShape: its weight where no animation drives it (glTF ``mesh.weights``)
+DEFAULT_WEIGHT_KEY = "usdhands:defaultWeight"
+#: customData of a SkelAnimation: the source's sampler interpolation (``STEP``, ``CUBICSPLINE``)
+INTERPOLATION_KEY = "usdhands:interpolation"
 
 
 @contextlib.contextmanager

@@ -10,6 +10,7 @@ answers ``GetSkelQuery`` for them, with the animation their own
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 from pathlib import Path
@@ -19,7 +20,11 @@ from pxr import Gf, Tf, Usd, UsdGeom, UsdSkel
 
 from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatchError
 from usdhands.formats.usd_common import (
+    DEFAULT_WEIGHT_KEY,
+    INTERPOLATION_KEY,
+    SOURCE_MESH_KEY,
     SOURCE_NAME_KEY,
+    SOURCE_NODE_KEY,
     SOURCE_SKELETON_KEY,
     bound_animation_path,
     fold_into_roots,
@@ -31,7 +36,8 @@ from usdhands.formats.usd_common import (
     tf_error_reason,
 )
 from usdhands.formats.usd_schema_data import read_finger_motion
-from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.formats.usd_materials import MaterialReader
+from usdhands.model.asset import Asset, BlendShape, BlendShapeWeights, SkinnedMesh
 from usdhands.model.clip import Clip
 from usdhands.model.rotations import xform_to_trs
 from usdhands.model.skeleton import Skeleton
@@ -176,6 +182,7 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
                                 kept_prims[k] if worlds[k] is not None else None))
 
     meshes: list[SkinnedMesh] = []
+    materials = MaterialReader(path)
     for root in roots:
         for binding in cache.ComputeSkelBindings(root, _PREDICATE):
             k = index_of_skel.get(str(binding.GetSkeleton().GetPrim().GetPath()))
@@ -183,11 +190,11 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
                 continue
             for sq in binding.GetSkinningTargets():
                 if sq.GetPrim().IsA(UsdGeom.Mesh):
-                    meshes.append(_read_mesh(sq, k, tokens_of[k], path, worlds[k]))
-    left_out = _left_out(stage, meshes)
+                    meshes.append(_read_mesh(sq, k, tokens_of[k], path, worlds[k], materials))
+    left_out = _left_out(stage, meshes, materials)
     for thing in left_out:
         _log.info("%s: not read: %s", path, thing)
-    provenance, source_names = {}, {}
+    provenance, source_names, weights, interpolation = {}, {}, {}, {}
     for m in meshes:
         original = stage.GetPrimAtPath(m.name).GetCustomDataByKey(SOURCE_NAME_KEY)
         if isinstance(original, str) and original:
@@ -200,28 +207,53 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
         original = prim.GetCustomDataByKey(SOURCE_NAME_KEY)
         if isinstance(original, str) and original:
             source_names[clip.name] = original
+        kind = prim.GetCustomDataByKey(INTERPOLATION_KEY)
+        if kind in ("STEP", "CUBICSPLINE"):
+            interpolation[clip.name] = kind
+        w = _blend_shape_weights(cache.GetAnimQuery(UsdSkel.Animation(prim)), clip, tcps)
+        if w is not None:
+            weights[clip.name] = w
     return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes),
-                 provenance=provenance, source_names=source_names, left_out=left_out)
+                 provenance=provenance, source_names=source_names, left_out=left_out,
+                 materials=tuple(materials.materials), images=tuple(materials.images), blend_shape_weights=weights,
+                 interpolation=interpolation)
 
 
-def _left_out(stage: Usd.Stage, meshes: list[SkinnedMesh]) -> tuple[str, ...]:
+def _blend_shape_weights(anim_query, clip: Clip, tcps: float) -> BlendShapeWeights | None:
+    """The animation's ``blendShapeWeights`` at the clip's frames (None when it has none)."""
+    if not anim_query:
+        return None
+    names = [str(t) for t in anim_query.GetBlendShapeOrder()]
+    if not names:
+        return None
+    codes = clip.start_time * tcps + np.arange(clip.num_frames) * (tcps / clip.fps)
+    out = np.zeros((clip.num_frames, len(names)))
+    for f, c in enumerate(codes.tolist()):
+        value = anim_query.ComputeBlendShapeWeights(Usd.TimeCode(round(c, 9)))
+        if value is not None and len(value) == len(names):
+            out[f] = np.asarray(value, dtype=np.float64)
+    return BlendShapeWeights(tuple(names), out)
+
+
+def _left_out(stage: Usd.Stage, meshes: list[SkinnedMesh], materials: MaterialReader) -> tuple[str, ...]:
     """What the stage holds that the model does not, one short phrase each."""
-    counts = {"mesh": 0, "mesh_points": 0, "Material": 0, "BlendShape": 0, "Camera": 0, "light": 0}
+    counts = {"mesh": 0, "mesh_points": 0, "Material": len(materials.skipped), "Camera": 0, "light": 0}
+    read = {m.name for m in meshes}
     for prim in stage.Traverse(_PREDICATE):
-        if prim.IsA(UsdGeom.Mesh) and not prim.HasAPI(UsdSkel.BindingAPI):
+        if prim.IsA(UsdGeom.Mesh) and str(prim.GetPath()) not in read:
             counts["mesh"] += 1
             pts = UsdGeom.Mesh(prim).GetPointsAttr().Get()
             counts["mesh_points"] += len(pts) if pts is not None else 0
-        elif prim.GetTypeName() in ("Material", "BlendShape", "Camera"):
-            counts[str(prim.GetTypeName())] += 1
+        elif prim.GetTypeName() == "Camera":
+            counts["Camera"] += 1
         elif str(prim.GetTypeName()).endswith("Light"):
             counts["light"] += 1
     out = []
     if counts["mesh"]:
-        read = sum(int(np.asarray(m.points).shape[0]) for m in meshes)
-        out.append(f"{counts['mesh']} mesh(es) not skinned ({counts['mesh_points']} vertices; "
-                   f"{read} skinned vertices read)")
-    for key, what in (("BlendShape", "blend shape(s)"), ("Material", "material(s)"), ("Camera", "camera(s)"),
+        done = sum(int(np.asarray(m.points).shape[0]) for m in meshes)
+        out.append(f"{counts['mesh']} mesh(es) not bound to a skeleton ({counts['mesh_points']} vertices; "
+                   f"{done} vertices read)")
+    for key, what in (("Material", "material(s) that are not UsdPreviewSurface"), ("Camera", "camera(s)"),
                       ("light", "light(s)")):
         if counts[key]:
             out.append(f"{counts[key]} {what}")
@@ -562,7 +594,8 @@ def _check_influences(prim: Usd.Prim, n_points: int, n_joints: int, path: Path, 
         raise JointMismatchError("skel:jointWeights holds NaN or infinite weights", path=path, location=where)
 
 
-def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.ndarray | None = None) -> SkinnedMesh:
+def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.ndarray | None = None,
+               materials: MaterialReader | None = None) -> SkinnedMesh:
     prim = sq.GetPrim()
     where = str(prim.GetPath())
     mesh = UsdGeom.Mesh(prim)
@@ -646,8 +679,64 @@ def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.nda
             uv_out = (uvs[0][first] if uvs[1] == "corner" else uvs[0][src])[:, :2]
         if joint_indices is not None:
             joint_indices, joint_weights = joint_indices[src], joint_weights[src]
+    else:
+        src = None
+    shapes = _read_blend_shapes(prim, V, path, where)
+    if src is not None:
+        shapes = tuple(dataclasses.replace(b, offsets=b.offsets[src], normal_offsets=None if b.normal_offsets is None
+                                           else b.normal_offsets[src]) for b in shapes)
+    group = prim.GetCustomDataByKey(SOURCE_MESH_KEY)
+    node = prim.GetCustomDataByKey(SOURCE_NODE_KEY)
     return SkinnedMesh(
         name=where, points=pts, face_vertex_counts=counts, face_vertex_indices=face_idx,
         normals=n_out, uvs=uv_out, joint_indices=joint_indices, joint_weights=joint_weights,
         geom_bind_xform=geom_bind, skeleton_index=skel_index,
+        group=group if isinstance(group, str) else None, node=node if isinstance(node, str) else None,
+        material=materials.material_of(prim) if materials is not None else None, blend_shapes=shapes,
     )
+
+
+def _read_blend_shapes(prim: Usd.Prim, V: int, path: Path, where: str) -> tuple[BlendShape, ...]:
+    """The mesh's ``skel:blendShapes`` with their ``BlendShape`` targets, offsets made dense (V, 3)."""
+    binding = UsdSkel.BindingAPI(prim)
+    attr = binding.GetBlendShapesAttr()
+    names = [str(t) for t in (attr.Get() or [])] if attr else []
+    rel = binding.GetBlendShapeTargetsRel()
+    targets = rel.GetForwardedTargets() if rel else []
+    if not names:
+        return ()
+    if len(targets) != len(names):
+        raise JointMismatchError(f"skel:blendShapes has {len(names)} names for {len(targets)} "
+                                 "skel:blendShapeTargets", path=path, location=where)
+    out = []
+    stage = prim.GetStage()
+    for name, target in zip(names, targets):
+        shape = UsdSkel.BlendShape(stage.GetPrimAtPath(target))
+        if not shape:
+            raise JointMismatchError(f"skel:blendShapeTargets names {target}, which is not a BlendShape",
+                                     path=path, location=where)
+        offsets = np.asarray(shape.GetOffsetsAttr().Get() or [], dtype=np.float64).reshape(-1, 3)
+        normals = shape.GetNormalOffsetsAttr().Get() if shape.GetNormalOffsetsAttr().HasValue() else None
+        normals = None if normals is None else np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+        indices = shape.GetPointIndicesAttr().Get() if shape.GetPointIndicesAttr().HasValue() else None
+        if indices is not None:
+            idx = np.asarray(indices, dtype=np.int64)
+            if len(idx) != len(offsets) or (len(idx) and (idx.min() < 0 or idx.max() >= V)):
+                raise JointMismatchError(f"{target}: pointIndices do not match its offsets or the {V} points",
+                                         path=path, location=where)
+            dense = np.zeros((V, 3))
+            dense[idx] = offsets
+            offsets = dense
+            if normals is not None and len(normals) == len(idx):
+                dense = np.zeros((V, 3))
+                dense[idx] = normals
+                normals = dense
+        if len(offsets) != V or (normals is not None and len(normals) != V):
+            raise JointMismatchError(f"{target}: {len(offsets)} offsets for {V} points", path=path, location=where)
+        bs_prim = shape.GetPrim()
+        default = bs_prim.GetCustomDataByKey(DEFAULT_WEIGHT_KEY)
+        original = bs_prim.GetCustomDataByKey(SOURCE_NAME_KEY)
+        out.append(BlendShape(name=name, offsets=offsets, normal_offsets=normals,
+                              default_weight=float(default) if isinstance(default, (int, float)) else 0.0,
+                              source_name=original if isinstance(original, str) else None))
+    return tuple(out)

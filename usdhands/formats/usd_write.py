@@ -17,8 +17,12 @@ from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
 
 from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats.usd_common import (
+    DEFAULT_WEIGHT_KEY,
+    INTERPOLATION_KEY,
     SOURCE_JOINT_NAMES_KEY,
+    SOURCE_MESH_KEY,
     SOURCE_NAME_KEY,
+    SOURCE_NODE_KEY,
     SOURCE_SKELETON_KEY,
     bound_animation_path,
     fold_into_roots,
@@ -31,6 +35,7 @@ from usdhands.formats.usd_common import (
     unique_name,
     valid_identifier,
 )
+from usdhands.formats.usd_materials import bind_material, write_materials
 from usdhands.formats.usd_read import read_skeleton
 from usdhands.formats.usd_schema_data import write_finger_motion, write_hand_map
 from usdhands.model.asset import Asset, SkinnedMesh
@@ -159,7 +164,8 @@ def _set_time_range(layer: Sdf.Layer, codes: np.ndarray, *, extend: bool) -> Non
 
 
 # --------------------------------------------------------------------------- standalone
-def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None = None) -> None:
+def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None = None,
+              final_path: str | os.PathLike | None = None) -> None:
     """Write ``asset`` as a standalone stage.
 
     Layout: ``/Root`` is the default prim, a SkelRoot holding the Skeleton, its
@@ -186,8 +192,12 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
     provenance : dict, optional
         How the finger motion of every clip was made
         (:func:`usdhands.model.provenance.provenance_record`).
+    final_path : path-like, optional
+        Where ``path`` will be renamed to (texture images are written beside it, see
+        :mod:`usdhands.formats.usd_materials`); defaults to ``path``.
     """
     path = Path(path)
+    final_path = Path(final_path) if final_path is not None else path
     records = [provenance_record(provenance) if provenance is not None else asset.provenance.get(c.name)
                for c in asset.clips]
     if not asset.skeletons:
@@ -213,6 +223,8 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
         else:
             UsdGeom.Xform.Define(stage, root_path)
         stage.SetDefaultPrim(stage.GetPrimAtPath(root_path))
+        material_paths = write_materials(stage, root_path.AppendChild("Materials"), asset.materials, asset.images,
+                                         final_path, (asset.path,))
         all_codes = []
         used_roots: set[str] = set()
         for k, sk in enumerate(asset.skeletons):
@@ -260,6 +272,12 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                 codes = frame_time_codes(clip, tcps)
                 all_codes.append(codes)
                 author_animation(anim, clip, np.arange(sk.num_joints), tokens, codes)
+                shapes = asset.blend_shape_weights.get(clip.name)
+                if shapes is not None and len(shapes.names):
+                    _author_blend_shape_weights(anim, shapes.names, shapes.weights, codes)
+                kind = asset.interpolation.get(clip.name)
+                if kind is not None:
+                    anim.GetPrim().SetCustomDataByKey(INTERPOLATION_KEY, kind)
                 if record is not None:
                     write_finger_motion(anim.GetPrim(), **provenance_record(record))
                 if not bound:
@@ -271,7 +289,8 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                 if m.skeleton_index == k:
                     if chain:
                         m = _mesh_without_chain(m, lifted.num_joints, keep, to_skel)
-                    _write_mesh(stage, parent, used, m, skel_path, sk.num_joints, asset.source_names.get(m.name))
+                    _write_mesh(stage, parent, used, m, skel_path, sk.num_joints, asset.source_names.get(m.name),
+                                material_paths, asset.materials)
         if all_codes:
             _set_time_range(layer, np.concatenate(all_codes), extend=False)
         layer.Export(str(path))
@@ -359,13 +378,53 @@ def _owner(skeletons: Sequence[Skeleton], clip: Clip) -> int:
                      f"got skeleton {clip.skeleton.name!r}")
 
 
+def _author_blend_shape_weights(anim: UsdSkel.Animation, names: Sequence[str], weights: np.ndarray,
+                                time_codes: np.ndarray) -> None:
+    """``blendShapes`` and one ``blendShapeWeights`` sample per frame (``weights`` (T, B))."""
+    anim.CreateBlendShapesAttr().Set(Vt.TokenArray(list(names)))
+    attr = anim.CreateBlendShapeWeightsAttr()
+    w = _f32(weights).reshape(len(time_codes), len(names))
+    with Sdf.ChangeBlock():
+        for f, tc in enumerate(time_codes.tolist()):
+            attr.Set(Vt.FloatArray.FromNumpy(w[f]), Usd.TimeCode(tc))
+
+
+def _write_blend_shapes(stage: Usd.Stage, mesh: UsdGeom.Mesh, binding: UsdSkel.BindingAPI, m: SkinnedMesh) -> None:
+    """One ``BlendShape`` prim below the mesh per shape, bound through ``skel:blendShapes`` /
+    ``skel:blendShapeTargets``."""
+    used: set[str] = set()
+    targets = []
+    for shape in m.blend_shapes:
+        path = mesh.GetPath().AppendChild(unique_name(valid_identifier(shape.name), used))
+        bs = UsdSkel.BlendShape.Define(stage, path)
+        bs.CreateOffsetsAttr().Set(Vt.Vec3fArray.FromNumpy(_f32(shape.offsets).reshape(-1, 3)))
+        if shape.normal_offsets is not None:
+            bs.CreateNormalOffsetsAttr().Set(Vt.Vec3fArray.FromNumpy(_f32(shape.normal_offsets).reshape(-1, 3)))
+        if shape.default_weight:
+            bs.GetPrim().SetCustomDataByKey(DEFAULT_WEIGHT_KEY, float(shape.default_weight))
+        if shape.source_name:
+            bs.GetPrim().SetCustomDataByKey(SOURCE_NAME_KEY, shape.source_name)
+        targets.append(path)
+    binding.CreateBlendShapesAttr().Set(Vt.TokenArray([s.name for s in m.blend_shapes]))
+    binding.CreateBlendShapeTargetsRel().SetTargets(targets)
+
+
 def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMesh, skel_path: Sdf.Path,
-                num_joints: int, source_name: str | None = None) -> None:
+                num_joints: int, source_name: str | None = None, material_paths: Sequence[Sdf.Path] = (),
+                materials: Sequence = ()) -> None:
     original = source_name or m.name.rsplit("/", 1)[-1] or "Mesh"
     name = unique_name(valid_identifier(original), used)
     mesh = UsdGeom.Mesh.Define(stage, parent.AppendChild(name))
     if name != original:
         mesh.GetPrim().SetCustomDataByKey(SOURCE_NAME_KEY, original)
+    if m.group is not None:
+        mesh.GetPrim().SetCustomDataByKey(SOURCE_MESH_KEY, m.group)
+    if m.node is not None:
+        mesh.GetPrim().SetCustomDataByKey(SOURCE_NODE_KEY, m.node)
+    if m.material is not None and 0 <= m.material < len(material_paths):
+        bind_material(mesh.GetPrim(), material_paths[m.material])
+        if materials[m.material].double_sided:
+            mesh.CreateDoubleSidedAttr().Set(True)
     pts = _f32(m.points).reshape(-1, 3)
     mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts))
     mesh.CreateFaceVertexCountsAttr().Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(m.face_vertex_counts,
@@ -396,6 +455,8 @@ def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMe
             Vt.IntArray.FromNumpy(np.ascontiguousarray(idx, dtype=np.int32).reshape(-1)))
         binding.CreateJointWeightsPrimvar(False, K).Set(Vt.FloatArray.FromNumpy(_f32(w).reshape(-1)))
     binding.CreateGeomBindTransformAttr().Set(numpy_to_matrices(m.geom_bind_xform[None])[0])
+    if m.blend_shapes:
+        _write_blend_shapes(stage, mesh, binding, m)
 
 
 # --------------------------------------------------------------------------- into a source

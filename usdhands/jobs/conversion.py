@@ -123,7 +123,8 @@ def _convert_asset(src: Path, dst: Path, animation: str | None = None, fps: floa
     if not asset.skeletons:
         raise NoSkeletonError("no skeleton in file", path=src)
     if asset.left_out:
-        _log.warning("%s: not converted (usdhands reads skeletons, animations and skinned meshes): %s",
+        _log.warning("%s: not converted (usdhands carries skeletons, animations, the meshes on them with their "
+                     "materials and blend shapes): %s",
                      src, "; ".join(asset.left_out))
     clips = asset.clips
     if animation is not None:

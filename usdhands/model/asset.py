@@ -1,4 +1,4 @@
-"""What a reader returns: the skeletons, clips and skinned meshes of one file."""
+"""What a reader returns: the skeletons, clips, meshes (with their blend shapes) and materials of one file."""
 
 from __future__ import annotations
 
@@ -7,9 +7,43 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from usdhands.model.clip import Clip
+from usdhands.model.material import Image, Material
 from usdhands.model.skeleton import Skeleton
 
-__all__ = ["SkinnedMesh", "Asset"]
+__all__ = ["BlendShape", "SkinnedMesh", "Asset", "BlendShapeWeights"]
+
+
+@dataclass(frozen=True, eq=False)
+class BlendShape:
+    """A morph target of a mesh: offsets added to its points, weighted by an animated weight.
+
+    Parameters
+    ----------
+    name : str
+        The weight channel it follows (UsdSkel's blend shape token): meshes whose shapes
+        share a name follow the same weight (the primitives of one glTF mesh do).
+    offsets : (V, 3) float
+        Point offsets in the mesh's units and space.
+    normal_offsets : (V, 3) float, optional
+    default_weight : float
+        Weight where no animation drives it (glTF ``mesh.weights``).
+    source_name : str, optional
+        The target's name in the file it came from where ``name`` differs from it.
+    """
+
+    name: str
+    offsets: np.ndarray
+    normal_offsets: np.ndarray | None = None
+    default_weight: float = 0.0
+    source_name: str | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class BlendShapeWeights:
+    """The blend shape weights of one clip: ``names`` (B,) and ``weights`` (T, B) at the clip's frames."""
+
+    names: tuple[str, ...]
+    weights: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,6 +71,15 @@ class SkinnedMesh:
         Mesh-to-skeleton-space transform at bind time (column vectors).
     skeleton_index : int
         Which skeleton of the asset it is bound to.
+    group : str, optional
+        The source mesh this one is a part of (a glTF mesh with several primitives gives
+        one SkinnedMesh per primitive, all with the glTF mesh's name here); writers put
+        the parts of one group back into one mesh where the format can.
+    node : str, optional
+        Name of the node that carries the mesh in the source (glTF node name).
+    material : int, optional
+        Index into ``Asset.materials``.
+    blend_shapes : tuple of BlendShape
     """
 
     name: str
@@ -49,6 +92,23 @@ class SkinnedMesh:
     joint_weights: np.ndarray | None = None
     geom_bind_xform: np.ndarray = field(default_factory=lambda: np.eye(4))
     skeleton_index: int = 0
+    group: str | None = None
+    node: str | None = None
+    material: int | None = None
+    blend_shapes: tuple[BlendShape, ...] = ()
+
+    def rigid_joint(self) -> int | None:
+        """The one joint every point follows with full weight (a rigid mesh parented to a joint), else None."""
+        if self.joint_indices is None or self.joint_weights is None:
+            return None
+        idx = np.asarray(self.joint_indices).reshape(len(self.points), -1)
+        w = np.asarray(self.joint_weights, dtype=np.float64).reshape(idx.shape)
+        if not idx.size:
+            return None
+        main = idx[np.arange(len(idx)), np.argmax(w, axis=1)]
+        if np.all(main == main[0]) and np.allclose(w.max(axis=1), 1.0, atol=1e-6):
+            return int(main[0])
+        return None
 
 
 @dataclass(frozen=True, eq=False)
@@ -78,6 +138,15 @@ class Asset:
         Skeleton index -> names of its joints that no skin lists (glTF nodes above the
         skin's joints, kept for their transforms: Mixamo's ``Armature``); the USD writer
         puts the static ones above every skin joint on ``Xform`` prims instead.
+    materials : tuple of Material
+        Surface materials (glTF PBR metallic-roughness, USD ``UsdPreviewSurface``) the meshes use.
+    images : tuple of Image
+        Texture images the materials use.
+    blend_shape_weights : dict str -> BlendShapeWeights
+        Clip name -> the blend shape weights it animates, at its frames.
+    interpolation : dict str -> str
+        Clip name -> ``"STEP"`` or ``"CUBICSPLINE"`` where the source's samplers were such
+        (absent: linear), so a writer that can hold it writes it again.
     """
 
     path: str
@@ -88,6 +157,10 @@ class Asset:
     source_names: dict[str, str] = field(default_factory=dict)
     left_out: tuple[str, ...] = ()
     non_skin_joints: dict[int, tuple[str, ...]] = field(default_factory=dict)
+    materials: tuple[Material, ...] = ()
+    images: tuple[Image, ...] = ()
+    blend_shape_weights: dict[str, BlendShapeWeights] = field(default_factory=dict)
+    interpolation: dict[str, str] = field(default_factory=dict)
 
     def clip(self, animation: str | int | None = None) -> Clip:
         """One clip by name or index; the first when ``animation`` is None.

@@ -1,0 +1,339 @@
+"""Scene-preserving conversion glTF <-> USD (issue 12, item 1): every mesh on a skeleton (skinned
+and rigid parts below joints), materials as UsdPreviewSurface with their textures, morph targets as
+UsdSkel BlendShapes with animated weights, animation names and interpolation, through
+glTF -> USD -> glTF (and USD -> glTF -> USD) on the third-party assets and a constructed file.
+Every written glTF passes the Khronos validator, every written USD USD's validators."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pygltflib
+import pytest
+from pxr import Usd, UsdShade, UsdSkel
+
+from usdhands.formats.gltf_container import BinaryAppender, save_gltf
+from usdhands.formats.io import read_asset
+from usdhands.formats.usd_validate import usd_compliance_errors
+from usdhands.jobs.conversion import ConvertOptions, convert
+
+
+def _gltf_json(path: Path) -> dict:
+    data = path.read_bytes()
+    if path.suffix == ".glb":
+        n = int.from_bytes(data[12:16], "little")
+        return json.loads(data[20:20 + n])
+    return json.loads(data)
+
+
+def _summary(path: Path) -> dict:
+    """What a glTF file holds, counted from its JSON (independently of the reader)."""
+    g = _gltf_json(path)
+    acc = g.get("accessors", [])
+    anims = g.get("animations", [])
+    return {
+        "meshes": len(g.get("meshes", [])),
+        "primitives": sum(len(m["primitives"]) for m in g.get("meshes", [])),
+        "vertices": sum(acc[p["attributes"]["POSITION"]]["count"] for m in g.get("meshes", []) for p in m["primitives"]),
+        "materials": len(g.get("materials", [])),
+        "images": len(g.get("images", [])),
+        "morph_targets": sum(len(p.get("targets", [])) for m in g.get("meshes", []) for p in m["primitives"]),
+        "target_names": [m.get("extras", {}).get("targetNames") for m in g.get("meshes", [])
+                         if m.get("extras", {}).get("targetNames")],
+        "animations": [a.get("name") for a in anims],
+        "keys": [sorted({acc[s["input"]]["count"] for s in a["samplers"]}) for a in anims],
+        "interpolation": [sorted({s.get("interpolation", "LINEAR") for s in a["samplers"]}) for a in anims],
+        "weights_channels": [sum(1 for c in a["channels"] if c["target"]["path"] == "weights") for a in anims],
+    }
+
+
+def _usd_counts(path: Path) -> dict:
+    stage = Usd.Stage.Open(str(path))
+    prims = list(stage.Traverse())
+    meshes = [p for p in prims if p.GetTypeName() == "Mesh"]
+    anims = [UsdSkel.Animation(p) for p in prims if p.IsA(UsdSkel.Animation)]
+    return {
+        "meshes": len(meshes),
+        "points": sum(len(p.GetAttribute("points").Get()) for p in meshes),
+        "bound": sum(1 for p in meshes if UsdSkel.BindingAPI(p).GetSkeletonRel().GetTargets()),
+        "materials": sum(1 for p in prims if p.IsA(UsdShade.Material)),
+        "with_material": sum(1 for p in meshes if UsdShade.MaterialBindingAPI(p).ComputeBoundMaterial()[0]),
+        "blend_shapes": sum(1 for p in prims if p.IsA(UsdSkel.BlendShape)),
+        "animation_shapes": [len(a.GetBlendShapesAttr().Get() or []) for a in anims],
+    }
+
+
+# -- the third-party assets ------------------------------------------------------------
+
+def test_robot_expressive_keeps_the_whole_scene(shared_assets, tmp_path, gltf_validator):
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    usd, back = tmp_path / "robot.usda", tmp_path / "robot.glb"
+    result = convert(src, usd)
+    assert result.meshes == 19 and result.notes == ()
+    convert(usd, back)
+    a, b = _summary(src), _summary(back)
+    assert a["vertices"] == b["vertices"] == 7214
+    assert (b["meshes"], b["primitives"]) == (a["meshes"], a["primitives"]) == (14, 19)
+    assert b["materials"] == a["materials"] == 3
+    assert b["morph_targets"] == a["morph_targets"] == 9
+    assert b["target_names"] == a["target_names"] == [["Angry", "Surprised", "Sad"]]
+    assert b["animations"] == a["animations"] and len(a["animations"]) == 14
+    assert b["keys"] == a["keys"] and b["weights_channels"] == a["weights_channels"] == [1] * 14
+    assert gltf_validator(back)[0]["numErrors"] == 0
+    # in USD: every mesh is bound to the skeleton (the rigid parts follow one joint), 3 materials bound
+    # to all 19, 3 blend shapes on each of the head's 3 primitives, weights in every SkelAnimation
+    u = _usd_counts(usd)
+    assert (u["meshes"], u["points"], u["bound"]) == (19, 7214, 19)
+    assert (u["materials"], u["with_material"]) == (3, 19)
+    assert u["blend_shapes"] == 9 and u["animation_shapes"] == [3] * 14
+    assert usd_compliance_errors(usd) == []
+    # material factors are the source's
+    ga, gb = _gltf_json(src)["materials"], _gltf_json(back)["materials"]
+    for ma, mb in zip(ga, gb):
+        assert mb["name"] == ma["name"]
+        np.testing.assert_allclose(mb["pbrMetallicRoughness"]["baseColorFactor"],
+                                   ma["pbrMetallicRoughness"]["baseColorFactor"], atol=1e-6)
+        for k in ("metallicFactor", "roughnessFactor"):
+            assert mb["pbrMetallicRoughness"][k] == pytest.approx(ma["pbrMetallicRoughness"][k], abs=1e-6)
+
+
+def test_robot_expressive_rigid_parts_move_with_their_joints(shared_assets, tmp_path):
+    """UsdSkel's own BakeSkinning of the converted head (a mesh node below the Head joint in the glTF)
+    puts it where the glTF node tree does: world transform of its node at each frame times its points."""
+    from pxr import UsdGeom
+
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    usd = tmp_path / "robot.usda"
+    convert(src, usd)
+    g = pygltflib.GLTF2().load(str(src))
+    asset = read_asset(src)
+    clip = asset.clip("Wave")
+    sk = clip.skeleton
+    head = next(m for m in asset.meshes if m.name == "Head_0")
+    j = head.rigid_joint()
+    assert sk.joint_names[j] == "Head"
+    world = clip.world_xforms()[:, j] @ np.linalg.inv(sk.bind_xforms[j]) @ head.geom_bind_xform
+    expect = np.einsum("tij,vj->tvi", world, np.c_[head.points, np.ones(len(head.points))])[..., :3]
+    # the node tree of the glTF, independently: Head node's world rest transform times the mesh node's TRS
+    node = next(i for i, n in enumerate(g.nodes) if n.name == "Head" and n.mesh is not None)
+    assert g.nodes[node].skin is None
+
+    stage = Usd.Stage.Open(str(usd))
+    anim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation) and p.GetName() == "Wave")
+    skel = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton))
+    UsdSkel.BindingAPI(skel).GetAnimationSourceRel().SetTargets([anim.GetPath()])
+    assert UsdSkel.BakeSkinning(stage.Traverse())
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath(next(p.GetPath() for p in stage.Traverse() if p.GetName() == "Head_0")))
+    tcps = stage.GetTimeCodesPerSecond()
+    for f in (0, clip.num_frames // 2, clip.num_frames - 1):
+        code = Usd.TimeCode(clip.start_time * tcps + f * tcps / clip.fps)
+        x = np.array(mesh.ComputeLocalToWorldTransform(code)).T
+        pts = np.asarray(mesh.GetPointsAttr().Get(code), dtype=np.float64) @ x[:3, :3].T + x[:3, 3]
+        np.testing.assert_allclose(pts, expect[f], atol=1e-4)  # metres: 0.01 cm
+
+
+def test_cesium_man_texture_comes_through_usdz_to_gltf_and_back(shared_assets, tmp_path, gltf_validator):
+    src = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    glb, usd = tmp_path / "cesium.glb", tmp_path / "out" / "cesium.usda"
+    usd.parent.mkdir()
+    convert(src, glb)
+    convert(glb, usd)
+    assert gltf_validator(glb)[0]["numErrors"] == 0
+    s = _summary(glb)
+    assert (s["materials"], s["images"], s["vertices"]) == (1, 1, 3273)
+    g = _gltf_json(glb)
+    assert g["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]["index"] == 0
+    # the image bytes are the usdz's, in the glb and then in a file beside the USD output
+    stage = Usd.Stage.Open(str(src))
+    tex = next(p for p in stage.Traverse() if p.GetName() == "diffuseColor_texture")
+    from pxr import Ar
+
+    original = bytes(Ar.GetResolver().OpenAsset(Ar.ResolvedPath(tex.GetAttribute("inputs:file").Get().resolvedPath))
+                     .GetBuffer())
+    written = usd.parent / "cesium_textures" / "CesiumMan_img0.jpg"
+    assert written.read_bytes() == original
+    out = Usd.Stage.Open(str(usd))
+    tex2 = next(p for p in out.Traverse() if p.GetName() == "baseColor_texture")
+    assert tex2.GetAttribute("inputs:file").Get().path == "./cesium_textures/CesiumMan_img0.jpg"
+    assert usd_compliance_errors(usd) == []
+    assert _usd_counts(usd)["with_material"] == 1
+
+
+def test_webxr_hand_material_round_trip(shared_assets, tmp_path, gltf_validator):
+    src = shared_assets / "webxr_hand" / "left.glb"
+    usd, back = tmp_path / "left.usdc", tmp_path / "left.gltf"
+    convert(src, usd)
+    convert(usd, back)
+    a, b = _summary(src), _summary(back)
+    assert (b["vertices"], b["materials"], b["meshes"]) == (a["vertices"], a["materials"], a["meshes"]) == (1360, 1, 1)
+    ma, mb = _gltf_json(src)["materials"][0], _gltf_json(back)["materials"][0]
+    assert mb["name"] == ma["name"]
+    assert mb["pbrMetallicRoughness"]["roughnessFactor"] == pytest.approx(
+        ma["pbrMetallicRoughness"]["roughnessFactor"], abs=1e-6)
+    assert gltf_validator(back)[0]["numErrors"] == 0
+    assert usd_compliance_errors(usd) == []
+
+
+# -- a constructed file with every feature ------------------------------------------------
+
+def _png(rgba) -> bytes:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.new("RGBA", (4, 4), tuple(rgba)).save(buf, "PNG")
+    return buf.getvalue()
+
+
+FPS = 30.0
+
+
+def _scene(path: Path) -> dict:
+    """Root > Child joints; a skinned quad (UVs, material with all five textures, MASK, double-sided);
+    a rigid triangle below Child with two morph targets (default weights 0.25, 0); animations
+    ``wave-01`` (STEP, rotation and weights) and ``spin`` (CUBICSPLINE)."""
+    g = pygltflib.GLTF2(asset=pygltflib.Asset(version="2.0"))
+    g.buffers = [pygltflib.Buffer(byteLength=0)]
+    app = BinaryAppender(g, 0)
+    f32 = np.float32
+    g.nodes = [pygltflib.Node(name="Root", children=[1], translation=[0.0, 1.0, 0.0]),
+               pygltflib.Node(name="Child", children=[4], translation=[0.0, 0.5, 0.0]),
+               pygltflib.Node(name="Quad", mesh=0, skin=0),
+               pygltflib.Node(name="Hat", mesh=1)]
+    g.nodes.append(pygltflib.Node(name="HatPivot", children=[3], translation=[0.1, 0.2, 0.0], scale=[2.0, 2.0, 2.0]))
+    ibm = np.array([np.linalg.inv(m).T.reshape(-1) for m in
+                    (np.array([[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1.0]]),
+                     np.array([[1, 0, 0, 0], [0, 1, 0, 1.5], [0, 0, 1, 0], [0, 0, 0, 1.0]]))], dtype=f32)
+    g.skins = [pygltflib.Skin(name="Rig", joints=[0, 1], inverseBindMatrices=app.add_accessor(ibm, "MAT4"))]
+    quad = np.array([[-0.5, 1, 0], [0.5, 1, 0], [0.5, 2, 0], [-0.5, 2, 0]], dtype=f32)
+    attrs = pygltflib.Attributes(
+        POSITION=app.add_accessor(quad, "VEC3", min_max=True),
+        NORMAL=app.add_accessor(np.tile(np.array([0, 0, 1], f32), (4, 1)), "VEC3"),
+        TEXCOORD_0=app.add_accessor(np.array([[0, 1], [1, 1], [1, 0], [0, 0]], f32), "VEC2"),
+        JOINTS_0=app.add_accessor(np.array([[0, 1, 0, 0]] * 2 + [[1, 0, 0, 0]] * 2, np.uint8), "VEC4"),
+        WEIGHTS_0=app.add_accessor(np.array([[0.5, 0.5, 0, 0]] * 2 + [[1, 0, 0, 0]] * 2, f32), "VEC4"))
+    idx = app.add_accessor(np.array([0, 1, 2, 0, 2, 3], np.uint16).reshape(-1, 1), "SCALAR")
+    tri = np.array([[0, 0, 0], [0.2, 0, 0], [0, 0.2, 0]], dtype=f32)
+    smile = np.array([[0, 0.05, 0], [0, 0, 0], [0, 0, 0]], dtype=f32)
+    blink = np.array([[0, 0, 0], [0.05, 0, 0], [0, 0, 0.05]], dtype=f32)
+    hat = pygltflib.Primitive(attributes=pygltflib.Attributes(POSITION=app.add_accessor(tri, "VEC3", min_max=True)),
+                              material=1, targets=[
+                                  pygltflib.Attributes(POSITION=app.add_accessor(smile, "VEC3", min_max=True)),
+                                  pygltflib.Attributes(POSITION=app.add_accessor(blink, "VEC3", min_max=True))])
+    g.meshes = [pygltflib.Mesh(name="QuadMesh", primitives=[pygltflib.Primitive(attributes=attrs, indices=idx,
+                                                                                 material=0)]),
+                pygltflib.Mesh(name="HatMesh", primitives=[hat], weights=[0.25, 0.0],
+                               extras={"targetNames": ["Smile", "Blink"]})]
+    colors = [(200, 30, 30, 255), (0, 128, 255, 255), (128, 128, 255, 255), (255, 255, 255, 255), (10, 200, 10, 255)]
+    g.images = [pygltflib.Image(name=f"tex{i}", mimeType="image/png", bufferView=app.add_view(_png(c)))
+                for i, c in enumerate(colors)]
+    g.samplers = [pygltflib.Sampler(wrapS=33071, wrapT=33648)]
+    g.textures = [pygltflib.Texture(source=i, sampler=0) for i in range(5)]
+    g.materials = [
+        pygltflib.Material(name="Skin Mat", alphaMode="MASK", alphaCutoff=0.3, doubleSided=True,
+                           emissiveFactor=[0.5, 0.25, 0.0],
+                           pbrMetallicRoughness=pygltflib.PbrMetallicRoughness(
+                               baseColorFactor=[0.9, 0.8, 0.7, 0.6], metallicFactor=0.2, roughnessFactor=0.7,
+                               baseColorTexture=pygltflib.TextureInfo(index=0),
+                               metallicRoughnessTexture=pygltflib.TextureInfo(index=1)),
+                           normalTexture=pygltflib.NormalMaterialTexture(index=2, scale=0.8),
+                           occlusionTexture=pygltflib.OcclusionTextureInfo(index=3, strength=0.6),
+                           emissiveTexture=pygltflib.TextureInfo(index=4)),
+        pygltflib.Material(name="Plain", alphaMode="BLEND", pbrMetallicRoughness=pygltflib.PbrMetallicRoughness(
+            baseColorFactor=[0.1, 0.2, 0.3, 0.5], metallicFactor=0.0, roughnessFactor=0.4))]
+    t = (np.arange(6) / FPS).astype(f32).reshape(-1, 1)
+    ang = np.radians([0, 20, 40, 60, 40, 20])
+    rot = np.stack([np.sin(ang / 2), 0 * ang, 0 * ang, np.cos(ang / 2)], axis=1).astype(f32)
+    w = np.array([[0, 0], [0.5, 0], [1, 0.2], [1, 0.4], [0.5, 1], [0, 0]], dtype=f32)
+    t_in = app.add_accessor(t, "SCALAR", min_max=True)
+    wave = pygltflib.Animation(name="wave-01", samplers=[
+        pygltflib.AnimationSampler(input=t_in, output=app.add_accessor(rot, "VEC4"), interpolation="STEP"),
+        pygltflib.AnimationSampler(input=t_in, output=app.add_accessor(w.reshape(-1, 1), "SCALAR"),
+                                   interpolation="STEP")],
+        channels=[pygltflib.AnimationChannel(sampler=0, target=pygltflib.AnimationChannelTarget(node=1, path="rotation")),
+                  pygltflib.AnimationChannel(sampler=1, target=pygltflib.AnimationChannelTarget(node=3, path="weights"))])
+    cubic = np.concatenate([np.zeros_like(rot), rot, np.zeros_like(rot)], axis=1).reshape(-1, 4)
+    spin = pygltflib.Animation(name="spin", samplers=[
+        pygltflib.AnimationSampler(input=t_in, output=app.add_accessor(cubic, "VEC4"), interpolation="CUBICSPLINE")],
+        channels=[pygltflib.AnimationChannel(sampler=0, target=pygltflib.AnimationChannelTarget(node=0, path="rotation"))])
+    g.animations = [wave, spin]
+    g.scenes = [pygltflib.Scene(nodes=[0, 2])]
+    g.scene = 0
+    buffers: list[bytes] = []
+    app.finish(buffers)
+    save_gltf(g, buffers, path, glb=True)
+    return {"weights": w, "colors": colors}
+
+
+def test_constructed_scene_round_trips_every_feature(tmp_path, gltf_validator):
+    src = tmp_path / "scene.glb"
+    truth = _scene(src)
+    assert gltf_validator(src)[0]["numErrors"] == 0
+    usd, back = tmp_path / "scene.usda", tmp_path / "back.glb"
+    assert convert(src, usd).notes == ()
+    convert(usd, back)
+    assert usd_compliance_errors(usd) == []
+    assert gltf_validator(back)[0]["numErrors"] == 0
+    a, b = _summary(src), _summary(back)
+    for key in ("meshes", "primitives", "vertices", "materials", "images", "morph_targets", "target_names",
+                "animations", "keys", "interpolation", "weights_channels"):
+        assert b[key] == a[key], key
+    assert a["interpolation"] == [["STEP"], ["CUBICSPLINE"]]
+
+    # USD: textures written beside the output, each the source's PNG bytes
+    folder = tmp_path / "scene_textures"
+    assert sorted(p.name for p in folder.iterdir()) == [f"tex{i}.png" for i in range(5)]
+    assert [(folder / f"tex{i}.png").read_bytes() for i in range(5)] == [_png(c) for c in truth["colors"]]
+    stage = Usd.Stage.Open(str(usd))
+    surface = UsdShade.Material(stage.GetPrimAtPath("/Root/Materials/Skin_Mat")).ComputeSurfaceSource()[0]
+    assert surface.GetIdAttr().Get() == "UsdPreviewSurface"
+    for name in ("diffuseColor", "opacity", "metallic", "roughness", "normal", "occlusion", "emissiveColor"):
+        assert surface.GetInput(name).HasConnectedSource(), name
+    assert surface.GetInput("opacityThreshold").Get() == pytest.approx(0.3)
+
+    # glTF again: every material value as in the source
+    ga, gb = _gltf_json(src), _gltf_json(back)
+    for ma, mb in zip(ga["materials"], gb["materials"]):
+        assert mb["name"] == ma["name"] and mb.get("alphaMode") == ma.get("alphaMode")
+        assert mb.get("doubleSided", False) == ma.get("doubleSided", False)
+        assert mb.get("alphaCutoff", 0.5) == pytest.approx(ma.get("alphaCutoff", 0.5))
+        np.testing.assert_allclose(mb.get("emissiveFactor", [0, 0, 0]), ma.get("emissiveFactor", [0, 0, 0]), atol=1e-6)
+        pa, pb = ma["pbrMetallicRoughness"], mb["pbrMetallicRoughness"]
+        np.testing.assert_allclose(pb["baseColorFactor"], pa["baseColorFactor"], atol=1e-6)
+        for k in ("metallicFactor", "roughnessFactor"):
+            assert pb[k] == pytest.approx(pa[k], abs=1e-6)
+        for k in ("baseColorTexture", "metallicRoughnessTexture"):
+            assert (k in pb) == (k in pa)
+        for k, s in (("normalTexture", "scale"), ("occlusionTexture", "strength")):
+            assert (k in mb) == (k in ma)
+            if k in ma:
+                assert mb[k][s] == pytest.approx(ma[k][s], abs=1e-6)
+    assert [(s["wrapS"], s["wrapT"]) for s in gb["samplers"]] == [(33071, 33648)]
+    images = [bytes(read_asset(back).images[i].content()) for i in range(5)]
+    assert images == [_png(c) for c in truth["colors"]]
+    assert gb["meshes"][1]["weights"] == [0.25, 0.0]
+    # morph weights animated exactly at the keys, STEP kept
+    asset = read_asset(back)
+    np.testing.assert_allclose(asset.blend_shape_weights["wave-01"].weights, truth["weights"], atol=1e-6)
+    assert asset.blend_shape_weights["wave-01"].names == ("Smile", "Blink")
+    assert asset.interpolation == {"wave-01": "STEP", "spin": "CUBICSPLINE"}
+    # the rigid hat is a mesh node below the Child joint again, with its pivot folded in
+    hat = next(n for n in gb["nodes"] if n.get("mesh") == 1)
+    child = next(n for n in gb["nodes"] if n.get("name") == "Child")
+    assert gb["nodes"].index(hat) in child["children"] and "skin" not in hat
+    np.testing.assert_allclose(hat["translation"], [0.1, 0.2, 0.0], atol=1e-6)
+    np.testing.assert_allclose(hat["scale"], [2.0, 2.0, 2.0], atol=1e-6)
+
+
+def test_animation_option_picks_one_and_keeps_its_weights(tmp_path):
+    src = tmp_path / "scene.glb"
+    truth = _scene(src)
+    usd = tmp_path / "one.usda"
+    result = convert(src, usd, ConvertOptions(animation="wave-01"))
+    assert [a["name"] for a in result.animations] == ["wave-01"]
+    asset = read_asset(usd)
+    (clip,) = asset.clips
+    assert asset.source_names[clip.name] == "wave-01"
+    np.testing.assert_allclose(asset.blend_shape_weights[clip.name].weights, truth["weights"], atol=1e-6)
