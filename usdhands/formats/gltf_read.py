@@ -500,8 +500,12 @@ def _norm(q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     return np.divide(q, np.where(n > 0, n, 1.0), out=out)  # zero quaternions stay zero: Clip.validate reports them
 
 
-def channel_keys(doc: GltfFile, anim_index: int, channel_index: int) -> tuple[np.ndarray, np.ndarray, str]:
-    """Key times ``(K,)``, values ``(K or 3K, C)`` and interpolation of one channel."""
+def channel_keys(doc: GltfFile, anim_index: int, channel_index: int,
+                 targets: int | None = None) -> tuple[np.ndarray, np.ndarray, str]:
+    """Key times ``(K,)``, values ``(K or 3K, C)`` and interpolation of one channel.
+
+    A ``weights`` channel needs ``targets``, the morph target count of its node (its C).
+    """
     a = doc.gltf.animations[anim_index]
     ch = a.channels[channel_index]
     where = f"animations[{anim_index}].channels[{channel_index}]"
@@ -515,10 +519,15 @@ def channel_keys(doc: GltfFile, anim_index: int, channel_index: int) -> tuple[np
     times = doc.accessor(smp.input)[:, 0]
     values = doc.accessor(smp.output)
     need = times.shape[0] * (3 if interp == "CUBICSPLINE" else 1)
+    if ch.target.path == "weights":
+        if targets is None or values.size != need * targets:
+            raise doc.error(f"weights sampler has {values.size} output values for {times.shape[0]} keys of "
+                            f"{targets} morph targets", where)
+        values = values.reshape(need, targets)
     if values.shape[0] != need:
         raise doc.error(f"{interp} sampler has {values.shape[0]} output values for {times.shape[0]} keys "
                         f"(expected {need})", where)
-    width = {"rotation": 4, "translation": 3, "scale": 3}[ch.target.path]
+    width = {"rotation": 4, "translation": 3, "scale": 3, "weights": targets}[ch.target.path]
     if values.shape[1] != width:
         raise doc.error(f"{ch.target.path} output has {values.shape[1]} components, expected {width}", where)
     if not np.isfinite(times).all():
@@ -544,10 +553,10 @@ def _check_component_types(doc: GltfFile, input_index, output_index, path: str, 
     if times.componentType != FLOAT:
         raise doc.error(f"key times (accessors[{input_index}]) have componentType {times.componentType}; "
                         "glTF requires FLOAT (5126)", where)
-    ok = values.componentType == FLOAT or (path == "rotation" and values.componentType in ROTATION_INTEGER_TYPES
-                                          and values.normalized)
+    ok = values.componentType == FLOAT or (path in ("rotation", "weights")
+                                          and values.componentType in ROTATION_INTEGER_TYPES and values.normalized)
     if not ok:
-        allowed = "FLOAT or normalized BYTE/SHORT types" if path == "rotation" else "FLOAT"
+        allowed = "FLOAT or normalized BYTE/SHORT types" if path in ("rotation", "weights") else "FLOAT"
         raise doc.error(f"{path} values (accessors[{output_index}]) have componentType {values.componentType}"
                         f"{'' if values.normalized else ' not normalized'}; glTF allows {allowed}", where)
 
@@ -680,23 +689,10 @@ def sample_morph_weights(doc: GltfFile, anim_index: int, clip: Clip, tokens: dic
     snap = snap_time(clip.fps)
     for c, ch in keyed:
         node = ch.target.node
-        where = f"animations[{anim_index}].channels[{c}]"
-        if ch.sampler is None or not 0 <= ch.sampler < len(anim.samplers):
-            raise doc.error(f"sampler {ch.sampler} out of range", where)
-        smp = anim.samplers[ch.sampler]
-        interp = smp.interpolation or "LINEAR"
-        if interp not in ("LINEAR", "STEP", "CUBICSPLINE"):
-            raise doc.error(f"unknown interpolation {interp!r}", where)
-        times = doc.accessor(smp.input)[:, 0]
-        values = doc.accessor(smp.output).reshape(-1)
-        B = len(tokens[node])
-        rows = times.shape[0] * (3 if interp == "CUBICSPLINE" else 1)
-        if values.size != rows * B or not times.size:
-            raise doc.error(f"weights sampler has {values.size} output values for {times.shape[0]} keys of "
-                            f"{B} targets", where)
-        if np.any(np.diff(times) < 0) or not np.isfinite(times).all():
-            raise doc.error("sampler input times decrease or are not finite", where)
-        out[:, columns[node]] = sample_channel(times, values.reshape(rows, B), interp, at, False, snap)
+        times, values, interp = channel_keys(doc, anim_index, c, targets=len(tokens[node]))
+        if not times.size:
+            raise doc.error("weights sampler has no keys", f"animations[{anim_index}].channels[{c}]")
+        out[:, columns[node]] = sample_channel(times, values, interp, at, False, snap)
     return BlendShapeWeights(tuple(names), out)
 
 
