@@ -59,13 +59,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats.fixed_point_text import format_rows_6f
 from usdhands.model.asset import Asset
 from usdhands.model.clip import Clip
-from usdhands.model.rotations import quat_identity, unwrap_deg
+from usdhands.model.rotations import quat_identity, quat_to_euler_deg, unwrap_deg
 from usdhands.model.skeleton import Skeleton
 
 _log = logging.getLogger(__name__)
@@ -519,15 +518,13 @@ def _euler(q: np.ndarray, axes: str) -> np.ndarray:
     """Intrinsic Euler angles in degrees, unwrapped along time, for 1 to 3 axes.
 
     ``q`` is ``(T, ..., 4)`` xyzw (any number of joints after the time axis, converted
-    in one scipy call); returns ``(T, ..., len(axes))``.
+    in one call); returns ``(T, ..., len(axes))``.
     """
     full = axes
     if len(set(axes)) < 3 and len(axes) < 3:
         full = axes + "".join(a for a in _AXES if a not in axes)[: 3 - len(axes)]
     q = np.asarray(q)
-    with warnings.catch_warnings():  # gimbal lock: scipy zeroes the third angle, still exact
-        warnings.simplefilter("ignore", UserWarning)
-        e = Rotation.from_quat(q.reshape(-1, 4)).as_euler(full, degrees=True)
+    e = quat_to_euler_deg(q.reshape(-1, 4), full)  # scipy's as_euler (gimbal lock: third angle 0), without scipy
     if len(axes) == 2 and len(set(axes)) == 2:
         # two channels: keep the solution whose dropped third angle is near 0, not 180; for three
         # distinct axes (t1, t2, t3) and (t1 + 180, 180 - t2, t3 + 180) are the same rotation
