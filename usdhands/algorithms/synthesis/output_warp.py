@@ -34,10 +34,12 @@ before that, the NumPy functions, which the tests hold the twins to.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
-__all__ = ["smooth_warp", "sample_rows", "step_limits", "limit_steps", "limit_steps_fast", "play_segments",
-           "play_segments_fast", "compiled_kernels_loaded"]
+__all__ = ["smooth_warp", "moving_average_nearest", "sample_rows", "step_limits", "limit_steps", "limit_steps_fast",
+           "play_segments", "play_segments_fast", "compiled_kernels_loaded"]
 
 #: Share of the straight warp (constant speed) mixed into the smoothed DTW warp, so the
 #: warp's slope never falls to zero: a DTW path that waits on one database frame for
@@ -70,9 +72,7 @@ def smooth_warp(path: np.ndarray, m: int, fps: float, smoothing_s: float) -> np.
     w = int(round(smoothing_s * fps))
     if n < 3 or w < 2:
         return np.maximum.accumulate(np.clip(x, 0, m - 1))
-    from scipy.ndimage import uniform_filter1d
-
-    y = uniform_filter1d(x, size=min(w, n), mode="nearest")
+    y = moving_average_nearest(x, min(w, n))
     y = (1 - LINEAR_SHARE) * y + LINEAR_SHARE * np.linspace(y[0], y[-1], n)
     lo, hi = x[0], x[-1]
     if y[-1] > y[0]:
@@ -80,6 +80,35 @@ def smooth_warp(path: np.ndarray, m: int, fps: float, smoothing_s: float) -> np.
     else:
         y = np.linspace(lo, hi, n)
     return np.maximum.accumulate(np.clip(y, 0, m - 1))
+
+
+def moving_average_nearest(x: np.ndarray, size: int) -> np.ndarray:
+    """``scipy.ndimage.uniform_filter1d(x, size, mode="nearest")`` to the bit, without importing scipy.
+
+    Parameters
+    ----------
+    x : (n,) float
+    size : int
+        Window length, ``1 <= size``; the window of output ``i`` is
+        ``x[i - size // 2 : i - size // 2 + size]``, the ends repeated beyond the array.
+
+    Returns
+    -------
+    (n,) float64
+        scipy's running sum: the first window summed from 0.0, then each step adds the
+        entering value minus the leaving one, each output the sum divided by ``size``.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n = len(x)
+    if n == 0:
+        return x.copy()
+    left = size // 2
+    padded = np.concatenate([np.full(left, x[0]), x, np.full(size - left - 1, x[-1])])
+    total = 0.0
+    for v in padded[:size].tolist():
+        total += v
+    steps = (padded[size:size + n - 1] - padded[:n - 1]).tolist()
+    return np.fromiter(itertools.accumulate(steps, initial=total), dtype=np.float64, count=n) / size
 
 
 def sample_rows(rows: np.ndarray, at: np.ndarray) -> np.ndarray:
@@ -222,19 +251,18 @@ def play_segments(query_weighted: np.ndarray, db_weighted: np.ndarray, fingers: 
         segment by DTW, its warp smoothed (:func:`smooth_warp`) and its fingers sampled
         along it (:func:`sample_rows`); a pair no warp fits is stretched linearly.
     """
-    from usdhands.algorithms.synthesis.segment_cost import dtw_align
+    from usdhands.algorithms.synthesis.segment_cost import dtw_align_many
 
     qf, df, rows, sr, qb, c, w, bd = _play_arrays(query_weighted, db_weighted, fingers, seg_ranges, query_bounds,
                                                   cand, weights, bands)
     out = np.zeros((len(qf), rows.shape[1]))
-    for i, (q0, q1) in enumerate(qb):
-        for j in range(c.shape[1]):
-            if w[i, j] <= 0 or c[i, j] < 0:
-                continue
-            a, b = sr[c[i, j]]
-            _, warp = dtw_align(qf[q0:q1], df[a:b], bd[i, j])
-            at = np.linspace(0, b - a - 1, q1 - q0) if len(warp) == 0 else smooth_warp(warp, b - a, fps, smoothing_s)
-            out[q0:q1] += w[i, j] * sample_rows(rows[a:b], at)
+    used = [(i, j) for i in range(len(qb)) for j in range(c.shape[1]) if w[i, j] > 0 and c[i, j] >= 0]
+    # every pair aligned in one batch (the compiled alignment's paths, in NumPy)
+    pairs = np.array([(qb[i, 0], qb[i, 1], *sr[c[i, j]]) for i, j in used], dtype=np.int64).reshape(-1, 4)
+    warps = dtw_align_many(qf, df, pairs, np.array([bd[i, j] for i, j in used]))
+    for (i, j), (q0, q1, a, b), (_, warp) in zip(used, pairs, warps):
+        at = np.linspace(0, b - a - 1, q1 - q0) if len(warp) == 0 else smooth_warp(warp, b - a, fps, smoothing_s)
+        out[q0:q1] += w[i, j] * sample_rows(rows[a:b], at)
     return out
 
 

@@ -15,7 +15,10 @@ the local cost is a plain squared Euclidean distance.
 
 Search. :func:`knn_segments` compares every input segment with every database
 segment whose length is within ``length_factor`` of it and keeps the ``k`` cheapest.
-It runs in one numba-compiled kernel, parallel over input segments. For each input
+It runs in one numba-compiled kernel, parallel over input segments, or, for a search
+too small to pay for loading numba (about 0.5 s), in its NumPy twin
+(:mod:`~usdhands.algorithms.synthesis._dtw_numpy`), which gives the same result and
+statistics to the bit. For each input
 segment it visits the candidates in order of the distance between segment means (a
 cheap guess that finds good neighbours early, so the ``k``-th best cost drops fast).
 Each candidate is first checked against a lower bound of its cost and **pruned**
@@ -35,7 +38,8 @@ The result is the same for every bound (ties in cost go to the lower index).
 
 :func:`dtw_align` is the plain NumPy twin for one pair (cost and warp path); tests
 check the kernel and :func:`dtw_align_fast` (its compiled twin) against it and the
-benchmark measures the kernel's speed-up over it.
+benchmark measures the kernel's speed-up over it. :func:`dtw_align_many` aligns many
+pairs at once in NumPy with the compiled twin's numbers.
 """
 
 from __future__ import annotations
@@ -45,7 +49,8 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
-    "weight_features", "band_window", "dtw_align", "dtw_align_fast", "lb_keogh", "knn_segments", "SearchResult",
+    "weight_features", "band_window", "dtw_align", "dtw_align_fast", "dtw_align_many", "lb_keogh", "knn_segments",
+    "SearchResult",
 ]
 
 
@@ -161,6 +166,40 @@ def dtw_align_fast(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> tu
     return float(total / n), path
 
 
+def dtw_align_many(query: np.ndarray, db: np.ndarray, pairs: np.ndarray, bands) -> list[tuple[float, np.ndarray]]:
+    """:func:`dtw_align_fast` of many pairs at once, in NumPy (no numba): the same costs and paths.
+
+    Parameters
+    ----------
+    query : (T, D) float
+        Weighted input features.
+    db : (F, D) float
+        Weighted database features.
+    pairs : (P, 4) int
+        ``[q0, q1, d0, d1)``: the input and database frame ranges of each pair.
+    bands : (P,) float
+        Band half-width of each pair, a fraction of its database length.
+
+    Returns
+    -------
+    list of (cost, path)
+        As :func:`dtw_align_fast` per pair.
+    """
+    from usdhands.algorithms.synthesis import _dtw_numpy
+
+    q = np.ascontiguousarray(query, dtype=np.float64)
+    d = np.ascontiguousarray(db, dtype=np.float64)
+    pr = np.asarray(pairs, dtype=np.int64).reshape(-1, 4)
+    if q.ndim != 2 or d.ndim != 2 or q.shape[1] != d.shape[1]:
+        raise ValueError(f"Expected (T, D) and (F, D) features, got {q.shape} and {d.shape}")
+    if len(pr) and ((pr[:, 1] <= pr[:, 0]).any() or (pr[:, 3] <= pr[:, 2]).any() or (pr[:, [0, 2]] < 0).any()
+                    or (pr[:, 1] > len(q)).any() or (pr[:, 3] > len(d)).any()):
+        raise ValueError("pairs must hold non-empty frame ranges inside the features")
+    totals, paths = _dtw_numpy.align_paths(q, d, pr, np.broadcast_to(np.asarray(bands, np.float64), (len(pr),)))
+    return [(float(t / (p[1] - p[0])) if np.isfinite(t) else float("inf"), path)
+            for t, p, path in zip(totals, pr, paths)]
+
+
 def lb_keogh(query: np.ndarray, cand: np.ndarray, band: float = 1.0) -> float:
     """The LB_Keogh lower bound of :func:`dtw_align`'s cost, plain NumPy (for tests)."""
     q = np.asarray(query, dtype=np.float64)
@@ -257,8 +296,6 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
         Ties in cost go to the lower database index; the result does not depend on
         ``bound`` or on the number of threads.
     """
-    from usdhands.algorithms.synthesis import _dtw_kernel as kern
-
     qf = np.ascontiguousarray(query_features, dtype=np.float64)
     df = np.ascontiguousarray(db_features, dtype=np.float64)
     qb = np.ascontiguousarray(query_bounds, dtype=np.int64).reshape(-1, 2)
@@ -285,6 +322,40 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
     out_cost = np.full((Q, int(k)), np.inf)
     stats = np.zeros((Q, 4), dtype=np.int64)
     if Q and N:
-        kern.search(qf, qb, qg, df, ds, dg, int(k), float(length_factor), float(band), BOUNDS[bound],
-                    out_idx, out_cost, stats)
+        search = _search_kernel(qb, ds, float(length_factor), float(band), bound)
+        search(qf, qb, qg, df, ds, dg, int(k), float(length_factor), float(band), BOUNDS[bound],
+               out_idx, out_cost, stats)
     return SearchResult(out_idx, out_cost, stats[:, 0], stats[:, 3], stats[:, 1], stats[:, 2])
+
+
+#: Largest search (band cells of all candidate pairs, :func:`_dtw_numpy.estimated_cells`)
+#: done in NumPy when the numba kernel is not loaded yet: importing numba and loading the
+#: kernel takes about 0.5 s, the NumPy search about 25 ns per cell (the sample
+#: conversation against the bundled database: 1.9 M cells a hand, 50 ms).
+NUMPY_SEARCH_MAX_CELLS = 8e6
+
+
+def _search_kernel(query_bounds: np.ndarray, db_segments: np.ndarray, length_factor: float, band: float,
+                   bound: str):
+    """The search function for this work: the NumPy twin for small searches, else the numba kernel.
+
+    Both give the same result and statistics to the bit (``tests/test_dtw_numpy_twin.py``).
+    """
+    from usdhands.algorithms.synthesis import _dtw_numpy
+
+    if bound != "keogh" and not _kernel_loaded():
+        cells = _dtw_numpy.estimated_cells(query_bounds[:, 1] - query_bounds[:, 0],
+                                           db_segments[:, 1] - db_segments[:, 0], length_factor, band)
+        if cells <= NUMPY_SEARCH_MAX_CELLS:
+            return _dtw_numpy.search
+    from usdhands.algorithms.synthesis import _dtw_kernel
+
+    return _dtw_kernel.search
+
+
+def _kernel_loaded() -> bool:
+    """Whether this process has the search kernel loaded already (then it is the faster choice)."""
+    import sys
+
+    kernel = sys.modules.get("usdhands.algorithms.synthesis._dtw_kernel")
+    return kernel is not None and bool(kernel.search.signatures)
