@@ -2,8 +2,9 @@
 
 A fresh virtual environment (its own site-packages; numpy, scipy, usd-core, ... come
 from the running interpreter's, so nothing is downloaded) gets a non-editable
-``pip install .`` of a copy of the checkout, runs ``usdhands synthesize`` (which compiles
-and caches the numba kernels), then ``pip install -e .`` and ``usdhands --version``.
+``pip install .`` of a copy of the checkout, runs ``usdhands synthesize`` and ``usdhands
+splice`` (which compiles and caches numba kernels), then ``pip install -e .`` and
+``usdhands --version``.
 numba's own ``cache=True`` wrote ``.nbi``/``.nbc`` files into the installed package; the
 uninstall left that folder behind and it then imported as an empty namespace package
 (``ImportError: cannot import name '__version__'``).
@@ -72,6 +73,10 @@ def test_install_then_editable_install_keeps_a_working_command(tmp_path):
     sample = ROOT / "sample_assets" / "conversation_bodyonly.bvh"
     out = _run([bindir / "usdhands", "synthesize", sample, "-o", work / "out.bvh"], env=env, cwd=work)
     assert (work / "out.bvh").is_file(), out.stdout
+    # a synthesis this small searches in NumPy; splicing compiles its numba kernels
+    out = _run([bindir / "usdhands", "splice", sample, ROOT / "sample_assets" / "conversation.glb",
+                "-o", work / "spliced.bvh"], env=env, cwd=work)
+    assert (work / "spliced.bvh").is_file(), out.stdout
     written = sorted(_files_under(installed) - files_before)
     # compiled Python (.pyc) is the interpreter's business; anything else is ours
     assert [f for f in written if not f.endswith(".pyc")] == []
