@@ -38,7 +38,7 @@ from usdhands.algorithms.dtw import dtw, dtw_naive  # noqa: E402
 from usdhands.algorithms.splicing.markers import markers_from_joints, yup_cm_positions  # noqa: E402
 from previous_first_pass import previous_first_pass_kernel  # noqa: E402
 
-from usdhands.algorithms.splicing.costs import _first_pass_kernel, hand_directions, sign_features  # noqa: E402
+from usdhands.algorithms.splicing.costs import _first_pass_kernel, cell_runs, hand_directions, sign_features  # noqa: E402
 from usdhands.algorithms.splicing.splice import (  # noqa: E402
     SpliceOptions, align_hands, median_alignment, partial_world_xforms, splice_clips,
 )
@@ -150,10 +150,11 @@ def main() -> None:
     vb, ab, evb, eab = sign_features(P, body.fps)
     vh, ah, evh, eah = sign_features(Q, body.fps)
     rows, cols = al.first.band.cells()
-    kargs = (rows, cols, P, Q, vb, ab, vh, ah, evb, eab, evh, eah, 2, False, np.zeros(1), np.zeros(1))
-    previous_first_pass_kernel(*kargs)  # compile
-    t_k, c_k, cost_now = median_of(lambda: _first_pass_kernel(*kargs), args.repeat)
-    t_kp, c_kp, cost_before = median_of(lambda: previous_first_pass_kernel(*kargs), args.repeat)
+    kargs = (P, Q, vb, ab, vh, ah, evb, eab, evh, eah, 2, False, np.zeros(1), np.zeros(1))
+    previous_first_pass_kernel(rows, cols, *kargs)  # compile
+    runs = cell_runs(rows, cols)
+    t_k, c_k, cost_now = median_of(lambda: _first_pass_kernel(*runs, *kargs), args.repeat)
+    t_kp, c_kp, cost_before = median_of(lambda: previous_first_pass_kernel(rows, cols, *kargs), args.repeat)
 
     # the recurrence alone, on the same first-pass cost matrix
     full_cost = al.first.cost_matrix()

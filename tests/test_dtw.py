@@ -58,6 +58,27 @@ def test_cost_function_is_called_on_band_cells_only_and_gives_the_same_warp():
     assert np.isnan(m[0, 69]) and m[10, 13] == cost[10, 13]
 
 
+def test_cost_on_the_band_gives_the_same_warp_as_cost_on_cells():
+    """``on_band=True`` hands the cost function the Band (its rows as runs), not a list of cells."""
+    for rng, n, m, cost, width in _random_cases(40, seed=7):
+        band = Band.diagonal(n, m, width)
+        seen = []
+
+        def on_band(b):
+            seen.append(b)
+            rows, cols = b.cells()
+            return cost[rows, cols]
+
+        a = dtw(on_band, band, shape=(n, m), on_band=True)
+        b = dtw(cost, band)
+        assert seen == [band]
+        assert a.cost == b.cost
+        np.testing.assert_array_equal(a.path, b.path)
+        np.testing.assert_array_equal(a.cell_costs, b.cell_costs)
+    with pytest.raises(ValueError, match=r"Expected the cost function to return shape \(\d+,\), got \(3,\)"):
+        dtw(lambda b: np.zeros(3), Band.diagonal(10, 10, 0.3), shape=(10, 10), on_band=True)
+
+
 def test_path_is_monotone_with_unit_steps_from_corner_to_corner():
     rng = np.random.default_rng(4)
     r = dtw(rng.random((30, 55)), Band.diagonal(30, 55, 0.2))

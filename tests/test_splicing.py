@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from splice_synth import body_handside, hand_session, leap_handside, make_case, reaxis
 
-from usdhands.algorithms.dtw import Constraint
+from usdhands.algorithms.dtw import Band, Constraint
 from usdhands.algorithms.splicing.markers import MarkerOffsets, default_marker_offsets, markers_from_joints
 from usdhands.algorithms.splicing.costs import (
-    FirstPassInput, direction_angle_cost, first_pass_cost, first_pass_cost_naive, fit_rotation, hand_angle_cost, hand_angle_cost_naive, hand_directions, sign_features, window_yaw_naive,
+    FirstPassInput, direction_angle_band_cost, direction_angle_cost, first_pass_band_cost, first_pass_cost,
+    first_pass_cost_naive, fit_rotation, hand_angle_cost, hand_angle_cost_naive, hand_directions, sign_features, window_yaw_naive,
 )
 from usdhands.algorithms.splicing.splice import (
     SpliceOptions, align_hands, median_alignment, pair_finger_joints, phase_boundaries, splice_clips, transfer_fingers,
@@ -89,6 +90,12 @@ def test_first_pass_cost_is_the_same_whatever_cells_are_asked(trunk):
     rows = np.concatenate([np.full(b - a + 1, r) for r, (a, b) in enumerate(zip(lo, hi))])
     cols = np.concatenate([np.arange(a, b + 1) for a, b in zip(lo, hi)])
     assert np.array_equal(first_pass_cost(inp, rows, cols), full[rows, cols])
+    band = Band(lo, hi, 26)  # the same cells asked as a band's rows
+    assert np.array_equal(first_pass_band_cost(inp, band), full[rows, cols])
+    ub, uh = rng.normal(size=(19, 3)), rng.normal(size=(26, 3))
+    ub /= np.linalg.norm(ub, axis=1, keepdims=True)
+    uh /= np.linalg.norm(uh, axis=1, keepdims=True)
+    assert np.array_equal(direction_angle_band_cost(ub, uh, band), direction_angle_cost(ub, uh, rows, cols))
 
 
 def test_window_yaw_recovers_a_known_turn():

@@ -296,32 +296,39 @@ def _cells(lo, hi, off):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _accumulate(vals, off, lo, hi):  # pragma: no cover - compiled
+    """``γ`` of every band cell: ``D(i, j) + min(γ(i-1, j-1), γ(i-1, j), γ(i, j-1))``.
+
+    Each row in two sweeps: the cells above (diagonal and up, independent of each
+    other) first, then the left-to-right chain; the minimum of the same three values,
+    so the same numbers as cell by cell.
+    """
     n = lo.shape[0]
     acc = np.empty_like(vals)
+    up = np.empty(max(hi.max() - lo.min() + 1, 1) if n else 1)
     for i in range(n):
         base = off[i]
         l_i = lo[i]
-        for j in range(l_i, hi[i] + 1):
-            best = np.inf
-            if i == 0 and j == 0:
-                best = 0.0
-            if i > 0:
-                pl = lo[i - 1]
-                ph = hi[i - 1]
-                pb = off[i - 1]
-                if pl <= j - 1 <= ph:
-                    v = acc[pb + j - 1 - pl]
-                    if v < best:
-                        best = v
-                if pl <= j <= ph:
-                    v = acc[pb + j - pl]
-                    if v < best:
-                        best = v
-            if j > l_i:
-                v = acc[base + j - 1 - l_i]
-                if v < best:
-                    best = v
-            acc[base + j - l_i] = vals[base + j - l_i] + best
+        w = hi[i] - l_i + 1
+        if i == 0:
+            for t in range(w):
+                up[t] = np.inf
+            if l_i == 0 and w > 0:
+                up[0] = 0.0
+        else:
+            pl = lo[i - 1]
+            ph = hi[i - 1]
+            pb = off[i - 1]
+            for t in range(w):
+                j = l_i + t
+                a = acc[pb + j - 1 - pl] if pl <= j - 1 <= ph else np.inf
+                b = acc[pb + j - pl] if pl <= j <= ph else np.inf
+                up[t] = a if a < b else b
+        left = np.inf
+        for t in range(w):
+            best = up[t] if up[t] < left else left
+            v = vals[base + t] + best
+            acc[base + t] = v
+            left = v
     return acc
 
 
@@ -366,8 +373,8 @@ def _backtrack(acc, off, lo, hi):  # pragma: no cover - compiled
     return out[:k][::-1].copy()
 
 
-def dtw(cost: np.ndarray | Callable[[np.ndarray, np.ndarray], np.ndarray], band: Band | None = None,
-        *, shape: tuple[int, int] | None = None) -> WarpResult:
+def dtw(cost: np.ndarray | Callable, band: Band | None = None,
+        *, shape: tuple[int, int] | None = None, on_band: bool = False) -> WarpResult:
     """Optimal monotone warp from ``(0, 0)`` to ``(n-1, m-1)`` inside a band.
 
     Parameters
@@ -380,6 +387,10 @@ def dtw(cost: np.ndarray | Callable[[np.ndarray, np.ndarray], np.ndarray], band:
         Cells allowed; the full matrix when omitted.
     shape : (int, int), optional
         ``(n, m)`` when ``cost`` is a callable.
+    on_band : bool
+        With a callable ``cost``: call it as ``cost(band)`` instead, to return the
+        band cells' costs in flat row-major order (a cost that works on the band's rows
+        needs no list of cells).
 
     Returns
     -------
@@ -404,12 +415,18 @@ def dtw(cost: np.ndarray | Callable[[np.ndarray, np.ndarray], np.ndarray], band:
     if (band.n, band.m) != (n, m):
         raise ValueError(f"Expected a band of shape {(n, m)}, got {(band.n, band.m)}")
     band.check_connected()
-    rows, cols = band.cells()
     if callable(cost):
-        vals = np.ascontiguousarray(cost(rows, cols), dtype=np.float64)
-        if vals.shape != rows.shape:
-            raise ValueError(f"Expected the cost function to return shape {rows.shape}, got {vals.shape}")
+        if on_band:
+            vals = np.ascontiguousarray(cost(band), dtype=np.float64)
+            want = (band.num_cells,)
+        else:
+            rows, cols = band.cells()
+            vals = np.ascontiguousarray(cost(rows, cols), dtype=np.float64)
+            want = rows.shape
+        if vals.shape != want:
+            raise ValueError(f"Expected the cost function to return shape {want}, got {vals.shape}")
     else:
+        rows, cols = band.cells()
         vals = np.ascontiguousarray(cost[rows, cols])
     off = band.offsets
     acc = _accumulate(vals, off, band.lo, band.hi)

@@ -116,17 +116,25 @@ def _sgn(x, eps):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh, eps_ah,
+def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh, eps_ah,
                        half, use_trunk, yaw_b, yaw_h):  # pragma: no cover - compiled
-    """Eq. 6 (with eq. 7's angle, or the trunk angles) on the cells ``rows, cols``.
+    """Eq. 6 (with eq. 7's angle, or the trunk angles) on runs of cells along rows.
 
-    The cells are taken in runs along a row (a band row is one run), and every sum of
-    a run is accumulated column by column in contiguous slices, which the compiler
-    vectorises: each cell's sums still add the same terms in the same order as a
-    cell-by-cell loop (window frames, then markers), so the costs are the same to the
-    bit. Windows hold the frames ``i + k, j + k`` (``|k| <= half``) inside both clips.
+    Run ``r`` is the cells ``(run_row[r], run_col[r] + t)`` for ``t < run_len[r]``; the
+    costs come out run after run (a band's rows are its runs).
+
+    Eq. 7's window sums run along diagonals: the cell ``(i, j)`` adds the per-frame-pair
+    products ``f(i + k, j + k)`` (``|k| <= half``, both frames inside their clips), so
+    each ``f(a, b)`` (a sum over the markers) is computed once, for every frame pair the
+    asked cells' windows reach, and shared by the cells of its diagonal, instead of
+    once per window it falls in. Each cell's value depends on that cell alone (not on
+    which other cells are asked or in what order). Eq. 6 is accumulated column by
+    column in contiguous slices of a run, which the compiler vectorises.
     """
-    N = rows.shape[0]
+    R = run_row.shape[0]
+    N = 0
+    for r in range(R):
+        N += run_len[r]
     n = P.shape[0]
     m = Q.shape[0]
     K = P.shape[1]
@@ -162,6 +170,45 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
             for ax in range(3):
                 SB[i, mk, ax] = _sgn(vb[i, mk, ax], eps_vb)
                 SB[i, mk, 3 + ax] = _sgn(ab[i, mk, ax], eps_ab)
+    # eq. 7's products of frame pairs: f(a, b) for b in need_lo[a] .. need_hi[a], stored
+    # row after row from foff[a]
+    need_lo = np.full(n, m, dtype=np.int64)
+    need_hi = np.full(n, -1, dtype=np.int64)
+    if not use_trunk:
+        for r in range(R):
+            i = run_row[r]
+            for k in range(-half, half + 1):
+                a = i + k
+                if a < 0 or a >= n:
+                    continue
+                b0 = max(run_col[r] + k, 0)
+                b1 = min(run_col[r] + run_len[r] - 1 + k, m - 1)
+                if b0 > b1:
+                    continue
+                if b0 < need_lo[a]:
+                    need_lo[a] = b0
+                if b1 > need_hi[a]:
+                    need_hi[a] = b1
+    foff = np.zeros(n + 1, dtype=np.int64)
+    for a in range(n):
+        foff[a + 1] = foff[a] + max(need_hi[a] - need_lo[a] + 1, 0)
+    FXZ = np.zeros(foff[n])
+    FXX = np.zeros(foff[n])
+    for a in range(n):
+        lo_a = need_lo[a]
+        w = need_hi[a] - lo_a + 1
+        if w <= 0:
+            continue
+        fxz = FXZ[foff[a]:foff[a] + w]
+        fxx = FXX[foff[a]:foff[a] + w]
+        for mk in range(K):
+            xa = X[a, mk]
+            za = Z[a, mk]
+            xs = XhT[mk, lo_a:lo_a + w]
+            zs = ZhT[mk, lo_a:lo_a + w]
+            for u in range(w):
+                fxz[u] += xa * zs[u] - xs[u] * za
+                fxx[u] += xa * xs[u] + za * zs[u]
     sxz = np.empty(m)
     sxx = np.empty(m)
     bx = np.empty(m)
@@ -173,21 +220,18 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
     si = np.empty(m)
     d = np.empty(m)
     c = 0
-    while c < N:
+    for r in range(R):
         # a run of cells: row i, columns j0 .. j0 + L - 1
-        i = rows[c]
-        j0 = cols[c]
-        e = c + 1
-        while e < N and rows[e] == i and cols[e] == cols[e - 1] + 1:
-            e += 1
-        L = e - c
+        i = run_row[r]
+        j0 = run_col[r]
+        L = run_len[r]
         if use_trunk:
             for t in range(L):
                 th = yaw_b[i] - yaw_h[j0 + t]
                 co[t] = np.cos(th)
                 si[t] = np.sin(th)
         else:
-            # eq. 7 over the window, accumulated in the same order as cell by cell
+            # eq. 7 over the window: the diagonal's products, frame sums and counts
             for t in range(L):
                 sxz[t] = 0.0
                 sxx[t] = 0.0
@@ -206,16 +250,11 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
                     continue
                 o = j0 + k
                 w = t_hi - t_lo
+                base = foff[a] + o + t_lo - need_lo[a]
+                f_xz = FXZ[base:base + w]
+                f_xx = FXX[base:base + w]
                 s_xz = sxz[t_lo:t_hi]
                 s_xx = sxx[t_lo:t_hi]
-                for mk in range(K):
-                    xa = X[a, mk]
-                    za = Z[a, mk]
-                    xs = XhT[mk, o + t_lo:o + t_hi]
-                    zs = ZhT[mk, o + t_lo:o + t_hi]
-                    for u in range(w):
-                        s_xz[u] += xa * zs[u] - xs[u] * za
-                        s_xx[u] += xa * xs[u] + za * zs[u]
                 sa = SX[a]
                 za_ = SZ[a]
                 b_x = bx[t_lo:t_hi]
@@ -226,19 +265,21 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
                 sh_x = SXh[o + t_lo:o + t_hi]
                 sh_z = SZh[o + t_lo:o + t_hi]
                 for u in range(w):
+                    s_xz[u] += f_xz[u]
+                    s_xx[u] += f_xx[u]
                     b_x[u] += sa
                     b_z[u] += za_
                     h_x[u] += sh_x[u]
                     h_z[u] += sh_z[u]
                     cn[u] += K
-            for t in range(L):
+            for t in range(L):  # without branches, so it vectorises: r = 0 gives the identity
                 num = sxz[t] - (bx[t] * hz[t] - hx[t] * bz[t]) / cnt[t]
                 den = sxx[t] - (bx[t] * hx[t] + bz[t] * hz[t]) / cnt[t]
                 r = np.sqrt(num * num + den * den)
-                r0 = r == 0.0
-                rr = 1.0 if r0 else r
-                co[t] = 1.0 if r0 else den / rr
-                si[t] = 0.0 if r0 else num / rr
+                r0 = (r == 0.0) * 1.0
+                rr = r + r0
+                co[t] = den / rr + r0
+                si[t] = num / rr
         for t in range(L):
             d[t] = 0.0
         cs = co[:L]
@@ -282,7 +323,7 @@ def _first_pass_kernel(rows, cols, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh,
                 dl[t] = dd
         for t in range(L):
             out[c + t] = d[t]
-        c = e
+        c += L
     return out
 
 
@@ -316,14 +357,39 @@ class FirstPassInput:
     yaw_h: np.ndarray | None
 
 
+def cell_runs(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Cells as runs along rows: first row, first column and length of each run, three ``(R,)`` int64."""
+    rows = np.ascontiguousarray(rows, np.int64)
+    cols = np.ascontiguousarray(cols, np.int64)
+    if not len(rows):
+        return rows, cols, np.zeros(0, np.int64)
+    starts = np.concatenate([[0], np.nonzero((rows[1:] != rows[:-1]) | (cols[1:] != cols[:-1] + 1))[0] + 1])
+    return rows[starts], cols[starts], np.diff(np.append(starts, len(rows)))
+
+
+def band_runs(band) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A :class:`~usdhands.algorithms.dtw.Band`'s rows as runs (see :func:`cell_runs`), empty rows left out."""
+    width = band.hi - band.lo + 1
+    keep = np.nonzero(width > 0)[0]
+    return keep.astype(np.int64), band.lo[keep], width[keep]
+
+
 def first_pass_cost(inp: FirstPassInput, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Eq. 6 on the given cells (numba); see :func:`first_pass_cost_naive` for the definition."""
+    return _first_pass_runs(inp, *cell_runs(rows, cols))
+
+
+def first_pass_band_cost(inp: FirstPassInput, band) -> np.ndarray:
+    """Eq. 6 on every cell of a band, in its flat row-major order (for ``dtw(..., on_band=True)``)."""
+    return _first_pass_runs(inp, *band_runs(band))
+
+
+def _first_pass_runs(inp: FirstPassInput, run_row, run_col, run_len) -> np.ndarray:
     use_trunk = inp.yaw_b is not None
     yb = np.radians(inp.yaw_b) if use_trunk else np.zeros(1)
     yh = np.radians(inp.yaw_h) if use_trunk else np.zeros(1)
-    return _first_pass_kernel(np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(cols, np.int64),
-                              inp.P, inp.Q, inp.vb, inp.ab, inp.vh, inp.ah, *inp.eps, inp.half,
-                              use_trunk, yb, yh)
+    return _first_pass_kernel(run_row, run_col, run_len, inp.P, inp.Q, inp.vb, inp.ab, inp.vh, inp.ah, *inp.eps,
+                              inp.half, use_trunk, yb, yh)
 
 
 def window_yaw_naive(P: np.ndarray, Q: np.ndarray, i: int, j: int, half: int = 2) -> float:
@@ -440,25 +506,34 @@ def fit_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 @njit(cache=True)
-def _angle_kernel(rows, cols, ub, uh):  # pragma: no cover - compiled
-    N = rows.shape[0]
+def _angle_kernel(run_row, run_col, run_len, ub, uh):  # pragma: no cover - compiled
+    N = 0
+    for r in range(run_row.shape[0]):
+        N += run_len[r]
     out = np.empty(N)
-    for c in range(N):
-        i = rows[c]
-        j = cols[c]
-        d = ub[i, 0] * uh[j, 0] + ub[i, 1] * uh[j, 1] + ub[i, 2] * uh[j, 2]
-        if d > 1.0:
-            d = 1.0
-        elif d < -1.0:
-            d = -1.0
-        out[c] = np.degrees(np.arccos(d))
+    c = 0
+    for r in range(run_row.shape[0]):
+        i = run_row[r]
+        for j in range(run_col[r], run_col[r] + run_len[r]):
+            d = ub[i, 0] * uh[j, 0] + ub[i, 1] * uh[j, 1] + ub[i, 2] * uh[j, 2]
+            if d > 1.0:
+                d = 1.0
+            elif d < -1.0:
+                d = -1.0
+            out[c] = np.degrees(np.arccos(d))
+            c += 1
     return out
 
 
 def direction_angle_cost(ub: np.ndarray, uh: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     """Angle in degrees between unit vectors ``ub[rows]`` ``(n, 3)`` and ``uh[cols]`` ``(m, 3)`` (numba)."""
-    return _angle_kernel(np.ascontiguousarray(rows, np.int64), np.ascontiguousarray(cols, np.int64),
-                         np.ascontiguousarray(ub, np.float64), np.ascontiguousarray(uh, np.float64))
+    return _angle_kernel(*cell_runs(rows, cols), np.ascontiguousarray(ub, np.float64),
+                         np.ascontiguousarray(uh, np.float64))
+
+
+def direction_angle_band_cost(ub: np.ndarray, uh: np.ndarray, band) -> np.ndarray:
+    """:func:`direction_angle_cost` on every cell of a band, flat row-major (for ``dtw(..., on_band=True)``)."""
+    return _angle_kernel(*band_runs(band), np.ascontiguousarray(ub, np.float64), np.ascontiguousarray(uh, np.float64))
 
 
 @njit(cache=True)

@@ -54,8 +54,8 @@ from usdhands.algorithms.splicing.markers import (
     markers_from_joints, trunk_yaw_deg,
 )
 from usdhands.algorithms.splicing.costs import (
-    sign_features, FirstPassInput, first_pass_cost, forearm_hand_vectors,
-    hand_directions, forearm_rest_basis, fit_rotation, direction_angle_cost, hand_angle_cost,
+    sign_features, FirstPassInput, first_pass_band_cost, forearm_hand_vectors,
+    hand_directions, forearm_rest_basis, fit_rotation, direction_angle_band_cost, hand_angle_cost,
 )
 
 _log = logging.getLogger(__name__)
@@ -270,7 +270,7 @@ def align_hands(body_markers: np.ndarray, hand_markers: np.ndarray, fps: float, 
     inp = FirstPassInput(np.ascontiguousarray(P), np.ascontiguousarray(Q), vb, ab, vh, ah,
                         (evb, eab, evh, eah), options.yaw_window // 2, yaw_b, yaw_h)
     band1 = Band.diagonal(n, m, options.band1, cons)
-    first = dtw(lambda r, c: first_pass_cost(inp, r, c), band1, shape=(n, m))
+    first = dtw(lambda band: first_pass_band_cost(inp, band), band1, shape=(n, m), on_band=True)
     band2 = Band.around_path(first.path, n, m, options.band2).intersect(Band.diagonal(n, m, np.inf, cons))
     if options.forearm_align == "frame" and body_hand_dirs is not None and hand_hand_dirs is not None:
         ub = np.asarray(body_hand_dirs, dtype=np.float64)
@@ -291,7 +291,7 @@ def align_hands(body_markers: np.ndarray, hand_markers: np.ndarray, fps: float, 
         for R, refits in candidates:
             for k in range(refits + 1):
                 uh_r = uh @ R.T
-                res = dtw(lambda r, c: direction_angle_cost(ub, uh_r, r, c), band2, shape=(n, m))
+                res = dtw(lambda band: direction_angle_band_cost(ub, uh_r, band), band2, shape=(n, m), on_band=True)
                 if k < refits:
                     match = np.clip(np.round(median_alignment(res.path, n)).astype(int), 0, m - 1)
                     R = fit_rotation(ub, uh[match])
