@@ -207,3 +207,22 @@ def test_ambiguous_short_name_needs_the_full_path():
     assert not sk.has_joint("Index1")
     with pytest.raises(KeyError, match="No joint named 'Index1'"):
         sk.index("Index1")
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32, None])
+def test_clip_arrays_are_read_only_copies_of_what_was_given(dtype):
+    """A float32 array (a reader's) is converted once and kept; a float64 one is copied: never the caller's memory."""
+    sk = Skeleton(["a", "b"], [-1, 0], np.zeros((2, 3)), np.tile([0, 0, 0, 1.0], (2, 1)))
+    rng = np.random.default_rng(4)
+    q = rng.normal(size=(5, 2, 4))
+    t = rng.normal(size=(5, 2, 3))
+    given_q = q.tolist() if dtype is None else q.astype(dtype)
+    given_t = t.tolist() if dtype is None else t.astype(dtype)
+    clip = Clip(sk, 30, given_q, given_t, np.ones((5, 2, 3), dtype or np.float64))
+    for arr, given in ((clip.rotations, given_q), (clip.translations, given_t)):
+        assert arr.dtype == np.float64 and not arr.flags.writeable
+        assert np.array_equal(arr, np.asarray(given, dtype=np.float64))
+        if dtype is not None:
+            assert not np.may_share_memory(arr, given)
+            given[0, 0, 0] = 99.0  # the caller's array changes, the clip does not
+            assert arr[0, 0, 0] != 99.0

@@ -70,12 +70,19 @@ def _continuous(q: np.ndarray) -> np.ndarray:
     glTF requires unit rotations: a USD quaternion of magnitude 1e38 was written as it was
     and failed the Khronos validator.
     """
-    norms = np.linalg.norm(q, axis=-1, keepdims=True)
-    if np.abs(norms - 1.0).max(initial=0.0) > 1e-6:  # unit ones are written as they are (same bytes as before)
-        q = q / norms
+    q = np.asarray(q)
+    square = np.einsum("...i,...i->...", q, q)
+    # |n² - 1| <= 1e-6 means |n - 1| < 1e-6: the norms themselves are needed only otherwise
+    if np.abs(square - 1.0).max(initial=0.0) > 1e-6:
+        norms = np.linalg.norm(q, axis=-1, keepdims=True)
+        if np.abs(norms - 1.0).max(initial=0.0) > 1e-6:  # unit ones are written as they are (same bytes as before)
+            q = q / norms
     if q.shape[0] < 2:
         return q
-    d = np.sum(q[1:] * q[:-1], axis=-1)
+    a, b = q[1:], q[:-1]
+    d = a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2] + a[..., 3] * b[..., 3]  # np.sum's order
+    if not (d < 0).any():
+        return q
     flips = np.cumprod(np.where(d < 0, -1.0, 1.0), axis=0)
     out = q.copy()
     out[1:] *= flips[..., None]
@@ -143,7 +150,8 @@ class _AnimationWriter:
         """
         if not joints:
             return
-        data = np.ascontiguousarray(values[:, joints].transpose(1, 0, 2), dtype=np.float32)
+        every = len(joints) == values.shape[1] and joints == list(range(values.shape[1]))
+        data = (values if every else values[:, joints]).transpose(1, 0, 2).astype(np.float32, order="C")
         if self.interpolation == "CUBICSPLINE":
             data = np.ascontiguousarray(_cubic_values(data.transpose(1, 0, 2), self.times).transpose(1, 0, 2))
         T, C = data.shape[1], data.shape[2]

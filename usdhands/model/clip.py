@@ -18,6 +18,19 @@ __all__ = ["Clip"]
 MAX_MAGNITUDE = 1e30
 
 
+def _owned_readonly(a: np.ndarray, given) -> np.ndarray:
+    """``a`` (float64, made from ``given``) read-only, copied only where it may still be ``given``'s memory.
+
+    A conversion (float32 arrays of a reader, lists) already made a new array: that one
+    is kept instead of copied a second time (a 10,000-frame, 65-joint clip: 26 MB less).
+    """
+    if given is None or (isinstance(given, np.ndarray) and np.may_share_memory(a, given)) or a.base is not None \
+            or not a.flags.c_contiguous:
+        return readonly(a)
+    a.setflags(write=False)
+    return a
+
+
 @dataclass(frozen=True, eq=False)
 class Clip:
     """A skeleton animated over time.
@@ -70,9 +83,9 @@ class Clip:
             raise ValueError(f"Expected scales to have shape ({T}, {J}, 3), got {s.shape}")
         set_ = object.__setattr__
         set_(self, "fps", float(self.fps))
-        set_(self, "rotations", readonly(q))
-        set_(self, "translations", readonly(t))
-        set_(self, "scales", readonly(s))
+        set_(self, "rotations", _owned_readonly(q, self.rotations))
+        set_(self, "translations", _owned_readonly(t, self.translations))
+        set_(self, "scales", _owned_readonly(s, self.scales))
         set_(self, "start_time", float(self.start_time))
 
     # -- checks ---------------------------------------------------------------
