@@ -226,3 +226,17 @@ def test_clip_arrays_are_read_only_copies_of_what_was_given(dtype):
             assert not np.may_share_memory(arr, given)
             given[0, 0, 0] = 99.0  # the caller's array changes, the clip does not
             assert arr[0, 0, 0] != 99.0
+
+
+def test_clip_shares_a_locked_array_it_is_handed_and_copies_an_unlocked_one():
+    sk = Skeleton(["a"], [-1], np.zeros((1, 3)), np.tile([0, 0, 0, 1.0], (1, 1)))
+    q = np.tile([0, 0, 0, 1.0], (3, 1, 1))
+    q.setflags(write=False)  # a reader hands over what it made
+    locked = Clip(sk, 30, q)
+    assert locked.rotations is q
+    again = locked.replace(name="b")  # immutable arrays are shared between clips
+    assert again.rotations is q
+    open_ = np.tile([0, 0, 0, 1.0], (3, 1, 1))
+    assert not np.may_share_memory(Clip(sk, 30, open_).rotations, open_)
+    view = q[1:]  # not owning its memory: copied
+    assert Clip(sk, 30, view).rotations.base is None

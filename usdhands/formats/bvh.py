@@ -449,6 +449,8 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
             step = max(1, _ROTATIONS_PER_CHUNK // len(ks))  # frames at a time: the gathered angles stay in cache
             for t in range(0, T, step):
                 rot[t:t + step, ks] = euler_channels_to_quat(bvh.values[t:t + step][:, cols], axes)
+    rot.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
+    trans.setflags(write=False)
     clip = Clip(sk, _fps(bvh.frame_time), rot, trans, name=path.stem)
     if fps is not None and T:
         clip = clip.resample(fps)

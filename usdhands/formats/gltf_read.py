@@ -658,6 +658,8 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
                 target[path][:, j] = vals
         else:
             target[path][:, j] = sample_channel(times, values, interp, at, path == "rotation", snap)
+    for a in (rot, tra, sca):
+        a.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
     return Clip(sk, rate, rot, tra, sca, name=name, start_time=t0)
 
 
