@@ -230,7 +230,8 @@ def test_clip_arrays_are_read_only_copies_of_what_was_given(dtype):
 
 def test_clip_shares_a_locked_array_it_is_handed_and_copies_an_unlocked_one():
     sk = Skeleton(["a"], [-1], np.zeros((1, 3)), np.tile([0, 0, 0, 1.0], (1, 1)))
-    q = np.tile([0, 0, 0, 1.0], (3, 1, 1))
+    q = np.zeros((3, 1, 4))
+    q[..., 3] = 1.0
     q.setflags(write=False)  # a reader hands over what it made
     locked = Clip(sk, 30, q)
     assert locked.rotations is q

@@ -422,8 +422,10 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     sk = Skeleton(names, parents, offsets, quat_identity((J,)), meters_per_unit=meters_per_unit,
                   up_axis="Y", name=path.stem)
     T = bvh.values.shape[0]
-    rot = np.tile(quat_identity(), (T, J, 1))
-    trans = np.tile(offsets, (T, 1, 1))
+    rot = np.empty((T, J, 4))  # arrays that own their memory: the clip keeps them (see below)
+    rot[:] = quat_identity()
+    trans = np.empty((T, J, 3))
+    trans[:] = offsets
     col = 0
     groups: dict[tuple, list] = {}  # rotation axes -> [(joint, columns)]
     moved = ([], [], [])  # position channels: joint, axis, column
