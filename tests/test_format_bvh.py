@@ -489,3 +489,67 @@ def test_written_euler_angles_match_scipy_as_euler(tmp_path, order):
     diff = (angles - np.degrees(ref) + 180) % 360 - 180
     assert np.abs(diff).max() < 1.5e-6
     assert quat_angle_deg(read_asset(out).clip().rotations, q).max() < 1e-4
+
+
+def _bvh_variants(text: str):
+    """Well-formed and broken variants of one BVH text: what the streamed reader must read alike or hand over."""
+    head, motion = text.split("MOTION\n", 1)
+    frames_line, time_line, *rows = motion.splitlines()
+    yield "as is", text
+    yield "crlf", text.replace("\n", "\r\n")
+    yield "cr", text.replace("\n", "\r")
+    yield "bom", "\ufeff" + text
+    yield "blank lines", head + "MOTION\n\n" + frames_line + "\n\n" + time_line + "\n\n" + "\n\n".join(rows) + "\n\n"
+    yield "tabs", head + "MOTION\n" + frames_line + "\n" + time_line + "\n" + "\n".join(r.replace(" ", "\t") for r in rows)
+    yield "leap rest line", head + "MOTION\n" + frames_line + "\n" + time_line + "\n" + " ".join(
+        ["0"] * len(rows[0].split())) + "\n" + "\n".join(rows) + "\n"
+    yield "one frame short", head + "MOTION\n" + frames_line + "\n" + time_line + "\n" + "\n".join(rows[:-1]) + "\n"
+    yield "one value short", head + "MOTION\n" + frames_line + "\n" + time_line + "\n" + "\n".join(
+        rows[:2] + [rows[2].rsplit(" ", 1)[0]] + rows[3:]) + "\n"
+    yield "nan", text.replace(rows[1], rows[1].replace(rows[1].split()[0], "nan", 1))
+    yield "word", text.replace(rows[1], rows[1].replace(rows[1].split()[0], "x1", 1))
+    yield "form feed in the head", text.replace("HIERARCHY\n", "HIERARCHY\x0c\n", 1)
+    yield "frame time 0", text.replace(time_line, "Frame Time: 0")
+    yield "no frames line", head + "MOTION\n" + time_line + "\n" + "\n".join(rows) + "\n"
+    yield "zero frames", head + "MOTION\nFrames: 0\n" + time_line + "\n"
+    yield "no motion", head
+
+
+def test_streamed_reading_equals_the_line_by_line_reading(tmp_path, sample_assets, monkeypatch):
+    """parse_bvh's streamed fast path gives what reading the whole text line by line gives, or hands over."""
+    import usdhands.formats.bvh as bvh_module
+
+    from conftest import SHARED_ASSETS
+
+    sources = [sample_assets / "conversation_bodyonly.bvh", sample_assets / "humanoid.bvh"]
+    sources += sorted((SHARED_ASSETS / "leap_hands").glob("*.bvh"))  # Leap Motion files: the rest line
+    outcomes = []
+    for src in sources:
+        for name, text in _bvh_variants(src.read_text()):
+            p = tmp_path / f"{src.stem}-{name.replace(' ', '_')}.bvh"
+            p.write_bytes(text.encode("utf-8"))
+            results = []
+            for streamed in (True, False):
+                with monkeypatch.context() as m:
+                    if not streamed:
+                        m.setattr(bvh_module, "_parse_bvh_streamed", lambda path: None)
+                    try:
+                        results.append(parse_bvh(p))
+                    except AssetReadError as e:
+                        results.append(str(e))
+            fast, slow = results
+            if isinstance(slow, str):
+                assert fast == slow, name
+            else:
+                assert [(j.name, j.parent, j.channels, j.end_site, j.line) for j in fast.joints] == \
+                       [(j.name, j.parent, j.channels, j.end_site, j.line) for j in slow.joints], name
+                assert all(np.array_equal(a.offset, b.offset) for a, b in zip(fast.joints, slow.joints))
+                assert fast.hierarchy_text == slow.hierarchy_text and fast.frame_time == slow.frame_time, name
+                assert fast.values.shape == slow.values.shape and np.array_equal(fast.values, slow.values), name
+            outcomes.append(isinstance(slow, str))
+    assert 4 < sum(outcomes) < len(outcomes) - 10  # both readable and broken variants were tried
+    streamed = []
+    monkeypatch.setattr(bvh_module, "_parse_bvh_streamed",
+                        lambda path, f=bvh_module._parse_bvh_streamed: streamed.append(f(path)) or streamed[-1])
+    parse_bvh(sources[0])
+    assert streamed[-1] is not None  # a well-formed file takes the streamed path
