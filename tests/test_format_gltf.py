@@ -628,3 +628,19 @@ def test_differs_from_rest_equals_the_frame_by_frame_test():
         for tol in (1e-6, 0.0, 1e-3):
             naive = np.any(np.abs(v - rest[None]) > tol * np.maximum(1.0, np.abs(rest))[None], axis=(0, 2))
             assert np.array_equal(_differs_from_rest(v, rest, tol), naive)
+
+
+def test_a_document_loaded_again_is_equal_and_independent(sample_assets):
+    """Loads of the same JSON share pygltflib's decoding (kept by text) but never the objects."""
+    from usdhands.formats.gltf_container import clear_decoded_cache, load_gltf
+
+    clear_decoded_cache()
+    src = sample_assets / "conversation_bodyonly.glb"
+    first = load_gltf(src)
+    first.gltf.nodes[0].name = "changed by a writer"
+    first.gltf.animations[0].channels.clear()
+    second = load_gltf(src)
+    clear_decoded_cache()
+    fresh = load_gltf(src)
+    assert second.gltf == fresh.gltf and second.gltf is not fresh.gltf
+    assert second.gltf.nodes[0].name != "changed by a writer" and second.gltf.animations[0].channels
