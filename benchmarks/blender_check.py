@@ -2,8 +2,9 @@
 
 Blender is the tool users open usdhands' outputs in: this script imports each file with
 Blender's own importers (glTF-IO, the USD importer) and compares, against the source,
-the world positions of the bones (matched by name) and the bounding box of the evaluated
-(skinned) meshes at a few frames.
+the world positions of the bones (matched by name) and the bounding box of every
+evaluated mesh (skinned, and rigid parts following a bone) at a few frames, and counts
+what Blender imported: mesh vertices, materials, image textures, shape keys and actions.
 
 bpy is not a test dependency: its wheel (``pip install bpy``, 77 s and 968 MB here for
 bpy 5.0.1) pins numpy 1.26, which would downgrade the project's numpy. Run it from a
@@ -66,17 +67,29 @@ def _key(name: str) -> str:
     return name.replace(":", "_").replace(".", "_")
 
 
-def skinned_bbox() -> tuple[Vector, Vector] | None:
-    """World bounding box of every evaluated mesh with an Armature modifier (skinning applied).
+def _file_meshes() -> list:
+    """The mesh objects the file holds (not the Icosphere glTF-IO makes as every bone's display shape)."""
+    shapes = {pb.custom_shape.name for o in bpy.context.scene.objects if o.type == "ARMATURE"
+              for pb in o.pose.bones if pb.custom_shape}
+    return [o for o in bpy.context.scene.objects if o.type == "MESH" and o.name not in shapes]
 
-    Only skinned meshes: usdhands converts those (a source's rigid meshes are left out
-    and named in a warning), and the importers split primitives into objects differently.
-    """
+
+def counts() -> dict[str, int]:
+    """What the import holds: mesh vertices, materials used by meshes, image textures, shape keys
+    (without the basis), actions."""
+    meshes = _file_meshes()
+    materials = {s.material.name for o in meshes for s in o.material_slots if s.material}
+    keys = sum(len(o.data.shape_keys.key_blocks) - 1 for o in meshes if o.data.shape_keys)
+    return {"verts": sum(len(o.data.vertices) for o in meshes), "mats": len(materials),
+            "images": sum(1 for i in bpy.data.images if i.source == "FILE"), "keys": keys,
+            "actions": len(bpy.data.actions)}
+
+
+def skinned_bbox() -> tuple[Vector, Vector] | None:
+    """World bounding box of every evaluated mesh (skinning applied; rigid parts where their bone puts them)."""
     deps = bpy.context.evaluated_depsgraph_get()
     pts = []
-    for obj in bpy.context.scene.objects:
-        if obj.type != "MESH" or not any(m.type == "ARMATURE" for m in obj.modifiers):
-            continue
+    for obj in _file_meshes():
         ev = obj.evaluated_get(deps)
         mesh = ev.to_mesh()
         pts += [ev.matrix_world @ v.co for v in mesh.vertices]
@@ -86,9 +99,9 @@ def skinned_bbox() -> tuple[Vector, Vector] | None:
     return Vector(map(min, *pts)), Vector(map(max, *pts))
 
 
-def snapshot(path: Path, fps: int) -> dict[int, tuple[dict, tuple | None]]:
+def snapshot(path: Path, fps: int) -> dict:
     load(path, fps)
-    out = {}
+    out = {"counts": counts()}
     for f in FRAMES:
         bpy.context.scene.frame_set(f)
         out[f] = (bone_positions(), skinned_bbox())
@@ -104,9 +117,11 @@ def main(argv: list[str]) -> int:
         fps, argv = int(argv[1]), argv[2:]
     source, *converted = (Path(a) for a in argv)
     ref = snapshot(source, fps)
-    print(f"{'file':28s} {'frame':>5s} {'bones':>5s} {'max bone cm':>11s} {'skinned bbox cm':>15s}")
+    print(f"{source.name:28s} {ref['counts']}")
+    print(f"{'file':28s} {'frame':>5s} {'bones':>5s} {'max bone cm':>11s} {'mesh bbox cm':>12s}")
     for path in converted:
         got = snapshot(path, fps)
+        print(f"{path.name:28s} {got['counts']}")
         for f in FRAMES:
             (rb, rbox), (gb, gbox) = ref[f], got[f]
             common = sorted(set(rb) & set(gb))
@@ -114,7 +129,7 @@ def main(argv: list[str]) -> int:
             box = float("nan")
             if rbox and gbox:
                 box = max(abs(a - b) for k in (0, 1) for a, b in zip(rbox[k], gbox[k])) * 100
-            print(f"{path.name:28s} {f:5d} {len(common):5d} {worst:11.4f} {box:15.4f}")
+            print(f"{path.name:28s} {f:5d} {len(common):5d} {worst:11.4f} {box:12.4f}")
     return 0
 
 

@@ -337,3 +337,29 @@ def test_animation_option_picks_one_and_keeps_its_weights(tmp_path):
     (clip,) = asset.clips
     assert asset.source_names[clip.name] == "wave-01"
     np.testing.assert_allclose(asset.blend_shape_weights[clip.name].weights, truth["weights"], atol=1e-6)
+
+
+@pytest.mark.parametrize("middle", [".usda", None])
+def test_source_nodes_above_the_skin_stay_plain_nodes(shared_assets, tmp_path, middle, gltf_validator):
+    """RobotArmature (scale 100, -90° about x) is a node above the skin's joints in the source; it comes
+    back as such (not a skin joint: Blender's importer makes every skin joint a bone, and a bone cannot
+    hold that scale, which put the rigid parts up to 58 cm off), through USD (an Xform above the
+    SkelRoot there) and glTF -> glTF alike."""
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    back = tmp_path / "back.glb"
+    if middle:
+        convert(src, tmp_path / f"mid{middle}")
+        convert(tmp_path / f"mid{middle}", back)
+    else:
+        convert(src, back)
+    assert gltf_validator(back)[0]["numErrors"] == 0
+    ga, gb = pygltflib.GLTF2().load(str(src)), pygltflib.GLTF2().load(str(back))
+    names = lambda g, skin: [g.nodes[n].name for n in skin.joints]  # noqa: E731
+    assert names(gb, gb.skins[0]) == names(ga, ga.skins[0])
+    arm = next(n for n in gb.nodes if n.name == "RobotArmature")
+    assert gb.nodes.index(arm) not in gb.skins[0].joints
+    np.testing.assert_allclose(arm.scale, [100, 100, 100], rtol=1e-6)
+    assert [gb.nodes[c].name for c in arm.children] == ["Bone"]  # the root joint, as in the source
+    a, b = read_asset(src), read_asset(back)
+    for ca, cb in zip(a.clips, b.clips):
+        np.testing.assert_allclose(cb.world_positions(), ca.world_positions(), atol=1e-5)

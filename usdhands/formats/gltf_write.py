@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import base64
 import os
+from dataclasses import replace
 import urllib.parse
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 import pygltflib
@@ -30,7 +32,7 @@ from usdhands.model.clip import Clip
 from usdhands.model.provenance import provenance_record
 from usdhands.formats.gltf_materials import write_materials
 from usdhands.model.rotations import quat_angle_deg, trs_to_xform, xform_to_trs
-from usdhands.model.skeleton import short_joint_name
+from usdhands.model.skeleton import Skeleton, short_joint_name
 from usdhands.model.units import asset_to, clip_to, skeleton_to
 
 __all__ = ["write_gltf", "write_clip_gltf", "clip_to_gltf_space", "ROTATION_TOLERANCE_DEG", "TRANSLATION_TOLERANCE_M"]
@@ -225,14 +227,16 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
     path = Path(path)
     if any(sk.meters_per_unit != 1.0 or sk.up_axis != "Y" for sk in asset.skeletons):
         asset = asset_to(asset, 1.0, "Y")
+    asset, chains = _unfold_root_nodes(asset)
     gltf = pygltflib.GLTF2(asset=pygltflib.Asset(generator="usdhands", version="2.0"))
     gltf.buffers = [pygltflib.Buffer(byteLength=0)]
     app = BinaryAppender(gltf, 0)
     scene_nodes: list[int] = []
     skel_nodes: list[list[int]] = []
     skel_skins: list[int] = []
+    skin_slot: list[np.ndarray] = []
     index_of = {id(s): i for i, s in enumerate(asset.skeletons)}
-    for sk in asset.skeletons:
+    for k, sk in enumerate(asset.skeletons):
         base = len(gltf.nodes)
         nodes = list(range(base, base + sk.num_joints))
         for j in range(sk.num_joints):
@@ -241,22 +245,38 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
                 translation=[float(v) for v in sk.rest_translations[j]],
                 rotation=[float(v) for v in _unit(sk.rest_rotations[j])],
                 scale=[float(v) for v in sk.rest_scales[j]]))
+        above = None
+        for name, local in chains.get(k, ()):
+            t, q, sc = xform_to_trs(local)
+            gltf.nodes.append(pygltflib.Node(name=name, translation=[float(v) for v in t],
+                                             rotation=[float(v) for v in _unit(q)], scale=[float(v) for v in sc]))
+            if above is None:
+                scene_nodes.append(len(gltf.nodes) - 1)
+            else:
+                gltf.nodes[above].children.append(len(gltf.nodes) - 1)
+            above = len(gltf.nodes) - 1
         for j, p in enumerate(sk.parents):
-            if p < 0:
+            if p < 0 and above is None:
                 scene_nodes.append(nodes[j])
+            elif p < 0:
+                gltf.nodes[above].children.append(nodes[j])
             else:
                 gltf.nodes[nodes[p]].children.append(nodes[j])
+        in_skin = _skin_joints(sk, asset.non_skin_joints.get(k, ()), [m for m in asset.meshes
+                                                                      if m.skeleton_index == k])
+        slot = np.full(sk.num_joints, -1, dtype=np.int64)
+        slot[in_skin] = np.arange(len(in_skin))
+        skin_slot.append(slot)
         bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
-        ibm = np.linalg.inv(bind).transpose(0, 2, 1).reshape(-1, 16).astype(np.float32)
+        ibm = np.linalg.inv(bind[in_skin]).transpose(0, 2, 1).reshape(-1, 16).astype(np.float32)
         acc = app.add_accessor(ibm, "MAT4")
-        roots = [nodes[j] for j in range(sk.num_joints) if sk.parents[j] < 0]
-        gltf.skins.append(pygltflib.Skin(name=sk.name.rsplit("/", 1)[-1] or None, joints=nodes,
-                                         inverseBindMatrices=acc, skeleton=roots[0] if len(roots) == 1 else None))
+        gltf.skins.append(pygltflib.Skin(name=sk.name.rsplit("/", 1)[-1] or None, joints=[nodes[j] for j in in_skin],
+                                         inverseBindMatrices=acc))
         skel_nodes.append(nodes)
         skel_skins.append(len(gltf.skins) - 1)
 
     material_index = write_materials(gltf, app, asset.materials, asset.images)
-    morph_nodes = _write_meshes(gltf, app, asset, skel_nodes, skel_skins, scene_nodes, material_index)
+    morph_nodes = _write_meshes(gltf, app, asset, skel_nodes, skel_skins, scene_nodes, material_index, skin_slot)
 
     # the name recorded where the source could not hold it, else a USD prim path's last element
     shorts = [asset.source_names.get(c.name) or c.name.rsplit("/", 1)[-1] for c in asset.clips]
@@ -357,8 +377,58 @@ def _clean_influences(ji: np.ndarray, jw: np.ndarray, num_joints: int) -> tuple[
     return ji, w32
 
 
+def _unfold_root_nodes(asset: Asset) -> tuple[Asset, dict]:
+    """``asset`` with the transforms of ``asset.root_nodes`` taken back out of the root joints (rest
+    and every frame), and those nodes per skeleton index, for the writer to put above the roots."""
+    if not asset.root_nodes:
+        return asset, {}
+    new_sk, chains = {}, {}
+    skeletons = list(asset.skeletons)
+    for k, chain in asset.root_nodes.items():
+        if not 0 <= k < len(skeletons) or not chain:
+            continue
+        sk = skeletons[k]
+        world = np.eye(4)
+        for _, local in chain:
+            world = world @ np.asarray(local, dtype=np.float64)
+        inv = np.linalg.inv(world)
+        roots = np.flatnonzero(sk.parents < 0)
+        t, q, sc = (np.array(sk.rest_translations), np.array(sk.rest_rotations), np.array(sk.rest_scales))
+        t[roots], q[roots], sc[roots] = xform_to_trs(inv @ trs_to_xform(t[roots], q[roots], sc[roots]))
+        skeletons[k] = Skeleton(sk.joint_names, sk.parents, t, q, sc, sk.bind_xforms, sk.meters_per_unit,
+                                sk.up_axis, sk.name)
+        new_sk[id(sk)] = (skeletons[k], inv, roots)
+        chains[k] = chain
+    clips = []
+    for c in asset.clips:
+        if id(c.skeleton) not in new_sk:
+            clips.append(c)
+            continue
+        sk, inv, roots = new_sk[id(c.skeleton)]
+        t, q, sc = np.array(c.translations), np.array(c.rotations), np.array(c.scales)
+        t[:, roots], q[:, roots], sc[:, roots] = xform_to_trs(inv @ trs_to_xform(t[:, roots], q[:, roots],
+                                                                                  sc[:, roots]))
+        clips.append(c.replace(skeleton=sk, translations=t, rotations=q, scales=sc))
+    return replace(asset, skeletons=tuple(skeletons), clips=tuple(clips)), chains
+
+
+def _skin_joints(sk: Skeleton, non_skin: Sequence[str], meshes: Sequence[SkinnedMesh]) -> list[int]:
+    """The joints a skin lists: all but the ones the source had as plain nodes (``non_skin``) that
+    no mesh point is weighted to (Blender's importer makes every skin joint a bone, and a bone
+    cannot hold the scale of RobotExpressive's ``RobotArmature``)."""
+    weighted = set()
+    for m in meshes:
+        if m.joint_indices is not None and m.joint_weights is not None:
+            idx = np.asarray(m.joint_indices)
+            weighted.update(np.unique(idx[np.asarray(m.joint_weights).reshape(idx.shape) != 0]).tolist())
+    names = set(non_skin)
+    keep = [j for j in range(sk.num_joints) if sk.joint_names[j] not in names or j in weighted]
+    return keep or list(range(sk.num_joints))
+
+
 def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel_nodes: list[list[int]],
-                  skel_skins: list[int], scene_nodes: list[int], material_index: list[int]) -> dict:
+                  skel_skins: list[int], scene_nodes: list[int], material_index: list[int],
+                  skin_slot: list[np.ndarray]) -> dict:
     """Every mesh of ``asset`` as glTF meshes: the parts of one ``group`` (a source mesh's primitives)
     become one mesh with several primitives; a mesh following one joint rigidly becomes a mesh node
     below that joint's node, the others skinned nodes at the scene root.
@@ -397,7 +467,7 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
         for m in parts:
             xf = np.eye(4) if rigid is not None else np.asarray(m.geom_bind_xform, dtype=np.float64)
             mat = material_index[m.material] if m.material is not None and m.material < len(material_index) else None
-            prims.append(_add_primitive(app, m, sk.num_joints, xf, rigid is None, names, mat))
+            prims.append(_add_primitive(app, m, skin_slot[si], xf, rigid is None, names, mat))
         extras = {}
         if names:
             extras["targetNames"] = [next((b.source_name or b.name) for m in parts for b in m.blend_shapes
@@ -424,10 +494,11 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
     return morph_nodes
 
 
-def _add_primitive(app: BinaryAppender, mesh: SkinnedMesh, num_joints: int, xf: np.ndarray, skinned: bool,
+def _add_primitive(app: BinaryAppender, mesh: SkinnedMesh, skin_slot: np.ndarray, xf: np.ndarray, skinned: bool,
                    target_names: list[str], material: int | None) -> pygltflib.Primitive:
-    """One triangle primitive of ``mesh``, points moved by ``xf`` (4, 4); joints and weights when
-    ``skinned``; one morph target per name of ``target_names`` (zero where the mesh lacks it)."""
+    """One triangle primitive of ``mesh``, points moved by ``xf`` (4, 4); joints (``skin_slot``: each
+    skeleton joint's place in the skin) and weights when ``skinned``; one morph target per name of
+    ``target_names`` (zero where the mesh lacks it)."""
     pts = np.asarray(mesh.points, dtype=np.float64)
     pts = pts @ xf[:3, :3].T + xf[:3, 3]
     attrs = {"POSITION": app.add_accessor(pts.astype(np.float32), "VEC3", target=ARRAY_BUFFER, min_max=True)}
@@ -443,7 +514,10 @@ def _add_primitive(app: BinaryAppender, mesh: SkinnedMesh, num_joints: int, xf: 
         uv = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
         attrs["TEXCOORD_0"] = app.add_accessor(uv.astype(np.float32), "VEC2", target=ARRAY_BUFFER)
     if skinned and mesh.joint_indices is not None and mesh.joint_weights is not None:
-        ji, jw = _clean_influences(mesh.joint_indices, mesh.joint_weights, num_joints)
+        num_joints = int(skin_slot.max()) + 1
+        w = np.asarray(mesh.joint_weights)
+        idx = skin_slot[np.asarray(mesh.joint_indices)]
+        ji, jw = _clean_influences(np.where(idx >= 0, idx, 0), np.where(idx >= 0, w, 0.0), num_joints)
         jdtype = np.uint8 if num_joints <= 256 else np.uint16
         for s in range(ji.shape[1] // 4):
             attrs[f"JOINTS_{s}"] = app.add_accessor(ji[:, 4 * s:4 * s + 4].astype(jdtype), "VEC4",

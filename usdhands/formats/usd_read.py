@@ -22,6 +22,7 @@ from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatch
 from usdhands.formats.usd_common import (
     DEFAULT_WEIGHT_KEY,
     INTERPOLATION_KEY,
+    NODE_KEY,
     SOURCE_MESH_KEY,
     SOURCE_NAME_KEY,
     SOURCE_NODE_KEY,
@@ -141,6 +142,7 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
     clips: list[Clip] = []
     used_anims: set[str] = set()
     index_of_skel: dict[str, int] = {}
+    root_nodes: dict[int, tuple] = {}
     for prim in skel_prims:
         skel = UsdSkel.Skeleton(prim)
         query = cache.GetSkelQuery(skel)
@@ -149,6 +151,10 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
         sk, tokens = read_skeleton(skel, query, path=path, meters_per_unit=mpu, up_axis=up, world=world)
         if sk is None:
             continue
+        if world is not None:
+            chain = _node_chain_above(prim, world)
+            if chain:
+                root_nodes[len(skeletons)] = chain
         index_of_skel[str(prim.GetPath())] = len(skeletons)
         skeletons.append(sk)
         kept_prims.append(prim)
@@ -216,7 +222,33 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
     return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes),
                  provenance=provenance, source_names=source_names, left_out=left_out,
                  materials=tuple(materials.materials), images=tuple(materials.images), blend_shape_weights=weights,
-                 interpolation=interpolation)
+                 interpolation=interpolation, root_nodes=root_nodes)
+
+
+def _node_chain_above(skel_prim: Usd.Prim, world: np.ndarray) -> tuple[tuple[str, np.ndarray], ...]:
+    """The Xforms usdhands wrote for source nodes above a skeleton (customData ``usdhands:node``),
+    top first, as ``(name, local (4, 4))``, when they alone make the Skeleton's ``world`` transform
+    and none moves over time; else ``()``."""
+    chain = []
+    p = skel_prim.GetParent()
+    if p and p.IsA(UsdSkel.Root):
+        p = p.GetParent()
+    while p and not p.IsPseudoRoot() and p.GetCustomDataByKey(NODE_KEY):
+        x = UsdGeom.Xformable(p)
+        if x.TransformMightBeTimeVarying():
+            return ()
+        local = matrices_to_numpy([x.GetLocalTransformation(Usd.TimeCode.EarliestTime())])[0]
+        name = p.GetCustomDataByKey(SOURCE_NAME_KEY)
+        chain.append((name if isinstance(name, str) and name else p.GetName(), local))
+        p = p.GetParent()
+    if not chain:
+        return ()
+    chain.reverse()
+    total = np.eye(4)
+    for _, m in chain:
+        total = total @ m
+    scale = max(1.0, float(np.abs(world).max()))
+    return tuple(chain) if np.allclose(total, world, rtol=0, atol=1e-9 * scale) else ()
 
 
 def _blend_shape_weights(anim_query, clip: Clip, tcps: float) -> BlendShapeWeights | None:

@@ -19,6 +19,7 @@ from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats.usd_common import (
     DEFAULT_WEIGHT_KEY,
     INTERPOLATION_KEY,
+    NODE_KEY,
     SOURCE_JOINT_NAMES_KEY,
     SOURCE_MESH_KEY,
     SOURCE_NAME_KEY,
@@ -345,6 +346,7 @@ def _define_node_xform(stage: Usd.Stage, above: Sdf.Path, sk: Skeleton, j: int, 
     xf.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, s)))
     if path.name != original:
         xf.GetPrim().SetCustomDataByKey(SOURCE_NAME_KEY, original)
+    xf.GetPrim().SetCustomDataByKey(NODE_KEY, True)
     return path
 
 

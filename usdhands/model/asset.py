@@ -147,6 +147,11 @@ class Asset:
     interpolation : dict str -> str
         Clip name -> ``"STEP"`` or ``"CUBICSPLINE"`` where the source's samplers were such
         (absent: linear), so a writer that can hold it writes it again.
+    root_nodes : dict int -> tuple of (str, (4, 4) array)
+        Skeleton index -> the static transform nodes above it (top first: name, local
+        transform), already folded into its root joints, that the source held as nodes of
+        their own (a USD file usdhands wrote from glTF: ``RobotArmature``); the glTF writer
+        makes them plain nodes above the skin's joints again.
     """
 
     path: str
@@ -161,6 +166,7 @@ class Asset:
     images: tuple[Image, ...] = ()
     blend_shape_weights: dict[str, BlendShapeWeights] = field(default_factory=dict)
     interpolation: dict[str, str] = field(default_factory=dict)
+    root_nodes: dict[int, tuple] = field(default_factory=dict)
 
     def clip(self, animation: str | int | None = None) -> Clip:
         """One clip by name or index; the first when ``animation`` is None.

@@ -91,4 +91,8 @@ def asset_to(asset: Asset, meters_per_unit: float | None = None, up_axis: str | 
                   else clip_to(c, skeleton_to(c.skeleton, meters_per_unit, up_axis)) for c in asset.clips)
     meshes = tuple(_mesh_to(m, asset.skeletons[m.skeleton_index], skeletons[m.skeleton_index])
                    for m in asset.meshes)
-    return replace(asset, skeletons=skeletons, clips=clips, meshes=meshes)
+    same = all(sk.meters_per_unit == new.meters_per_unit and sk.up_axis == new.up_axis
+               for sk, new in zip(asset.skeletons, skeletons))
+    # the nodes folded into the roots are in the old units: without them the roots still hold everything
+    return replace(asset, skeletons=skeletons, clips=clips, meshes=meshes,
+                   root_nodes=asset.root_nodes if same else {})
