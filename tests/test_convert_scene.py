@@ -15,7 +15,7 @@ import pygltflib
 import pytest
 from pxr import Usd, UsdShade, UsdSkel
 
-from usdhands.formats.gltf_container import BinaryAppender, save_gltf
+from usdhands.formats.gltf_container import BinaryAppender, load_gltf, save_gltf
 from usdhands.formats.io import read_asset
 from usdhands.formats.usd_validate import usd_compliance_errors
 from usdhands.jobs.conversion import ConvertOptions, convert
@@ -363,3 +363,103 @@ def test_source_nodes_above_the_skin_stay_plain_nodes(shared_assets, tmp_path, m
     a, b = read_asset(src), read_asset(back)
     for ca, cb in zip(a.clips, b.clips):
         np.testing.assert_allclose(cb.world_positions(), ca.world_positions(), atol=1e-5)
+
+
+def test_usd_material_subsets_become_primitives_of_one_mesh(tmp_path, gltf_validator):
+    """A skinned USD Mesh with two ``materialBind`` GeomSubsets (Blender's USD export of a mesh with
+    two material slots) becomes one glTF mesh with one primitive per material, each with the
+    vertices its faces use."""
+    from pxr import Gf, Sdf, UsdGeom, Vt
+
+    usd = tmp_path / "subsets.usda"
+    stage = Usd.Stage.CreateNew(str(usd))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdSkel.Root.Define(stage, "/Char")
+    stage.SetDefaultPrim(root.GetPrim())
+    skel = UsdSkel.Skeleton.Define(stage, "/Char/Skel")
+    skel.CreateJointsAttr(["Hips", "Hips/Spine"])
+    eye = Gf.Matrix4d(1)
+    up = Gf.Matrix4d().SetTranslate(Gf.Vec3d(0, 1, 0))
+    skel.CreateBindTransformsAttr([eye, up])
+    skel.CreateRestTransformsAttr([eye, up])
+    mesh = UsdGeom.Mesh.Define(stage, "/Char/Body")
+    pts = [(-1, 0, 0), (1, 0, 0), (1, 1, 0), (-1, 1, 0), (1, 2, 0), (-1, 2, 0)]
+    mesh.CreatePointsAttr(pts)
+    mesh.CreateFaceVertexCountsAttr([4, 4])
+    mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3, 3, 2, 4, 5])
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(False, 1).Set(Vt.IntArray([0, 0, 1, 1, 1, 1]))
+    binding.CreateJointWeightsPrimvar(False, 1).Set(Vt.FloatArray([1.0] * 6))
+    binding.CreateGeomBindTransformAttr(eye)
+    colours = {"Red": (1.0, 0.0, 0.0), "Blue": (0.0, 0.0, 1.0)}
+    for face, (name, rgb) in enumerate(colours.items()):
+        mat = UsdShade.Material.Define(stage, f"/Char/Looks/{name}")
+        shader = UsdShade.Shader.Define(stage, f"/Char/Looks/{name}/Surface")
+        shader.CreateIdAttr("UsdPreviewSurface")
+        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*rgb))
+        mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+        subset = UsdGeom.Subset.CreateGeomSubset(mesh, name, UsdGeom.Tokens.face, Vt.IntArray([face]),
+                                                  UsdShade.Tokens.materialBind)
+        UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(mat)
+    stage.GetRootLayer().Save()
+
+    glb = tmp_path / "subsets.glb"
+    assert convert(usd, glb).notes == ()
+    assert gltf_validator(glb)[0]["numErrors"] == 0
+    g = _gltf_json(glb)
+    assert len(g["meshes"]) == 1 and g["meshes"][0]["name"] == "Body"
+    prims = g["meshes"][0]["primitives"]
+    assert [g["accessors"][p["attributes"]["POSITION"]]["count"] for p in prims] == [4, 4]
+    assert [g["materials"][p["material"]]["name"] for p in prims] == ["Red", "Blue"]
+    assert [m["pbrMetallicRoughness"]["baseColorFactor"][:3] for m in g["materials"]] == [[1, 0, 0], [0, 0, 1]]
+
+
+@pytest.mark.parametrize("interpolation", ["LINEAR", "STEP"])
+def test_sparse_keys_come_back_as_the_same_keys(tmp_path, gltf_validator, interpolation):
+    """A hand-keyed animation (keys at 0, 0.5, 1 and 2 s) is sampled per frame in USD (61 frames at
+    30 fps) and keyed at the same 4 times with the same values back in glTF."""
+    g = pygltflib.GLTF2(asset=pygltflib.Asset(version="2.0"))
+    g.buffers = [pygltflib.Buffer(byteLength=0)]
+    app = BinaryAppender(g, 0)
+    g.nodes = [pygltflib.Node(name="Root", children=[1]), pygltflib.Node(name="Tip", translation=[0.0, 1.0, 0.0]),
+               pygltflib.Node(name="Body", mesh=0, skin=0)]
+    ibm = np.array([np.eye(4).reshape(-1), np.linalg.inv(np.array(
+        [[1, 0, 0, 0], [0, 1, 0, 1], [0, 0, 1, 0], [0, 0, 0, 1.0]])).T.reshape(-1)], dtype=np.float32)
+    g.skins = [pygltflib.Skin(joints=[0, 1], inverseBindMatrices=app.add_accessor(ibm, "MAT4"))]
+    tri = np.array([[0, 0, 0], [0.1, 1, 0], [0, 1, 0.1]], dtype=np.float32)
+    g.meshes = [pygltflib.Mesh(name="Body", primitives=[pygltflib.Primitive(attributes=pygltflib.Attributes(
+        POSITION=app.add_accessor(tri, "VEC3", min_max=True),
+        JOINTS_0=app.add_accessor(np.array([[0, 0, 0, 0], [1, 0, 0, 0], [1, 0, 0, 0]], np.uint8), "VEC4"),
+        WEIGHTS_0=app.add_accessor(np.array([[1, 0, 0, 0]] * 3, np.float32), "VEC4")))])]
+    times = np.array([0.0, 0.5, 1.0, 2.0], dtype=np.float32)
+    ang = np.radians([0.0, 30.0, -20.0, 45.0])
+    rot = np.stack([0 * ang, 0 * ang, np.sin(ang / 2), np.cos(ang / 2)], axis=1).astype(np.float32)
+    g.animations = [pygltflib.Animation(name="keyed", samplers=[pygltflib.AnimationSampler(
+        input=app.add_accessor(times.reshape(-1, 1), "SCALAR", min_max=True), output=app.add_accessor(rot, "VEC4"),
+        interpolation=interpolation)], channels=[pygltflib.AnimationChannel(
+            sampler=0, target=pygltflib.AnimationChannelTarget(node=1, path="rotation"))])]
+    g.scenes = [pygltflib.Scene(nodes=[0, 2])]
+    g.scene = 0
+    buffers: list[bytes] = []
+    app.finish(buffers)
+    src = tmp_path / "keyed.glb"
+    save_gltf(g, buffers, src, glb=True)
+
+    usd, back = tmp_path / "keyed.usda", tmp_path / "back.glb"
+    convert(src, usd)
+    assert read_asset(usd).clips[0].num_frames == 61
+    convert(usd, back)
+    assert gltf_validator(back)[0]["numErrors"] == 0
+    gb = pygltflib.GLTF2().load(str(back))
+    anim = gb.animations[0]
+    tip = next(i for i, n in enumerate(gb.nodes) if n.name == "Tip")
+    ch = next(c for c in anim.channels if c.target.node == tip and c.target.path == "rotation")
+    doc = load_gltf(back)
+    smp = anim.samplers[ch.sampler]
+    assert smp.interpolation == interpolation
+    np.testing.assert_allclose(doc.accessor(smp.input)[:, 0], times, atol=1e-6)
+    got = doc.accessor(smp.output)
+    got = got * np.sign(np.sum(got * rot, axis=1))[:, None]
+    np.testing.assert_allclose(got, rot, atol=1e-6)

@@ -698,6 +698,23 @@ def sample_morph_weights(doc: GltfFile, anim_index: int, clip: Clip, tokens: dic
     return BlendShapeWeights(tuple(names), out)
 
 
+def sparse_key_times(doc: GltfFile, anim_index: int, nodes: set[int], clip: Clip) -> np.ndarray | None:
+    """The key times (seconds, on the clip's frames) of the animation's channels on ``nodes`` when
+    they are fewer than the clip's frames and every one is a frame; else None."""
+    anim = doc.gltf.animations[anim_index]
+    inputs = {anim.samplers[ch.sampler].input for ch in anim.channels
+              if ch.target is not None and ch.target.node in nodes and ch.sampler is not None
+              and 0 <= ch.sampler < len(anim.samplers)}
+    if not inputs:
+        return None
+    times = np.unique(np.concatenate([doc.accessor(i)[:, 0] for i in inputs]).astype(np.float64))
+    x = (times - clip.start_time) * clip.fps
+    k = np.round(x)
+    if len(times) >= clip.num_frames or np.any(np.abs(x - k) > 1e-3):
+        return None
+    return clip.start_time + np.unique(k) / clip.fps
+
+
 def clip_interpolation(doc: GltfFile, anim_index: int, nodes: set[int]) -> str | None:
     """``"STEP"`` or ``"CUBICSPLINE"`` when every sampler of the animation's channels on ``nodes``
     has that interpolation; None for LINEAR or a mix."""
@@ -961,6 +978,7 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
         defaults = {ni: [float(w) for w in (doc.gltf.meshes[doc.gltf.nodes[ni].mesh].weights or [])] for ni in tokens}
         weights: dict[str, BlendShapeWeights] = {}
         interpolation: dict[str, str] = {}
+        key_times: dict[str, np.ndarray] = {}
         for ai, anim in enumerate(doc.gltf.animations):
             name = anim.name or f"animation{ai}"
             record = recorded_provenance(doc, ai)
@@ -974,9 +992,13 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
                     w = sample_morph_weights(doc, ai, clip, morph_nodes.get(b, {}), defaults)
                     if w is not None:
                         weights[clip.name] = w
-                    kind = clip_interpolation(doc, ai, set(binding.node_to_joint) | set(morph_nodes.get(b, {})))
+                    used = set(binding.node_to_joint) | set(morph_nodes.get(b, {}))
+                    kind = clip_interpolation(doc, ai, used)
                     if kind is not None:
                         interpolation[clip.name] = kind
+                    keys = sparse_key_times(doc, ai, used, clip)
+                    if keys is not None:
+                        key_times[clip.name] = keys
                     k += 1
         materials, images, not_kept = read_materials(doc)
         left_out = left_out_of(scene, meshes) + not_kept
@@ -990,7 +1012,7 @@ def read_gltf(path: str | Path, *, fps: float | None = None, scene: GltfScene | 
             non_skin[b] = names
     return Asset(str(path), tuple(b.skeleton for b in scene.bindings), tuple(clips), tuple(meshes),
                  provenance=provenance, left_out=left_out, non_skin_joints=non_skin, blend_shape_weights=weights,
-                 interpolation=interpolation, materials=materials, images=images)
+                 interpolation=interpolation, materials=materials, images=images, key_times=key_times)
 
 
 def left_out_of(scene: GltfScene, meshes: list[SkinnedMesh]) -> tuple[str, ...]:

@@ -292,14 +292,15 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
         _record_fps(anim, c.fps)
         _record_provenance(anim, provenance if provenance is not None else asset.provenance.get(clip.name))
         kind = asset.interpolation.get(clip.name, "LINEAR")
-        w = _AnimationWriter(app, anim, _key_times(c), kind)
+        sel = _key_frames(c, asset.key_times.get(clip.name))
+        w = _AnimationWriter(app, anim, _key_times(c)[sel], kind)
         J = sk.num_joints
         nodes = skel_nodes[si]
-        w.add("rotation", list(range(J)), nodes, _continuous(c.rotations))
+        w.add("rotation", list(range(J)), nodes, _continuous(c.rotations)[sel])
         for path_, values, rest, tol in (("translation", c.translations, sk.rest_translations, TRANSLATION_TOLERANCE_M),
                                          ("scale", c.scales, sk.rest_scales, SCALE_TOLERANCE)):
             moving = [j for j in np.nonzero(_differs_from_rest(values, rest, tol))[0]]
-            w.add(path_, moving, [nodes[j] for j in moving], values)
+            w.add(path_, moving, [nodes[j] for j in moving], values[sel])
         shapes = asset.blend_shape_weights.get(clip.name)
         for node, (k, names, defaults) in morph_nodes.items():
             if k != si or shapes is None or not set(names) & set(shapes.names):
@@ -307,7 +308,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
             col = {n: i for i, n in enumerate(shapes.names)}
             values = np.stack([shapes.weights[:, col[n]] if n in col else np.full(c.num_frames, d)
                                for n, d in zip(names, defaults)], axis=1)
-            w.add_weights(node, values)
+            w.add_weights(node, values[sel])
         gltf.animations.append(anim)
 
     gltf.scenes = [pygltflib.Scene(nodes=scene_nodes)]
@@ -377,6 +378,19 @@ def _clean_influences(ji: np.ndarray, jw: np.ndarray, num_joints: int) -> tuple[
     return ji, w32
 
 
+def _key_frames(clip: Clip, key_times: np.ndarray | None) -> slice | np.ndarray:
+    """The frames to key: those at the source's key times (``Asset.key_times``) when every one of
+    them is a frame of the clip (within a thousandth of a frame), else every frame."""
+    if key_times is None or not len(key_times):
+        return slice(None)
+    x = (np.asarray(key_times, dtype=np.float64) - clip.start_time) * clip.fps
+    k = np.round(x)
+    if np.any(np.abs(x - k) > 1e-3) or k.min() < 0 or k.max() >= clip.num_frames:
+        return slice(None)
+    frames = np.unique(k.astype(np.int64))
+    return slice(None) if len(frames) == clip.num_frames else frames
+
+
 def _unfold_root_nodes(asset: Asset) -> tuple[Asset, dict]:
     """``asset`` with the transforms of ``asset.root_nodes`` taken back out of the root joints (rest
     and every frame), and those nodes per skeleton index, for the writer to put above the roots."""
@@ -443,11 +457,12 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
         si = mesh.skeleton_index
         if not 0 <= si < len(asset.skeletons):
             raise ValueError(f"mesh {mesh.name!r} has skeleton_index {si}, the asset has {len(asset.skeletons)}")
-        rigid = mesh.rigid_joint()
-        key = (si, rigid, mesh.group, mesh.node) if mesh.group is not None else (si, rigid, id(mesh), None)
+        key = (si, mesh.group, mesh.node) if mesh.group is not None else (si, id(mesh), None)
         groups.setdefault(key, []).append(mesh)
     morph_nodes = {}
-    for (si, rigid, _, node_name), parts in groups.items():
+    for (si, _, node_name), parts in groups.items():
+        joints = {m.rigid_joint() for m in parts}
+        rigid = joints.pop() if len(joints) == 1 else None  # parts on different joints: a skinned mesh
         sk = asset.skeletons[si]
         first = parts[0]
         short = asset.source_names.get(first.name) or first.name.rsplit("/", 1)[-1]

@@ -357,7 +357,8 @@ class MaterialReader:
         elif ev is not None:
             emissive = [float(x) for x in ev]
         cutoff = float(threshold) if alpha_mode == "MASK" and threshold is not None else 0.5
-        double = bool(prim.GetCustomDataByKey(DOUBLE_SIDED_KEY)) or bool(UsdGeom.Gprim(mesh_prim).GetDoubleSidedAttr().Get())
+        gprim = UsdGeom.Gprim(mesh_prim if mesh_prim.IsA(UsdGeom.Gprim) else mesh_prim.GetParent())
+        double = bool(prim.GetCustomDataByKey(DOUBLE_SIDED_KEY)) or bool(gprim and gprim.GetDoubleSidedAttr().Get())
         return Material(name=str(name), base_color=tuple(float(x) for x in base), metallic=metallic,
                         roughness=roughness, emissive=tuple(float(x) for x in emissive), alpha_mode=alpha_mode,
                         alpha_cutoff=cutoff, double_sided=double, textures=textures)

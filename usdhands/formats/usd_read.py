@@ -16,12 +16,13 @@ import os
 from pathlib import Path
 
 import numpy as np
-from pxr import Gf, Tf, Usd, UsdGeom, UsdSkel
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel
 
 from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatchError
 from usdhands.formats.usd_common import (
     DEFAULT_WEIGHT_KEY,
     INTERPOLATION_KEY,
+    KEY_TIMES_KEY,
     NODE_KEY,
     SOURCE_MESH_KEY,
     SOURCE_NAME_KEY,
@@ -189,6 +190,7 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
 
     meshes: list[SkinnedMesh] = []
     materials = MaterialReader(path)
+    read_prims: set[str] = set()
     for root in roots:
         for binding in cache.ComputeSkelBindings(root, _PREDICATE):
             k = index_of_skel.get(str(binding.GetSkeleton().GetPrim().GetPath()))
@@ -196,13 +198,18 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
                 continue
             for sq in binding.GetSkinningTargets():
                 if sq.GetPrim().IsA(UsdGeom.Mesh):
-                    meshes.append(_read_mesh(sq, k, tokens_of[k], path, worlds[k], materials))
-    left_out = _left_out(stage, meshes, materials)
+                    mesh = _read_mesh(sq, k, tokens_of[k], path, worlds[k], materials)
+                    read_prims.add(mesh.name)
+                    meshes.extend(_split_by_material_subsets(mesh, sq.GetPrim(), materials))
+    left_out = _left_out(stage, meshes, read_prims, materials)
     for thing in left_out:
         _log.info("%s: not read: %s", path, thing)
-    provenance, source_names, weights, interpolation = {}, {}, {}, {}
+    provenance, source_names, weights, interpolation, key_times = {}, {}, {}, {}, {}
     for m in meshes:
-        original = stage.GetPrimAtPath(m.name).GetCustomDataByKey(SOURCE_NAME_KEY)
+        prim = stage.GetPrimAtPath(m.name) if Sdf.Path.IsValidPathString(m.name) else None
+        if not prim:
+            continue  # a part of a mesh split by its material subsets
+        original = prim.GetCustomDataByKey(SOURCE_NAME_KEY)
         if isinstance(original, str) and original:
             source_names[m.name] = original
     for clip in clips:
@@ -216,13 +223,18 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
         kind = prim.GetCustomDataByKey(INTERPOLATION_KEY)
         if kind in ("STEP", "CUBICSPLINE"):
             interpolation[clip.name] = kind
+        keys = prim.GetCustomDataByKey(KEY_TIMES_KEY)
+        if keys is not None and len(keys):
+            keys = np.asarray(list(keys), dtype=np.float64)
+            if np.isfinite(keys).all():
+                key_times[clip.name] = keys
         w = _blend_shape_weights(cache.GetAnimQuery(UsdSkel.Animation(prim)), clip, tcps)
         if w is not None:
             weights[clip.name] = w
     return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes),
                  provenance=provenance, source_names=source_names, left_out=left_out,
                  materials=tuple(materials.materials), images=tuple(materials.images), blend_shape_weights=weights,
-                 interpolation=interpolation, root_nodes=root_nodes)
+                 interpolation=interpolation, root_nodes=root_nodes, key_times=key_times)
 
 
 def _node_chain_above(skel_prim: Usd.Prim, world: np.ndarray) -> tuple[tuple[str, np.ndarray], ...]:
@@ -267,10 +279,10 @@ def _blend_shape_weights(anim_query, clip: Clip, tcps: float) -> BlendShapeWeigh
     return BlendShapeWeights(tuple(names), out)
 
 
-def _left_out(stage: Usd.Stage, meshes: list[SkinnedMesh], materials: MaterialReader) -> tuple[str, ...]:
-    """What the stage holds that the model does not, one short phrase each."""
+def _left_out(stage: Usd.Stage, meshes: list[SkinnedMesh], read: set[str],
+              materials: MaterialReader) -> tuple[str, ...]:
+    """What the stage holds that the model does not, one short phrase each (``read``: the Mesh prims read)."""
     counts = {"mesh": 0, "mesh_points": 0, "Material": len(materials.skipped), "Camera": 0, "light": 0}
-    read = {m.name for m in meshes}
     for prim in stage.Traverse(_PREDICATE):
         if prim.IsA(UsdGeom.Mesh) and str(prim.GetPath()) not in read:
             counts["mesh"] += 1
@@ -727,6 +739,49 @@ def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.nda
         group=group if isinstance(group, str) else None, node=node if isinstance(node, str) else None,
         material=materials.material_of(prim) if materials is not None else None, blend_shapes=shapes,
     )
+
+
+def _split_by_material_subsets(mesh: SkinnedMesh, prim: Usd.Prim, materials: MaterialReader) -> list[SkinnedMesh]:
+    """``mesh`` as one part per ``materialBind`` GeomSubset with a bound material (faces in no such
+    subset form one more part with the mesh's own material), each holding the vertices its faces
+    use; the mesh itself when it has no such subsets. The parts share ``group`` (the mesh), so a
+    glTF writer makes them the primitives of one mesh."""
+    subsets = [s for s in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()
+               if s.GetElementTypeAttr().Get() == UsdGeom.Tokens.face]
+    bound = [(s, materials.material_of(s.GetPrim())) for s in subsets]
+    bound = [(s, m) for s, m in bound if m is not None]
+    if not bound:
+        return [mesh]
+    counts = np.asarray(mesh.face_vertex_counts, dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    owner = np.full(len(counts), -1, dtype=np.int64)
+    for k, (s, _) in enumerate(bound):
+        faces = np.asarray(s.GetIndicesAttr().Get() or [], dtype=np.int64)
+        faces = faces[(faces >= 0) & (faces < len(counts))]
+        owner[faces[owner[faces] < 0]] = k
+    base = mesh.name.rsplit("/", 1)[-1]
+    group = mesh.group or base
+    parts = []
+    for k in sorted(set(owner.tolist())):
+        faces = np.flatnonzero(owner == k)
+        if not len(faces):
+            continue
+        corner = np.concatenate([np.arange(starts[f], starts[f] + counts[f]) for f in faces])
+        fvi = np.asarray(mesh.face_vertex_indices, dtype=np.int64)[corner]
+        used, remap = np.unique(fvi, return_inverse=True)
+
+        def take(a):
+            return None if a is None else np.asarray(a)[used]
+
+        name = f"{mesh.name}_{bound[k][0].GetPrim().GetName()}" if k >= 0 else mesh.name
+        parts.append(dataclasses.replace(
+            mesh, name=name, points=np.asarray(mesh.points)[used], face_vertex_counts=counts[faces],
+            face_vertex_indices=remap.reshape(-1), normals=take(mesh.normals), uvs=take(mesh.uvs),
+            joint_indices=take(mesh.joint_indices), joint_weights=take(mesh.joint_weights), group=group,
+            material=bound[k][1] if k >= 0 else mesh.material,
+            blend_shapes=tuple(dataclasses.replace(b, offsets=np.asarray(b.offsets)[used],
+                                                   normal_offsets=take(b.normal_offsets)) for b in mesh.blend_shapes)))
+    return parts
 
 
 def _read_blend_shapes(prim: Usd.Prim, V: int, path: Path, where: str) -> tuple[BlendShape, ...]:

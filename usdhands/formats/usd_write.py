@@ -19,6 +19,7 @@ from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats.usd_common import (
     DEFAULT_WEIGHT_KEY,
     INTERPOLATION_KEY,
+    KEY_TIMES_KEY,
     NODE_KEY,
     SOURCE_JOINT_NAMES_KEY,
     SOURCE_MESH_KEY,
@@ -279,6 +280,9 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                 kind = asset.interpolation.get(clip.name)
                 if kind is not None:
                     anim.GetPrim().SetCustomDataByKey(INTERPOLATION_KEY, kind)
+                keys = asset.key_times.get(clip.name)
+                if keys is not None:
+                    anim.GetPrim().SetCustomDataByKey(KEY_TIMES_KEY, Vt.DoubleArray([float(t) for t in keys]))
                 if record is not None:
                     write_finger_motion(anim.GetPrim(), **provenance_record(record))
                 if not bound:

@@ -147,6 +147,10 @@ class Asset:
     interpolation : dict str -> str
         Clip name -> ``"STEP"`` or ``"CUBICSPLINE"`` where the source's samplers were such
         (absent: linear), so a writer that can hold it writes it again.
+    key_times : dict str -> (K,) float
+        Clip name -> the seconds the source keyed, where it keyed fewer times than the clip
+        has frames (a hand-keyed glTF animation); each is one of the clip's frames, so a
+        writer that can key at will (glTF) keys there only, and the key count is the source's.
     root_nodes : dict int -> tuple of (str, (4, 4) array)
         Skeleton index -> the static transform nodes above it (top first: name, local
         transform), already folded into its root joints, that the source held as nodes of
@@ -166,6 +170,7 @@ class Asset:
     images: tuple[Image, ...] = ()
     blend_shape_weights: dict[str, BlendShapeWeights] = field(default_factory=dict)
     interpolation: dict[str, str] = field(default_factory=dict)
+    key_times: dict[str, np.ndarray] = field(default_factory=dict)
     root_nodes: dict[int, tuple] = field(default_factory=dict)
 
     def clip(self, animation: str | int | None = None) -> Clip:
