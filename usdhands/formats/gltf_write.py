@@ -270,8 +270,9 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
         bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
         ibm = np.linalg.inv(bind[in_skin]).transpose(0, 2, 1).reshape(-1, 16).astype(np.float32)
         acc = app.add_accessor(ibm, "MAT4")
+        roots = [nodes[j] for j in range(sk.num_joints) if sk.parents[j] < 0]
         gltf.skins.append(pygltflib.Skin(name=sk.name.rsplit("/", 1)[-1] or None, joints=[nodes[j] for j in in_skin],
-                                         inverseBindMatrices=acc))
+                                         inverseBindMatrices=acc, skeleton=roots[0] if len(roots) == 1 else None))
         skel_nodes.append(nodes)
         skel_skins.append(len(gltf.skins) - 1)
 
