@@ -463,3 +463,33 @@ def test_sparse_keys_come_back_as_the_same_keys(tmp_path, gltf_validator, interp
     got = doc.accessor(smp.output)
     got = got * np.sign(np.sum(got * rot, axis=1))[:, None]
     np.testing.assert_allclose(got, rot, atol=1e-6)
+
+
+def test_missing_texture_file_is_named_and_the_rest_converts(tmp_path, caplog):
+    src = tmp_path / "scene.glb"
+    _scene(src)
+    g = pygltflib.GLTF2().load(str(src))
+    g.images[0] = pygltflib.Image(uri="missing.png")
+    gltf = tmp_path / "scene.gltf"
+    g.convert_buffers(pygltflib.BufferFormat.DATAURI)
+    g.save_json(str(gltf))
+    with caplog.at_level("WARNING", logger="usdhands"):
+        convert(gltf, tmp_path / "out.usda")
+    asset = read_asset(tmp_path / "out.usda")
+    assert len(asset.materials) == 2 and "baseColor" not in asset.materials[0].textures
+    assert len(asset.images) == 4
+    warned = [r.getMessage() for r in caplog.records if "not converted" in r.getMessage()]
+    assert len(warned) == 1 and "image 0 (image file 'missing.png' cannot be read" in warned[0]
+
+
+def test_usd_texture_file_missing_is_named(tmp_path, caplog):
+    src = tmp_path / "scene.glb"
+    _scene(src)
+    usd = tmp_path / "scene.usda"
+    convert(src, usd)
+    (tmp_path / "scene_textures" / "tex1.png").unlink()
+    with caplog.at_level("WARNING", logger="usdhands"):
+        convert(usd, tmp_path / "back.glb")
+    warned = [r.getMessage() for r in caplog.records if "not converted" in r.getMessage()]
+    assert len(warned) == 1 and "1 texture file(s) not found (./scene_textures/tex1.png)" in warned[0]
+    assert len(read_asset(tmp_path / "back.glb").images) == 4

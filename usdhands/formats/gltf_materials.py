@@ -15,6 +15,7 @@ import urllib.parse
 
 import pygltflib
 
+from usdhands.errors import AssetReadError
 from usdhands.formats.gltf_container import BinaryAppender, GltfFile, contained_file
 from usdhands.model.material import ALPHA_MODES, Image, Material, TextureRef
 
@@ -47,6 +48,8 @@ def _image(doc: GltfFile, i: int) -> Image:
             raise doc.error("image data URI is not valid base64", where) from None
         return Image(name=_file_name(base, mime), mime_type=mime, data=data)
     file = contained_file(doc.path, uri, "image", where)
+    if not file.is_file():
+        raise doc.error(f"image file {uri!r} cannot be read (not a regular file, or missing)", where)
     mime = mime or _MIME.get(file.suffix.lower(), "image/png")
     return Image(name=im.name and _file_name(im.name, mime) or file.name, mime_type=mime, path=str(file))
 
@@ -72,8 +75,13 @@ def read_materials(doc: GltfFile) -> tuple[tuple[Material, ...], tuple[Image, ..
             notes.append(f"a {slot} texture without a core image source")
             return None
         if src not in image_of:
+            try:
+                image = _image(doc, src)
+            except (AssetReadError, IndexError, TypeError) as e:  # a missing file: the rest of the file still reads
+                notes.append(f"image {src} ({e.message if isinstance(e, AssetReadError) else 'malformed'})")
+                return None
             image_of[src] = len(images)
-            images.append(_image(doc, src))
+            images.append(image)
         wrap_s = wrap_t = "repeat"
         if tex.sampler is not None and 0 <= tex.sampler < len(g.samplers):
             smp = g.samplers[tex.sampler]

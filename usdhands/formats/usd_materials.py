@@ -233,6 +233,7 @@ class MaterialReader:
         self._material_index: dict[str, int] = {}
         self._image_index: dict[str, int] = {}
         self.skipped: set[str] = set()
+        self.missing_images: set[str] = set()
 
     def material_of(self, mesh_prim: Usd.Prim) -> int | None:
         """Index (into :attr:`materials`) of the material bound to ``mesh_prim``; None when it has
@@ -267,9 +268,11 @@ class MaterialReader:
         elif resolved:
             found = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
             if not found:
+                self.missing_images.add(asset.path)
                 return None
             image = Image(name=name, mime_type=mime, data=bytes(found.GetBuffer()))
         else:
+            self.missing_images.add(asset.path)
             return None
         self._image_index[key] = len(self.images)
         self.images.append(image)

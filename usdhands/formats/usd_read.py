@@ -297,6 +297,9 @@ def _left_out(stage: Usd.Stage, meshes: list[SkinnedMesh], read: set[str],
         done = sum(int(np.asarray(m.points).shape[0]) for m in meshes)
         out.append(f"{counts['mesh']} mesh(es) not bound to a skeleton ({counts['mesh_points']} vertices; "
                    f"{done} vertices read)")
+    if materials.missing_images:
+        out.append(f"{len(materials.missing_images)} texture file(s) not found "
+                   f"({', '.join(sorted(materials.missing_images)[:3])})")
     for key, what in (("Material", "material(s) that are not UsdPreviewSurface"), ("Camera", "camera(s)"),
                       ("light", "light(s)")):
         if counts[key]:
