@@ -493,3 +493,34 @@ def test_usd_texture_file_missing_is_named(tmp_path, caplog):
     warned = [r.getMessage() for r in caplog.records if "not converted" in r.getMessage()]
     assert len(warned) == 1 and "1 texture file(s) not found (./scene_textures/tex1.png)" in warned[0]
     assert len(read_asset(tmp_path / "back.glb").images) == 4
+
+
+def test_mesh_on_no_skeleton_comes_through_as_a_static_mesh(shared_assets, tmp_path, gltf_validator):
+    """A prop node beside the character (no joint above it) is a static Mesh with its transform in USD
+    and a mesh node at the scene root again in glTF, where the source puts it."""
+    src = tmp_path / "robot_prop.glb"
+    g = pygltflib.GLTF2().load(str(shared_assets / "robot_expressive" / "RobotExpressive.glb"))
+    g.nodes.append(pygltflib.Node(name="Prop", mesh=0, translation=[2.0, 0.5, 0.0], scale=[3.0, 3.0, 3.0]))
+    g.scenes[g.scene or 0].nodes.append(len(g.nodes) - 1)
+    g.save_binary(str(src))
+    usd, back = tmp_path / "prop.usda", tmp_path / "back.glb"
+    assert convert(src, usd).meshes == 20
+    convert(usd, back)
+    assert usd_compliance_errors(usd) == []
+    assert gltf_validator(back)[0]["numErrors"] == 0
+    stage = Usd.Stage.Open(str(usd))
+    from pxr import UsdGeom
+
+    prop = UsdGeom.Mesh(next(p for p in stage.Traverse() if p.GetCustomDataByKey("usdhands:sourceNode") == "Prop"))
+    assert prop.GetPath().GetParentPath() == "/Root"
+    assert not prop.GetPrim().HasAPI(UsdSkel.BindingAPI)
+    x = np.array(prop.ComputeLocalToWorldTransform(Usd.TimeCode.Default())).T
+    np.testing.assert_allclose(x[:3, 3], [2.0, 0.5, 0.0], atol=1e-9)
+    a, b = _summary(src), _summary(back)
+    # the prop's node uses the foot's mesh in the source; it is a mesh of its own after the round trip
+    assert (a["meshes"], a["vertices"]) == (14, 7214) and (b["meshes"], b["vertices"]) == (15, 7214 + 64)
+    gb = _gltf_json(back)
+    node = next(n for n in gb["nodes"] if n.get("name") == "Prop")
+    assert gb["nodes"].index(node) in gb["scenes"][0]["nodes"] and "skin" not in node
+    np.testing.assert_allclose(node["translation"], [2.0, 0.5, 0.0], atol=1e-9)
+    np.testing.assert_allclose(node["scale"], [3.0, 3.0, 3.0], atol=1e-9)

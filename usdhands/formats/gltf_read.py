@@ -763,6 +763,17 @@ def _rigid_parent(scene: GltfScene, node: int) -> tuple[int, int, np.ndarray] | 
     return None
 
 
+def _node_world(scene: GltfScene, node: int) -> np.ndarray:
+    """The rest world transform (4, 4) of a node: its TRS and its ancestors'."""
+    world = np.eye(4)
+    n = node
+    while n >= 0:
+        t, q, sc = scene.local_trs[n]
+        world = trs_to_xform(t, q, sc) @ world
+        n = int(scene.parents[n])
+    return world
+
+
 def mesh_node_binding(scene: GltfScene, node: int) -> int | None:
     """The skeleton (binding index) a mesh node's meshes are read onto: its skin's, or the one of
     the nearest joint above it; None when it is on none."""
@@ -828,13 +839,16 @@ def read_meshes(scene: GltfScene) -> list[SkinnedMesh]:
             rigid = None
         else:
             parent = _rigid_parent(scene, ni)
-            if parent is None:
-                continue  # not on a skeleton (named by left_out_of)
-            b, rigid, local = parent
-            binding = scene.bindings[b]
-            bind = binding.skeleton.bind_xforms
-            geom_bind = (bind[rigid] if bind is not None else binding.skeleton.rest_world_xforms()[rigid]) @ local
             skin_to_joint = None
+            if parent is None:
+                if not scene.bindings:
+                    continue  # no character: meshes alone are not read
+                b, rigid, geom_bind = -1, None, _node_world(scene, ni)  # on no skeleton: a static mesh
+            else:
+                b, rigid, local = parent
+                binding = scene.bindings[b]
+                bind = binding.skeleton.bind_xforms
+                geom_bind = (bind[rigid] if bind is not None else binding.skeleton.rest_world_xforms()[rigid]) @ local
         if not 0 <= node.mesh < len(g.meshes):
             raise doc.error(f"mesh {node.mesh} out of range (there are {len(g.meshes)})", f"nodes[{ni}]")
         mesh = g.meshes[node.mesh]
@@ -859,7 +873,9 @@ def read_meshes(scene: GltfScene) -> list[SkinnedMesh]:
             if attrs.get("TEXCOORD_0") is not None:
                 uv = doc.accessor(attrs["TEXCOORD_0"])
                 uvs = np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1)
-            if rigid is None:
+            if b < 0:
+                ji = jw = None
+            elif rigid is None:
                 ji, jw = _influences(doc, attrs, skin_to_joint, points.shape[0], where)
             else:
                 ji = np.full((points.shape[0], 1), rigid, dtype=np.int64)
@@ -1025,17 +1041,6 @@ def left_out_of(scene: GltfScene, meshes: list[SkinnedMesh]) -> tuple[str, ...]:
         if count:
             out.append(f"{count} {what}")
 
-    read_vertices = sum(int(np.asarray(m.points).shape[0]) for m in meshes)
-    off_nodes = [i for i, node in enumerate(g.nodes) if node.mesh is not None and mesh_node_binding(scene, i) is None]
-    off_vertices = 0
-    for i in off_nodes:
-        for prim in g.meshes[g.nodes[i].mesh].primitives:
-            pos = _attributes(prim).get("POSITION")
-            if pos is not None and 0 <= pos < len(g.accessors):
-                off_vertices += int(g.accessors[pos].count or 0)
-    if off_nodes:
-        out.append(f"{len(off_nodes)} mesh node(s) on no skeleton ({off_vertices} vertices; "
-                   f"{read_vertices} vertices read)")
     morphed = {i for i in blend_shape_tokens(scene) if mesh_node_binding(scene, i) is not None}
     n(len(g.cameras), "camera(s)")
     weights = sum(1 for a in g.animations for ch in a.channels if ch.target is not None and ch.target.path == "weights"

@@ -456,7 +456,7 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
     groups: dict[tuple, list[SkinnedMesh]] = {}
     for mesh in asset.meshes:
         si = mesh.skeleton_index
-        if not 0 <= si < len(asset.skeletons):
+        if not -1 <= si < len(asset.skeletons):
             raise ValueError(f"mesh {mesh.name!r} has skeleton_index {si}, the asset has {len(asset.skeletons)}")
         key = (si, mesh.group, mesh.node) if mesh.group is not None else (si, id(mesh), None)
         groups.setdefault(key, []).append(mesh)
@@ -464,7 +464,8 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
     for (si, _, node_name), parts in groups.items():
         joints = {m.rigid_joint() for m in parts}
         rigid = joints.pop() if len(joints) == 1 else None  # parts on different joints: a skinned mesh
-        sk = asset.skeletons[si]
+        static = si < 0  # on no skeleton: a mesh node placed by its own transform
+        sk = asset.skeletons[max(si, 0)]
         first = parts[0]
         short = asset.source_names.get(first.name) or first.name.rsplit("/", 1)[-1]
         mesh_name = first.group or short
@@ -473,7 +474,9 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
         for n in names:
             defaults.append(next(b.default_weight for m in parts for b in m.blend_shapes if b.name == n))
         local = None
-        if rigid is not None:
+        if static:  # the parts of one source node share its transform
+            local = np.asarray(first.geom_bind_xform, dtype=np.float64)
+        elif rigid is not None:
             bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
             local = np.linalg.inv(bind[rigid]) @ np.asarray(first.geom_bind_xform, dtype=np.float64)
             if not all(np.allclose(np.linalg.inv(bind[rigid]) @ m.geom_bind_xform, local, atol=1e-9) for m in parts):
@@ -481,9 +484,9 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
                 rigid = None
         prims = []
         for m in parts:
-            xf = np.eye(4) if rigid is not None else np.asarray(m.geom_bind_xform, dtype=np.float64)
+            xf = np.eye(4) if rigid is not None or static else np.asarray(m.geom_bind_xform, dtype=np.float64)
             mat = material_index[m.material] if m.material is not None and m.material < len(material_index) else None
-            prims.append(_add_primitive(app, m, skin_slot[si], xf, rigid is None, names, mat))
+            prims.append(_add_primitive(app, m, skin_slot[max(si, 0)], xf, rigid is None and not static, names, mat))
         extras = {}
         if names:
             extras["targetNames"] = [next((b.source_name or b.name) for m in parts for b in m.blend_shapes
@@ -491,7 +494,7 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
         gltf.meshes.append(pygltflib.Mesh(name=mesh_name, primitives=prims, extras=extras,
                                           weights=[float(d) for d in defaults] if names else None))
         node = pygltflib.Node(name=node_name or mesh_name, mesh=len(gltf.meshes) - 1)
-        if rigid is None:
+        if rigid is None and not static:
             node.skin = skel_skins[si]
             gltf.nodes.append(node)
             scene_nodes.append(len(gltf.nodes) - 1)
@@ -504,8 +507,11 @@ def _write_meshes(gltf: pygltflib.GLTF2, app: BinaryAppender, asset: Asset, skel
                 node.rotation = [float(v) for v in _unit(q)]
                 node.scale = [float(v) for v in sc]
             gltf.nodes.append(node)
-            gltf.nodes[skel_nodes[si][rigid]].children.append(len(gltf.nodes) - 1)
-        if names:
+            if static:
+                scene_nodes.append(len(gltf.nodes) - 1)
+            else:
+                gltf.nodes[skel_nodes[si][rigid]].children.append(len(gltf.nodes) - 1)
+        if names and not static:
             morph_nodes[len(gltf.nodes) - 1] = (si, names, defaults)
     return morph_nodes
 

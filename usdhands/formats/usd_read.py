@@ -201,6 +201,12 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
                     mesh = _read_mesh(sq, k, tokens_of[k], path, worlds[k], materials)
                     read_prims.add(mesh.name)
                     meshes.extend(_split_by_material_subsets(mesh, sq.GetPrim(), materials))
+    if skeletons:  # meshes on no skeleton (props, static parts) where the file has a character
+        for prim in stage.Traverse(_PREDICATE):
+            if prim.IsA(UsdGeom.Mesh) and str(prim.GetPath()) not in read_prims:
+                mesh = _read_mesh(None, -1, [], path, None, materials, prim=prim)
+                read_prims.add(mesh.name)
+                meshes.extend(_split_by_material_subsets(mesh, prim, materials))
     left_out = _left_out(stage, meshes, read_prims, materials)
     for thing in left_out:
         _log.info("%s: not read: %s", path, thing)
@@ -643,8 +649,10 @@ def _check_influences(prim: Usd.Prim, n_points: int, n_joints: int, path: Path, 
 
 
 def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.ndarray | None = None,
-               materials: MaterialReader | None = None) -> SkinnedMesh:
-    prim = sq.GetPrim()
+               materials: MaterialReader | None = None, prim: Usd.Prim | None = None) -> SkinnedMesh:
+    """A Mesh bound to a skeleton (``sq``, its SkinningQuery), or with ``sq`` None a Mesh ``prim`` on
+    no skeleton (``skel_index`` -1: no influences, ``geom_bind_xform`` its local-to-world transform)."""
+    prim = sq.GetPrim() if sq is not None else prim
     where = str(prim.GetPath())
     mesh = UsdGeom.Mesh(prim)
     early = Usd.TimeCode.EarliestTime()
@@ -658,41 +666,45 @@ def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.nda
     if len(fvi) and (fvi.min() < 0 or fvi.max() >= V):
         raise JointMismatchError(f"faceVertexIndices outside 0..{V - 1}", path=path, location=where)
 
-    # joint influences, in the skeleton's joint order
-    _check_influences(prim, V, len(sq.GetJointOrder() or tokens), path, where)
-    idx, w = sq.ComputeJointInfluences(early) or (None, None)
-    K = int(sq.GetNumInfluencesPerComponent())
     joint_indices = joint_weights = None
-    if idx is not None and K > 0:
-        idx = np.asarray(idx, dtype=np.int64)
-        w = np.asarray(w, dtype=np.float64)
-        if sq.IsRigidlyDeformed() or sq.GetInterpolation() == UsdGeom.Tokens.constant:
-            idx = np.tile(idx[:K], (V, 1))
-            w = np.tile(w[:K], (V, 1))
-        if idx.size != V * K or w.size != V * K:
-            raise JointMismatchError(f"skel:jointIndices/jointWeights have {idx.size}/{w.size} values for "
-                                     f"{V} points x {K} influences", path=path, location=where)
-        idx = idx.reshape(V, K)
-        w = w.reshape(V, K)
-        order = sq.GetJointOrder()
-        if order:
-            local = [str(t) for t in order]
-            index = {t: i for i, t in enumerate(tokens)}
-            missing = [t for t in local if t not in index]
-            if missing:
-                raise JointMismatchError(f"skel:joints names joints the skeleton does not have: "
-                                         f"{', '.join(repr(m) for m in missing[:8])}", path=path, location=where)
-            remap = np.array([index[t] for t in local], dtype=np.int64)
-            if len(idx) and (idx.min() < 0 or idx.max() >= len(remap)):
-                raise JointMismatchError(f"skel:jointIndices outside 0..{len(remap) - 1}", path=path, location=where)
-            idx = remap[idx]
-        elif len(idx) and (idx.min() < 0 or idx.max() >= len(tokens)):
-            raise JointMismatchError(f"skel:jointIndices outside 0..{len(tokens) - 1}", path=path, location=where)
-        joint_indices, joint_weights = idx, w
-    gbt = sq.GetGeomBindTransform(early)
-    geom_bind = matrices_to_numpy([gbt if gbt is not None else Gf.Matrix4d(1)])[0]
-    if world is not None:  # the skeleton's local-to-world, folded into its joints and binds too
-        geom_bind = world @ geom_bind
+    if sq is None:
+        geom_bind = matrices_to_numpy([UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(early)])[0]
+    else:
+        # joint influences, in the skeleton's joint order
+        _check_influences(prim, V, len(sq.GetJointOrder() or tokens), path, where)
+        idx, w = sq.ComputeJointInfluences(early) or (None, None)
+        K = int(sq.GetNumInfluencesPerComponent())
+        joint_indices = joint_weights = None
+        if idx is not None and K > 0:
+            idx = np.asarray(idx, dtype=np.int64)
+            w = np.asarray(w, dtype=np.float64)
+            if sq.IsRigidlyDeformed() or sq.GetInterpolation() == UsdGeom.Tokens.constant:
+                idx = np.tile(idx[:K], (V, 1))
+                w = np.tile(w[:K], (V, 1))
+            if idx.size != V * K or w.size != V * K:
+                raise JointMismatchError(f"skel:jointIndices/jointWeights have {idx.size}/{w.size} values for "
+                                         f"{V} points x {K} influences", path=path, location=where)
+            idx = idx.reshape(V, K)
+            w = w.reshape(V, K)
+            order = sq.GetJointOrder()
+            if order:
+                local = [str(t) for t in order]
+                index = {t: i for i, t in enumerate(tokens)}
+                missing = [t for t in local if t not in index]
+                if missing:
+                    raise JointMismatchError(f"skel:joints names joints the skeleton does not have: "
+                                             f"{', '.join(repr(m) for m in missing[:8])}", path=path, location=where)
+                remap = np.array([index[t] for t in local], dtype=np.int64)
+                if len(idx) and (idx.min() < 0 or idx.max() >= len(remap)):
+                    raise JointMismatchError(f"skel:jointIndices outside 0..{len(remap) - 1}", path=path, location=where)
+                idx = remap[idx]
+            elif len(idx) and (idx.min() < 0 or idx.max() >= len(tokens)):
+                raise JointMismatchError(f"skel:jointIndices outside 0..{len(tokens) - 1}", path=path, location=where)
+            joint_indices, joint_weights = idx, w
+        gbt = sq.GetGeomBindTransform(early)
+        geom_bind = matrices_to_numpy([gbt if gbt is not None else Gf.Matrix4d(1)])[0]
+        if world is not None:  # the skeleton's local-to-world, folded into its joints and binds too
+            geom_bind = world @ geom_bind
 
     api = UsdGeom.PrimvarsAPI(prim)
     normals = _flattened(api.GetPrimvar("normals"), V, counts, where, path)

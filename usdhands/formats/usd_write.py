@@ -8,6 +8,7 @@ with ``Vt.*Array.FromNumpy``.
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 from pathlib import Path
 from typing import Sequence
@@ -46,6 +47,8 @@ from usdhands.model.handmap import HandMap
 from usdhands.model.provenance import provenance_record
 from usdhands.model.rotations import quat_angle_deg
 from usdhands.model.skeleton import Skeleton
+
+_log = logging.getLogger(__name__)
 
 __all__ = ["write_usd", "write_usd_clip", "write_usd_hand_map", "author_clip", "author_animation", "frame_time_codes"]
 
@@ -296,6 +299,12 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                         m = _mesh_without_chain(m, lifted.num_joints, keep, to_skel)
                     _write_mesh(stage, parent, used, m, skel_path, sk.num_joints, asset.source_names.get(m.name),
                                 material_paths, asset.materials)
+        static = [m for m in asset.meshes if m.skeleton_index < 0]
+        if static:
+            used_top = {c.GetName() for c in stage.GetPrimAtPath(root_path).GetChildren()}
+            for m in static:
+                _write_mesh(stage, root_path, used_top, m, None, 0, asset.source_names.get(m.name), material_paths,
+                            asset.materials)
         if all_codes:
             _set_time_range(layer, np.concatenate(all_codes), extend=False)
         layer.Export(str(path))
@@ -415,7 +424,7 @@ def _write_blend_shapes(stage: Usd.Stage, mesh: UsdGeom.Mesh, binding: UsdSkel.B
     binding.CreateBlendShapeTargetsRel().SetTargets(targets)
 
 
-def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMesh, skel_path: Sdf.Path,
+def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMesh, skel_path: Sdf.Path | None,
                 num_joints: int, source_name: str | None = None, material_paths: Sequence[Sdf.Path] = (),
                 materials: Sequence = ()) -> None:
     original = source_name or m.name.rsplit("/", 1)[-1] or "Mesh"
@@ -448,6 +457,12 @@ def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMe
         st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
                                                      UsdGeom.Tokens.vertex)
         st.Set(Vt.Vec2fArray.FromNumpy(_f32(m.uvs).reshape(-1, 2)))
+    if skel_path is None:  # on no skeleton: placed by its own transform
+        mesh.AddTransformOp().Set(numpy_to_matrices(np.asarray(m.geom_bind_xform)[None])[0])
+        if m.blend_shapes:
+            _log.warning("not written to USD: %d blend shape(s) of mesh %r, which is on no skeleton (UsdSkel "
+                         "blend shapes need one)", len(m.blend_shapes), original)
+        return
     binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel_path])
     if m.joint_indices is not None:

@@ -70,7 +70,9 @@ class SkinnedMesh:
     geom_bind_xform : (4, 4) float
         Mesh-to-skeleton-space transform at bind time (column vectors).
     skeleton_index : int
-        Which skeleton of the asset it is bound to.
+        Which skeleton of the asset it is bound to; -1 for a mesh on no skeleton (a prop, a
+        static part), which has no influences and whose ``geom_bind_xform`` is its
+        mesh-to-world transform.
     group : str, optional
         The source mesh this one is a part of (a glTF mesh with several primitives gives
         one SkinnedMesh per primitive, all with the glTF mesh's name here); writers put

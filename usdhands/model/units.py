@@ -89,8 +89,8 @@ def asset_to(asset: Asset, meters_per_unit: float | None = None, up_axis: str | 
     skeletons = tuple(new[id(sk)] for sk in asset.skeletons)
     clips = tuple(clip_to(c, new[id(c.skeleton)]) if id(c.skeleton) in new
                   else clip_to(c, skeleton_to(c.skeleton, meters_per_unit, up_axis)) for c in asset.clips)
-    meshes = tuple(_mesh_to(m, asset.skeletons[m.skeleton_index], skeletons[m.skeleton_index])
-                   for m in asset.meshes)
+    meshes = tuple(_mesh_to(m, asset.skeletons[max(m.skeleton_index, 0)], skeletons[max(m.skeleton_index, 0)])
+                   for m in asset.meshes)  # a mesh on no skeleton (-1) is in the units of the first
     same = all(sk.meters_per_unit == new.meters_per_unit and sk.up_axis == new.up_axis
                for sk, new in zip(asset.skeletons, skeletons))
     # the nodes folded into the roots are in the old units: without them the roots still hold everything
