@@ -170,3 +170,16 @@ def grasping_mug_position() -> np.ndarray:
     middle of a sweep, its rim 4.2 cm below the palm, clear of the open hand and of the thumb (which
     hangs 4 cm below); the curled middle, ring and little fingers reach over its rim."""
     return np.array([81.0, 144.0 - 4.2 - 7.2, -4.5])
+
+
+def write_closing_scene(folder):
+    """``folder/closing.usda`` (:func:`closing_hand_clip`, 24 frames, 1 degree of jitter: fingers 15+ mm
+    into the cylinder) and ``folder/cyl.obj`` (:func:`cylinder_under_palm`); returns the clip."""
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+
+    clip = closing_hand_clip(frames=24, noise_deg=1.0)
+    write_asset(Asset("closing", (clip.skeleton,), (clip,)), folder / "closing.usda")
+    prop = cylinder_under_palm()
+    trimesh.Trimesh(np.asarray(prop.vertices), np.asarray(prop.faces)).export(folder / "cyl.obj")
+    return clip

@@ -7,12 +7,10 @@ import json
 
 import numpy as np
 import pytest
-import trimesh
 from cli_helpers import run
-from interaction_data import closing_hand_clip, cylinder_under_palm
+from interaction_data import write_closing_scene
 
-from usdhands.formats.io import read_clip, write_asset
-from usdhands.model.asset import Asset
+from usdhands.formats.io import read_clip
 
 KEYS = {"penetration_before_mm", "penetration_after_mm", "frames_corrected", "jitter_before", "jitter_after",
         "max_change_deg"}
@@ -21,13 +19,8 @@ KEYS = {"penetration_before_mm", "penetration_after_mm", "frames_corrected", "ji
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     d = tmp_path_factory.mktemp("correct")
-    clip = closing_hand_clip(frames=24, noise_deg=1.0)
-    write_asset(Asset("closing", (clip.skeleton,), (clip,)), d / "closing.usda")
-    prop = cylinder_under_palm()
-    trimesh.Trimesh(np.asarray(prop.vertices), np.asarray(prop.faces)).export(d / "cyl.obj")
+    write_closing_scene(d)
     return d
-
-
 
 
 def _json(capsys, *argv):

@@ -124,18 +124,10 @@ def test_import_usdhands_loads_no_job_until_used():
 @pytest.fixture(scope="module")
 def correct_scene(tmp_path_factory):
     """A hand closing into a cylinder under its palm (fingers 15+ mm deep), and the cylinder as OBJ."""
-    import numpy as np
-    import trimesh
-    from interaction_data import closing_hand_clip, cylinder_under_palm
-
-    from usdhands.formats.io import write_asset
-    from usdhands.model.asset import Asset
+    from interaction_data import write_closing_scene
 
     d = tmp_path_factory.mktemp("correct_job")
-    clip = closing_hand_clip(frames=24, noise_deg=1.0)
-    write_asset(Asset("closing", (clip.skeleton,), (clip,)), d / "closing.usda")
-    prop = cylinder_under_palm()
-    trimesh.Trimesh(np.asarray(prop.vertices), np.asarray(prop.faces)).export(d / "cyl.obj")
+    write_closing_scene(d)
     return d
 
 

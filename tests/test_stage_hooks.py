@@ -102,3 +102,79 @@ def test_a_layer_outside_the_stage_is_refused(ok_usda):
 def test_no_animated_skeleton_at_the_path(ok_usda):
     with pytest.raises(UsdHandsError, match="no animated Skeleton at /Nope"):
         usdhands.usd.synthesize_stage(_in_memory(ok_usda), "/Nope")
+
+
+@pytest.fixture(scope="module")
+def closing_scene(tmp_path_factory):
+    """The humanoid's left hand closing 15+ mm deep into a cylinder under its palm: the .usda and the cylinder .obj."""
+    from interaction_data import write_closing_scene
+
+    d = tmp_path_factory.mktemp("correct_stage")
+    return d, write_closing_scene(d)
+
+
+def _depth_read_back_mm(stage, clip, anim_path):
+    """Deepest finger penetration of the cylinder per frame (mm), for the rotations UsdSkel's AnimQuery
+    computes on the composed stage (mapped onto ``clip``'s joints)."""
+    from interaction_data import colliders_for, cylinder_under_palm
+
+    from usdhands.algorithms.interaction.correction import chain_posers, penetration_depth_mm
+    from usdhands.algorithms.interaction.finger_geometry import InteractionConfig
+    from usdhands.model.clip import Clip
+    from usdhands.samples.humanoid import humanoid_handmap
+
+    joints, rots = _rotations(stage, anim_path, range(clip.num_frames))
+    leaf = [j.rsplit("/", 1)[-1] for j in joints]
+    order = [leaf.index(n.rsplit("/", 1)[-1]) for n in clip.skeleton.joint_names]
+    read = Clip(clip.skeleton, clip.fps, rots[:, order].astype(np.float64), name=clip.name)  # xyzw from Vt
+    posers = chain_posers(read, humanoid_handmap(clip.skeleton), InteractionConfig())
+    return penetration_depth_mm(read, posers, colliders_for(read, cylinder_under_palm()))
+
+
+def test_correct_stage_authors_the_correction_into_the_edit_target(closing_scene):
+    d, clip = closing_scene
+    stage = _in_memory(d / "closing.usda")
+    anim = str(next(p.GetPath() for p in stage.Traverse() if p.IsA(UsdSkel.Animation)))
+    root_before = stage.GetRootLayer().ExportToString()
+    assert _depth_read_back_mm(stage, clip, anim).max() > 15
+    stage.SetEditTarget(stage.GetSessionLayer())
+
+    edit = usdhands.usd.correct_stage(stage, props=[d / "cyl.obj"])
+    assert edit.layer == stage.GetSessionLayer().identifier and edit.animation == anim
+    assert stage.GetRootLayer().ExportToString() == root_before  # the edit target only
+    assert stage.GetSessionLayer().GetAttributeAtPath(anim + ".rotations") is not None
+    assert edit.report["penetration_before_mm"]["max"] > 15 and edit.report["penetration_after_mm"]["max"] <= 0.5
+    assert set(edit.report["penetration_after_mm"]) == {"max", "mean", "frames"}
+    depth = _depth_read_back_mm(stage, clip, anim)
+    assert depth.max() <= 0.5
+    record = read_finger_motion(stage.GetPrimAtPath(anim))
+    assert record["method"] == "interaction" and record["parameters"]["props"] == [str(d / "cyl.obj")]
+    # the same motion the correct job writes into a file
+    usdhands.correct(d / "closing.usda", d / "job.usda", usdhands.CorrectOptions(props=(d / "cyl.obj",)))
+    _, from_job = _rotations(Usd.Stage.Open(str(d / "job.usda")), anim, range(clip.num_frames))
+    _, on_stage = _rotations(stage, anim, range(clip.num_frames))
+    np.testing.assert_allclose(on_stage, from_job, atol=1e-6)
+
+
+def test_correct_stage_into_a_named_layer_saves_nothing(closing_scene, tmp_path):
+    d, clip = closing_scene
+    src = tmp_path / "closing.usda"
+    src.write_bytes((d / "closing.usda").read_bytes())
+    stage = Usd.Stage.Open(str(src))
+    fix = Sdf.Layer.CreateAnonymous("fix.usda")
+    stage.GetSessionLayer().subLayerPaths.append(fix.identifier)
+    edit = usdhands.usd.correct_stage(stage, options=usdhands.CorrectOptions(props=(d / "cyl.obj",), margin=1.0),
+                                      layer=fix)
+    assert edit.layer == fix.identifier and edit.report["output"] == fix.identifier
+    assert not stage.GetRootLayer().dirty and not stage.GetSessionLayer().GetPrimAtPath(edit.animation)
+    assert src.read_bytes() == (d / "closing.usda").read_bytes()
+    assert fix.GetAttributeAtPath(edit.animation + ".rotations") is not None
+    assert _depth_read_back_mm(stage, clip, edit.animation).max() <= 0.5
+
+
+def test_correct_stage_without_props_is_refused(closing_scene):
+    d, _ = closing_scene
+    stage = _in_memory(d / "closing.usda")
+    with pytest.raises(UsdHandsError, match="--props: name at least one prop"):
+        usdhands.usd.correct_stage(stage)
+    assert stage.GetSessionLayer().ExportToString().count("over") == 0

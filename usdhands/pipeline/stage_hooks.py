@@ -18,8 +18,8 @@ the layer it chose. Exposed as :mod:`usdhands.usd`::
     print(edit.animation, edit.report["hands"])      # what was authored, the figures
     fingers.Save()                                   # the caller saves
 
-The hooks: :func:`synthesize_stage`, :func:`reduce_stage`, :func:`check_stage`. A hook for
-another job (``correct_stage``) follows the same shape: read with
+The hooks: :func:`synthesize_stage`, :func:`correct_stage`, :func:`reduce_stage`,
+:func:`check_stage`. A hook for another job follows the same shape: read with
 :func:`read_stage_clip`, run the job's method, author with ``_author`` inside
 ``_editing(stage, layer)``, return a :class:`StageEdit`.
 """
@@ -34,10 +34,11 @@ from pathlib import Path
 from pxr import Sdf, Usd, UsdSkel
 
 from usdhands.errors import NoSkeletonError, UsdHandsError
+from usdhands.jobs.correction import CorrectOptions
 from usdhands.jobs.reduction import ReduceOptions
 from usdhands.jobs.synthesis import SynthesizeOptions
 
-__all__ = ["StageEdit", "synthesize_stage", "reduce_stage", "check_stage", "read_stage_clip"]
+__all__ = ["StageEdit", "synthesize_stage", "correct_stage", "reduce_stage", "check_stage", "read_stage_clip"]
 
 
 @dataclass(frozen=True)
@@ -152,6 +153,61 @@ def synthesize_stage(stage: Usd.Stage, skeleton_path: str | None = None, db=None
     return StageEdit(skel, anim, target, report)
 
 
+def correct_stage(stage: Usd.Stage, props=(), skeleton_path: str | None = None,
+                  options: CorrectOptions = CorrectOptions(), *, layer: Sdf.Layer | None = None,
+                  progress=None) -> StageEdit:
+    """Push the fingers of a Skeleton's animation on an open stage out of props; author the correction.
+
+    Parameters
+    ----------
+    stage : Usd.Stage
+    props : sequence of paths
+        The prop files (meshes, or USD files with Mesh prims); when given they replace
+        ``options.props``. One of the two must name at least one prop.
+    skeleton_path : str, optional
+        Prim path of the Skeleton (default: the first animated one).
+    options : CorrectOptions
+        ``margin``, ``self_collision``, ``attach``, ``prop_units``, ``prop_up``,
+        ``interaction_config`` and ``handmap`` apply; ``as_layer``, ``animation`` and ``plot``
+        do not (a hook edits the stage in place).
+    layer : Sdf.Layer, optional
+        Where to author (default: the stage's current edit target).
+
+    Returns
+    -------
+    StageEdit
+        ``report`` as :meth:`usdhands.jobs.correction.CorrectResult.to_json` (``output`` is
+        the layer authored into). Only the finger joints that moved are authored; the
+        SkelAnimation gets ``UsdHandsFingerMotionAPI`` with method ``interaction``.
+    """
+    import dataclasses
+    import time
+
+    from usdhands.jobs.correction import check_correct_options, correct_loaded, correction_provenance, result_of
+    from usdhands.model.hand_detection import load_handmap
+
+    if props:
+        options = dataclasses.replace(options, props=tuple(Path(p) for p in props))
+    check_correct_options(options)
+    asset, clip, handmap = read_stage_clip(stage, skeleton_path)
+    where = Path(_stage_name(stage))
+    if options.handmap is not None:
+        handmap = load_handmap(options.handmap, clip.skeleton)
+    handmap = handmap or _detect(clip, where)
+    if progress:
+        progress(1, 2, "correcting")
+    start = time.perf_counter()
+    fixed, report, _, config = correct_loaded(clip, handmap, options, where)
+    seconds = time.perf_counter() - start
+    with _editing(stage, layer) as target:
+        skel, anim = _author(stage, fixed, clip.name, None, correction_provenance(options, config))
+    if progress:
+        progress(2, 2, "done")
+    summary = result_of(report, where, Path(target), clip.num_frames, options, seconds).to_json()
+    summary["output"] = target
+    return StageEdit(skel, anim, target, summary)
+
+
 def reduce_stage(stage: Usd.Stage, skeleton_path: str | None = None, options: ReduceOptions = ReduceOptions(), *,
                  layer: Sdf.Layer | None = None, progress=None) -> StageEdit:
     """Reduce the finger curves of a Skeleton's animation on an open stage and author the simplified curves.
@@ -214,21 +270,33 @@ def _stage_name(stage: Usd.Stage) -> str:
 def _editing(stage: Usd.Stage, layer: Sdf.Layer | None):
     """The stage's edit target, or ``layer`` for the duration; yields the layer's identifier.
 
-    A ``layer`` without a ``timeCodesPerSecond`` of its own gets the stage's.
+    A ``layer`` without a ``timeCodesPerSecond`` of its own gets the stage's; so does the edit
+    target's layer (the session layer, say) when the target maps times one to one.
     """
     if layer is None:
-        yield stage.GetEditTarget().GetLayer().identifier
+        target = stage.GetEditTarget()
+        if target.GetLayer() != stage.GetRootLayer() and target.GetMapFunction().timeOffset.IsIdentity():
+            _own_rate(stage, target.GetLayer())
+        yield target.GetLayer().identifier
         return
     if not stage.HasLocalLayer(layer):
         raise UsdHandsError(f"layer {layer.identifier} is not in the stage's layer stack or session layer: add it "
                             "(stage.GetRootLayer().subLayerPaths.insert(0, layer.identifier)) first")
-    if not layer.HasTimeCodesPerSecond():
-        # a sublayer without its own rate is read at 24 time codes per second and scaled onto the
-        # stage's: the frames authored would land at other times
-        layer.timeCodesPerSecond = stage.GetTimeCodesPerSecond()
-        layer.framesPerSecond = stage.GetFramesPerSecond()
+    _own_rate(stage, layer)
     with Usd.EditContext(stage, layer):
         yield layer.identifier
+
+
+def _own_rate(stage: Usd.Stage, layer: Sdf.Layer) -> None:
+    """Give ``layer`` the stage's time codes per second unless it has its own.
+
+    A sublayer (or session layer) without its own rate is read at 24 time codes per second
+    and scaled onto the stage's: frames authored at the stage's time codes would land at
+    other times.
+    """
+    if not layer.HasTimeCodesPerSecond():
+        layer.timeCodesPerSecond = stage.GetTimeCodesPerSecond()
+        layer.framesPerSecond = stage.GetFramesPerSecond()
 
 
 def _author(stage: Usd.Stage, clip, animation: str, handmap, provenance: dict) -> tuple[str, str]:
