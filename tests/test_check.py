@@ -200,3 +200,72 @@ def test_check_stage_sees_unsaved_edits(good):
     q = np.array(attr.Get(1.0))
     attr.Set(Vt.QuatfArray([Gf.Quatf(0, 0, 0, 0)] * len(q)), 1.0)
     assert [f.rule for f in usdhands.usd.check_stage(stage)] == ["quaternions"]
+
+
+@pytest.fixture(scope="module")
+def prop_scene(tmp_path_factory):
+    """closing.usda (the left hand's long fingers 15+ mm into a cylinder), the same as .glb, the
+    cylinder .obj, and fixed.usda: the correct job's output (clear of it)."""
+    from interaction_data import write_closing_scene
+
+    d = tmp_path_factory.mktemp("check_props")
+    write_closing_scene(d)
+    usdhands.convert(d / "closing.usda", d / "closing.glb")
+    usdhands.correct(d / "closing.usda", d / "fixed.usda", usdhands.CorrectOptions(props=(d / "cyl.obj",)))
+    return d
+
+
+LONG_FINGERS = ["LeftHandIndex1", "LeftHandMiddle1", "LeftHandPinky1", "LeftHandRing1"]
+
+
+def test_props_rule_fails_where_fingers_penetrate(prop_scene, capsys):
+    d = prop_scene
+    result = usdhands.check([d / "closing.usda"], usdhands.CheckOptions(props=(d / "cyl.obj",)))
+    assert result.exit_status == 1
+    (usd,) = result.files
+    # the .glb is in metres, the OBJ in centimetres
+    result = usdhands.check([d / "closing.glb"], usdhands.CheckOptions(props=(d / "cyl.obj",), prop_units=0.01))
+    assert result.exit_status == 1
+    (glb,) = result.files
+    anim = usd.findings[0].where
+    assert anim.startswith("/") and {(f.rule, f.where) for f in usd.findings} == {("props", anim)}
+    assert sorted(f.message.split(" finger")[0] for f in usd.findings) == [
+        "the left index", "the left middle", "the left pinky", "the left ring"]
+    assert sorted((f.rule, f.where) for f in glb.findings) == [("props", j) for j in LONG_FINGERS]
+    depth = float(usd.findings[0].message.split("by up to ")[1].split(" mm")[0])
+    assert depth > 10
+    # the thumb passes beside the cylinder; the body is not a prop without --self
+    assert not any("thumb" in f.message or "right" in f.message for f in result.findings)
+
+
+
+def test_props_rule_cli_lines_and_a_corrected_file_passes(prop_scene, capsys):
+    d = prop_scene
+    code = usdhands.cli.main(["check", str(d / "closing.glb"), str(d / "fixed.usda"), "--props", str(d / "cyl.obj"),
+                              "--prop-units", "0.01"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    lines = out.splitlines()
+    assert len(lines) == 4 and all(line.startswith(f"{d / 'closing.glb'}: LeftHand") for line in lines)
+    assert all(": props: the left " in line for line in lines)
+    assert err.strip() == "checked 2 file(s): 1 passed, 4 finding(s)"
+    # the corrected file keeps a few hundredths of a mm (the correction's resolution): under the 0.5 mm
+    # tolerance, found with none
+    assert usdhands.check(d / "fixed.usda", usdhands.CheckOptions(props=(d / "cyl.obj",))).exit_status == 0
+    strict = usdhands.check(d / "fixed.usda", usdhands.CheckOptions(props=(d / "cyl.obj",),
+                                                                     penetration_tolerance_mm=0.0))
+    assert strict.exit_status == 1 and {f.rule for f in strict.findings} == {"props"}
+    assert all(float(f.message.split("by up to ")[1].split(" mm")[0]) <= 0.25 for f in strict.findings)
+
+
+def test_props_rule_on_an_open_stage_and_bad_prop_options(prop_scene, tmp_path, capsys):
+    d = prop_scene
+    stage = Usd.Stage.Open(str(d / "closing.usda"))
+    options = usdhands.CheckOptions(props=(d / "cyl.obj",))
+    assert sorted(f.rule for f in usdhands.usd.check_stage(stage, options)) == ["props"] * 4
+    fixed = Usd.Stage.Open(str(d / "fixed.usda"))
+    assert usdhands.usd.check_stage(fixed, options) == []
+    code, lines = run(capsys, "check", d / "closing.usda", "--props", tmp_path / "nope.obj")
+    assert code == 2 and len(lines) == 1 and "no such" in lines[0] and "nope.obj" in lines[0]
+    code, lines = run(capsys, "check", d / "closing.usda", "--props", d / "cyl.obj", "--attach", "mug=LeftHand")
+    assert code == 2 and lines[0].startswith("usdhands: error: ") and "no prop named 'mug'" in lines[0]

@@ -137,12 +137,14 @@ def add_layer_argument(parser, what: str = "the input") -> None:
                         help=f"USD: write a sparse override layer over {what} instead of a full copy")
 
 
-def add_prop_arguments(p, required: bool) -> None:
-    """``--props``, ``--margin``, ``--self``, ``--attach``, ``--prop-units``, ``--prop-up``, ``--interaction-config``."""
+def add_prop_arguments(p, required: bool, margin: bool = True) -> None:
+    """``--props``, ``--margin`` (unless ``margin`` is False), ``--self``, ``--attach``, ``--prop-units``,
+    ``--prop-up``, ``--interaction-config``."""
     p.add_argument("--props", type=Path, nargs="+", required=required, default=[], metavar="PROP",
                    help="props the hands touch: mesh files (.obj .stl .ply .off .glb .gltf) or USD files with Mesh prims")
-    p.add_argument("--margin", type=float, default=0.0, metavar="MM",
-                   help="clearance to keep between fingers and props, millimetres (default 0: touching)")
+    if margin:
+        p.add_argument("--margin", type=float, default=0.0, metavar="MM",
+                       help="clearance to keep between fingers and props, millimetres (default 0: touching)")
     p.add_argument("--self", dest="self_collision", action="store_true",
                    help="also keep the fingers out of the character's own body (torso, head, upper arms, thighs)")
     p.add_argument("--attach", action="append", default=[], metavar="PROP=JOINT[:FROM-TO]",

@@ -9,27 +9,41 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from usdhands.commands._common import print_json
+from usdhands.commands._common import add_prop_arguments, print_json
 
 
 def register(sub) -> None:
     p = sub.add_parser("check", help="check files against the usdhands rules (hands, finger coverage, "
-                                     "quaternions, array lengths, provenance)",
+                                     "quaternions, array lengths, provenance, props)",
                        description="Check USD, glTF and BVH files: hands mapped or detectable; the animation "
                                    "covers the finger joints; no NaN or zero-length quaternions; joint counts "
-                                   "and array lengths consistent; finger-motion provenance well-formed. One line "
+                                   "and array lengths consistent; finger-motion provenance well-formed; with --props, "
+                                   "fingers do not penetrate the props. One line "
                                    "per finding; exit 1 when a rule fails, 2 when a file cannot be read.")
     p.add_argument("files", type=Path, nargs="+", metavar="FILE", help="files to check")
     p.add_argument("--require-provenance", action="store_true",
                    help="animated finger joints must carry a finger-motion provenance record")
     p.add_argument("--json", action="store_true", help="print the findings as JSON")
+    add_prop_arguments(p, required=False, margin=False)
+    p.add_argument("--tolerance", type=float, default=0.5, metavar="MM",
+                   help="with --props: the deepest finger penetration let through, millimetres (default 0.5)")
     p.set_defaults(func=run)
 
 
-def run(args) -> int:
-    from usdhands.jobs.validation import CheckOptions, check
+def options_from(args):
+    """The job's options from parsed arguments."""
+    from usdhands.jobs.validation import CheckOptions
 
-    result = check(args.files, CheckOptions(require_provenance=args.require_provenance))
+    return CheckOptions(require_provenance=args.require_provenance, props=tuple(args.props),
+                        attach=tuple(args.attach), prop_units=args.prop_units, prop_up=args.prop_up,
+                        self_collision=args.self_collision, interaction_config=args.interaction_config,
+                        penetration_tolerance_mm=args.tolerance)
+
+
+def run(args) -> int:
+    from usdhands.jobs.validation import check
+
+    result = check(args.files, options_from(args))
     if args.json:
         print_json(result.to_json())
         return result.exit_status

@@ -18,9 +18,12 @@ lives beside its reader (:mod:`usdhands.formats.usd_audit`, ``gltf_audit``, ``bv
 On an open stage: :func:`usdhands.usd.check_stage`; inside USD's own validation:
 :func:`usdhands.pipeline.usd_validation.register_validators` (keyword ``usdhands``).
 
-Adding a rule (``props``: fingers do not penetrate the props named with ``--props``, from
-the interaction methods): a field on :class:`CheckOptions`, the rule's key in ``RULES``, and
-a function ``(path, clip, options) -> list[Finding]`` called from :func:`_check_file` for
+``props`` (with ``props``): no finger capsule penetrates a prop (or, with
+``self_collision``, the body) deeper than ``penetration_tolerance_mm``, measured with the
+interaction method's finger geometry; one finding per finger and prop.
+
+Adding a rule: a field on :class:`CheckOptions`, the rule's key in ``RULES``, and a
+function ``(path, clip, options) -> list[Finding]`` called from :func:`_check_file` for
 every readable file.
 """
 
@@ -45,9 +48,24 @@ class CheckOptions:
         Every animation that animates finger joints must carry a finger-motion record
         (USD ``UsdHandsFingerMotionAPI``, glTF ``extras.usdhands.provenance``); without it,
         only the records that are there are checked.
+    props : tuple of Path
+        Prop files (meshes, or USD files with Mesh prims): the ``props`` rule, fingers do not
+        penetrate them. The other prop options (``attach`` ``"PROP=JOINT[:FROM-TO]"``,
+        ``prop_units``, ``prop_up``, ``self_collision``: the body too, ``interaction_config``:
+        finger radii) are those of :class:`usdhands.jobs.correction.CorrectOptions`.
+    penetration_tolerance_mm : float
+        Deepest penetration the ``props`` rule lets through, mm (``usdhands correct``
+        guarantees 0.25 mm).
     """
 
     require_provenance: bool = False
+    props: tuple[Path, ...] = ()
+    attach: tuple[str, ...] = ()
+    prop_units: float | None = None
+    prop_up: str | None = None
+    self_collision: bool = False
+    interaction_config: Path | None = None
+    penetration_tolerance_mm: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -104,10 +122,16 @@ def check(paths: Sequence[str | os.PathLike] | str | os.PathLike, options: Check
     options : CheckOptions
     progress : callable, optional
         ``progress(done, total, what)``.
+
+    Raises
+    ------
+    UsdHandsError
+        Bad options: a prop file missing, a bad ``attach`` or tolerance (before any file is read).
     """
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     paths = [Path(p) for p in paths]
+    _check_options(options)
     out = []
     for i, p in enumerate(paths):
         try:
@@ -123,7 +147,22 @@ def check_usd_stage(stage, options: CheckOptions = CheckOptions()) -> list[Findi
     """The rules on an open ``Usd.Stage`` as it composes now (unsaved edits included)."""
     from usdhands.formats.usd_audit import audit_stage
 
-    return audit_stage(stage, require_provenance=options.require_provenance)
+    findings = audit_stage(stage, require_provenance=options.require_provenance)
+    if options.props and not _unsound(findings):
+        from usdhands.formats.usd_read import read_stage
+
+        _check_options(options)
+        from usdhands.formats.usd_schema_data import read_hand_map
+        from usdhands.model.hand_detection import detect_hands
+
+        name = stage.GetRootLayer().identifier
+
+        def recorded_or_detected(clip):
+            prim = stage.GetPrimAtPath(clip.skeleton.name)
+            return (read_hand_map(prim, path=name) if prim else None) or detect_hands(clip.skeleton)
+
+        findings += prop_findings(name, read_stage(stage, path=name).clips, options, recorded_or_detected)
+    return findings
 
 
 def _check_file(path: Path, options: CheckOptions) -> list[Finding]:
@@ -133,6 +172,15 @@ def _check_file(path: Path, options: CheckOptions) -> list[Finding]:
     if not path.is_file():
         raise AssetReadError("no such file" if not path.exists() else "not a file", path=path)
     kind = handler_for(path, "read").name
+    findings = _audit(path, kind, options)
+    if options.props and not _unsound(findings):
+        from usdhands.formats.io import read_asset
+
+        findings += prop_findings(str(path), read_asset(path).clips, options)
+    return findings
+
+
+def _audit(path: Path, kind: str, options: CheckOptions) -> list[Finding]:
     if kind == "usd":
         from usdhands.formats.usd_audit import audit_usd
 
@@ -144,3 +192,70 @@ def _check_file(path: Path, options: CheckOptions) -> list[Finding]:
     from usdhands.formats.bvh_audit import audit_bvh
 
     return audit_bvh(path)
+
+
+def _unsound(findings: list[Finding]) -> bool:
+    """Findings that keep the animation from being posed (the props rule is not measured then)."""
+    return any(f.rule in ("quaternions", "array-lengths") for f in findings)
+
+
+def _prop_options(options: CheckOptions):
+    """The prop options as the correct job holds them (what :mod:`usdhands.jobs.props` reads)."""
+    from usdhands.jobs.correction import CorrectOptions
+
+    return CorrectOptions(props=tuple(options.props), attach=tuple(options.attach), prop_units=options.prop_units,
+                          prop_up=options.prop_up, self_collision=options.self_collision,
+                          interaction_config=options.interaction_config)
+
+
+def _check_options(options: CheckOptions) -> None:
+    if not options.props:
+        return
+    from usdhands.jobs.correction import check_correct_options
+
+    tol = options.penetration_tolerance_mm
+    if not (0.0 <= tol <= 100.0):
+        raise UsdHandsError(f"--tolerance must be between 0 and 100 mm, got {tol:g}")
+    check_correct_options(_prop_options(options))
+
+
+def prop_findings(name: str, clips, options: CheckOptions, handmap_of=None) -> list[Finding]:
+    """The ``props`` rule on ``clips`` (of the file or stage ``name``): a finding per finger and
+    prop that goes deeper than ``options.penetration_tolerance_mm`` into the prop.
+
+    ``handmap_of(clip)``: the clip's hand map (default: the one the file records, or detection).
+
+    ``where`` is the SkelAnimation's prim path for USD, else the finger's first joint (the
+    glTF node, the BVH joint). Clips without a detectable hand are left to the ``hands`` rule.
+    """
+    from usdhands.algorithms.interaction.colliders import Colliders
+    from usdhands.algorithms.interaction.correction import chain_posers, penetration_depth_mm
+    from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
+    from usdhands.errors import NoHandsError
+    from usdhands.jobs.inputs import handmap_for
+    from usdhands.jobs.props import build_colliders, read_scene_props
+
+    prop_options = _prop_options(options)
+    config = load_interaction_config(options.interaction_config) if options.interaction_config \
+        else InteractionConfig()
+    out = []
+    for clip in clips:
+        try:
+            handmap = handmap_of(clip) if handmap_of is not None else handmap_for(clip, name, None)
+        except NoHandsError:
+            continue
+        props = read_scene_props(prop_options, clip)
+        colliders, _ = build_colliders(prop_options, clip, handmap, props, path=name)
+        for poser in chain_posers(clip, handmap, config):
+            for item in colliders.items:
+                depth = penetration_depth_mm(clip, [poser], Colliders([item]))
+                deep = depth > options.penetration_tolerance_mm
+                if not deep.any():
+                    continue
+                joint = clip.skeleton.joint_names[poser.chain.joints[0]]
+                where = clip.name if clip.name.startswith("/") else joint.rsplit("/", 1)[-1]
+                out.append(Finding(name, where, "props",
+                                   f"the {poser.chain.name} finger penetrates {item.name} by up to "
+                                   f"{depth.max():.2f} mm in {int(deep.sum())} frame(s), deepest at frame "
+                                   f"{int(depth.argmax())} (tolerance {options.penetration_tolerance_mm:g} mm)"))
+    return out
