@@ -106,3 +106,53 @@ def test_bad_batch_options_are_refused_before_any_work(clips, tmp_path):
     with pytest.raises(UsdHandsError, match="no such file or folder"):
         run_batch([tmp_path / "nope"], BatchOptions(job="reduce", out=tmp_path / "out"))
     assert not (tmp_path / "out").exists()
+
+
+@pytest.fixture()
+def closing_clips(tmp_path):
+    """Two takes of the hand closing into the cylinder (one in a subfolder), a corrupt .usda, the cylinder."""
+    from interaction_data import write_closing_scene
+
+    src = tmp_path / "in"
+    (src / "sub").mkdir(parents=True)
+    write_closing_scene(tmp_path)
+    shutil.copy(tmp_path / "closing.usda", src / "a.usda")
+    shutil.copy(tmp_path / "closing.usda", src / "sub" / "b.usda")
+    (src / "sub" / "broken.usda").write_text("#usda 1.0\n(\n  this is not usd\n")
+    return src, tmp_path / "cyl.obj"
+
+
+@pytest.mark.parametrize("scheduler", [None, "local"])
+def test_correct_in_batch_like_the_job_alone(closing_clips, tmp_path, scheduler):
+    if scheduler:
+        pytest.importorskip("distributed")
+    src, cyl = closing_clips
+    out = tmp_path / "out"
+    options = usdhands.CorrectOptions(props=(cyl,), margin=0.5)
+    batch = BatchOptions(job="correct", out=out, workers=2, scheduler=scheduler, dask_processes=False,
+                         job_options=options)
+    report = run_batch([src], batch)
+    assert _statuses(report) == {"a.usda": "done", "sub/b.usda": "done", "sub/broken.usda": "failed"}
+    usdhands.correct(src / "a.usda", tmp_path / "alone.usda", options)
+    alone = (tmp_path / "alone.usda").read_text()
+    assert (out / "a.usda").read_text() == alone
+    assert (out / "sub" / "b.usda").read_text() == alone
+    # a rerun skips; a newer prop reruns every clip
+    assert [c.status for c in run_batch([src], batch).clips] == ["skipped", "skipped", "failed"]
+    time.sleep(0.01)
+    os.utime(cyl)
+    assert [c.status for c in run_batch([src], batch).clips] == ["done", "done", "failed"]
+
+
+def test_batch_correct_from_the_command_line(closing_clips, tmp_path, capsys):
+    src, cyl = closing_clips
+    code = usdhands.cli.main(["batch", str(src / "a.usda"), "--job", "correct", "--props", str(cyl),
+                              "--out", str(tmp_path / "out"), "--workers", "1", "--json"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0 and [c["status"] for c in report["clips"]] == ["done"]
+    fixed = usdhands.check(tmp_path / "out" / "a.usda", usdhands.CheckOptions(props=(cyl,)))
+    assert fixed.exit_status == 0
+    assert usdhands.check(src / "a.usda", usdhands.CheckOptions(props=(cyl,))).exit_status == 1
+    with pytest.raises(UsdHandsError, match="--job correct needs --props"):
+        run_batch([src], BatchOptions(job="correct", out=tmp_path / "none"))
+    assert not (tmp_path / "none").exists()

@@ -13,14 +13,14 @@ import sys
 import time
 from pathlib import Path
 
-from usdhands.commands._common import print_json, print_table
+from usdhands.commands._common import add_prop_arguments, print_json, print_table
 
-BATCH_JOBS = ("synthesize", "reduce", "expand", "convert", "check")
+BATCH_JOBS = ("synthesize", "correct", "reduce", "expand", "convert", "check")
 
 
 def register(sub) -> None:
     p = sub.add_parser("batch", help="run a job over many clips (local process pool or a Dask cluster)",
-                       description="Run synthesize, reduce, expand, convert or check over files, folders "
+                       description="Run synthesize, correct, reduce, expand, convert or check over files, folders "
                                    "(recursive) or text files listing paths; outputs under --out at the same "
                                    "relative paths. Outputs newer than their input and the options are skipped; "
                                    "failures are recorded in OUT/report.json and do not stop the others.")
@@ -34,7 +34,7 @@ def register(sub) -> None:
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     g = p.add_argument_group("job options")
     g.add_argument("--animation", default=None, help="animation name or index (default the first)")
-    g.add_argument("--handmap", type=Path, default=None, help="synthesize, reduce: hand map JSON")
+    g.add_argument("--handmap", type=Path, default=None, help="synthesize, correct, reduce: hand map JSON")
     g.add_argument("--hands", default=None, help="synthesize, reduce: left, right or left,right")
     g.add_argument("--db", type=Path, default=None, help="synthesize: database folder (default: bundled)")
     g.add_argument("--k", type=int, default=None, help="synthesize: candidates per segment")
@@ -46,6 +46,9 @@ def register(sub) -> None:
     g.add_argument("--fps", type=float, default=None, help="convert: resample to this rate")
     g.add_argument("--bvh-units", default="cm", help="convert: unit of BVH numbers (default cm)")
     g.add_argument("--require-provenance", action="store_true", help="check: finger motion must record provenance")
+    add_prop_arguments(g, required=False)
+    g.add_argument("--tolerance", type=float, default=0.5, metavar="MM",
+                   help="check with --props: the deepest finger penetration let through, millimetres (default 0.5)")
     p.set_defaults(func=run)
 
 
@@ -59,7 +62,8 @@ def job_options(args):
         from usdhands.jobs.synthesis import SynthesizeOptions
 
         return SynthesizeOptions(db=args.db, k=args.k, hands=hands, config=args.config, handmap=args.handmap,
-                                 animation=args.animation, finger_reference=args.finger_reference)
+                                 animation=args.animation, finger_reference=args.finger_reference,
+                                 margin=args.margin, **_prop_options(args))
     if args.job == "reduce":
         from usdhands.jobs.reduction import ReduceOptions
 
@@ -73,9 +77,22 @@ def job_options(args):
         from usdhands.jobs.conversion import ConvertOptions
 
         return ConvertOptions(animation=args.animation, fps=args.fps, bvh_units=args.bvh_units)
+    if args.job == "correct":
+        from usdhands.jobs.correction import CorrectOptions
+
+        return CorrectOptions(margin=args.margin, handmap=args.handmap, animation=args.animation,
+                              **_prop_options(args))
     from usdhands.jobs.validation import CheckOptions
 
-    return CheckOptions(require_provenance=args.require_provenance)
+    return CheckOptions(require_provenance=args.require_provenance, penetration_tolerance_mm=args.tolerance,
+                        **_prop_options(args))
+
+
+def _prop_options(args) -> dict:
+    """The prop options every job with props shares (synthesize, correct, check)."""
+    return {"props": tuple(args.props), "attach": tuple(args.attach), "prop_units": args.prop_units,
+            "prop_up": args.prop_up, "self_collision": args.self_collision,
+            "interaction_config": args.interaction_config}
 
 
 def run(args) -> int:

@@ -27,8 +27,10 @@
   (``tcp://host:8786``) to send the clips to an existing Dask cluster (``pip install
   'usdhands[dask]'``; the workers need usdhands installed and the paths visible).
 
-Adding a job (``correct``): an entry in :data:`JOBS` naming its module, function, options
-class and input extensions.
+- ``correct`` (and ``check`` with ``props``): a changed prop file reruns every clip, as a
+  changed option does.
+
+Adding a job: an entry in :data:`JOBS` naming its module, function and options class.
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ JOBS = {
     "expand": ("expansion", "expand", "ExpandOptions"),
     "convert": ("conversion", "convert", "ConvertOptions"),
     "check": ("validation", "check", "CheckOptions"),
+    "correct": ("correction", "correct", "CorrectOptions"),
 }
 OPTIONS_FILE = "batch_options.json"
 REPORT_FILE = "report.json"
@@ -164,6 +167,12 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
         raise UsdHandsError("--job expand needs --model MODEL.json")
     if options.job == "convert" and not options.to:
         raise UsdHandsError("--job convert needs --to EXT (usda, glb, bvh, ...)")
+    if options.job == "correct":
+        from usdhands.jobs.correction import check_correct_options
+
+        if not getattr(job_options, "props", ()):
+            raise UsdHandsError("--job correct needs --props PROP...")
+        check_correct_options(job_options)
     extensions = ANIMATION_EXTENSIONS
     pairs = []
     out = Path(options.out)
@@ -178,7 +187,7 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
     for src, dst in pairs:
         if dst.resolve() in resolved:
             records[src] = ClipRecord(str(src), str(dst), "failed", 0.0, "the output would overwrite an input")
-        elif _up_to_date(src, dst, recorded, options.model):
+        elif _up_to_date(src, dst, recorded, _side_files(options, job_options)):
             records[src] = ClipRecord(str(src), str(dst), "skipped")
         else:
             todo.append((src, dst))
@@ -276,10 +285,16 @@ def _record_options(out: Path, options: BatchOptions, job_options) -> float:
     return path.stat().st_mtime
 
 
-def _up_to_date(src: Path, dst: Path, options_time: float, model: Path | None) -> bool:
+def _side_files(options: BatchOptions, job_options) -> list[Path]:
+    """Files besides the clip that every output depends on: the ``expand`` model, the props."""
+    files = [Path(p) for p in getattr(job_options, "props", ())]
+    return files + ([Path(options.model)] if options.model is not None else [])
+
+
+def _up_to_date(src: Path, dst: Path, options_time: float, side_files: Sequence[Path] = ()) -> bool:
     try:
         made = dst.stat().st_mtime
-        newest = max(src.stat().st_mtime, options_time, model.stat().st_mtime if model is not None else 0.0)
+        newest = max([src.stat().st_mtime, options_time] + [p.stat().st_mtime for p in side_files])
     except OSError:
         return False
     return made >= newest
