@@ -156,3 +156,27 @@ def test_batch_correct_from_the_command_line(closing_clips, tmp_path, capsys):
     with pytest.raises(UsdHandsError, match="--job correct needs --props"):
         run_batch([src], BatchOptions(job="correct", out=tmp_path / "none"))
     assert not (tmp_path / "none").exists()
+
+
+@pytest.mark.parametrize("scheduler", [None, "local"])
+def test_workers_run_kernels_on_one_thread_and_the_callers_process_is_untouched(clips, tmp_path, scheduler):
+    """The local pool's workers (processes of their own) set numba's threads to 1; a Dask LocalCluster with
+    processes=False runs its workers as threads of this process, which must keep numba's setting and
+    environment as they were (the reverted a6aa675 leaked NUMBA_NUM_THREADS=1 into it)."""
+    numba = pytest.importorskip("numba")
+    if scheduler:
+        pytest.importorskip("distributed")
+    import usdhands.jobs.batch as batch
+
+    threads, env = numba.get_num_threads(), dict(os.environ)
+    report = run_batch([clips / "ok_00.glb"], BatchOptions(
+        job="synthesize", out=tmp_path / "out", workers=1, scheduler=scheduler, dask_processes=False,
+        job_options=usdhands.SynthesizeOptions(k=3)))
+    assert [c.status for c in report.clips] == ["done"]
+    assert numba.get_num_threads() == threads and dict(os.environ) == env
+    assert batch._own_worker_process is False
+    if scheduler is None:
+        from usdhands.jit import kernel_threads
+
+        with batch._pool(1, "convert", usdhands.ConvertOptions()) as pool:
+            assert pool.submit(kernel_threads).result() == 1

@@ -31,7 +31,8 @@ import tempfile
 from pathlib import Path
 from typing import Callable, Iterator
 
-__all__ = ["njit", "kernel_cache_dir", "user_cache_dir", "compile_listener"]  # and prange, numba's own
+__all__ = ["njit", "kernel_cache_dir", "user_cache_dir", "compile_listener", "kernel_threads",
+           "set_kernel_threads"]  # and prange, numba's own
 
 _writable: dict[Path, bool] = {}
 
@@ -105,6 +106,25 @@ def __getattr__(name: str):
 
         return numba.prange
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def kernel_threads() -> int:
+    """How many threads numba's parallel kernels use when called from this thread."""
+    import numba
+
+    return int(numba.get_num_threads())
+
+
+def set_kernel_threads(n: int) -> None:
+    """Parallel kernels called from **this thread** use at most ``n`` threads (numba's
+    ``set_num_threads``: per thread, no environment variable, nothing else changed).
+
+    For batch workers, which run one clip per core: the kernels' own threads would fight
+    over the same cores. Library code running in a caller's process must not call it.
+    """
+    import numba
+
+    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
 
 
 _listeners: list[Callable[[str], None]] = []

@@ -22,6 +22,11 @@
   once, each alone, so a clip that kills its worker is the only one to fail.
 - Start-up is paid once per worker, and the database loaded once per worker
   (:func:`usdhands.jobs.inputs.cached_database`).
+- A worker in a process of its own (the local pool's, a Dask worker process) runs numba's
+  parallel kernels on one thread (:func:`usdhands.jit.set_kernel_threads`): one clip per
+  core, not every clip's kernel threads fighting over all cores. The caller's process is
+  never changed: Dask workers that are threads of the caller (``LocalCluster(processes=False)``)
+  keep numba's default, and no environment variable is set anywhere.
 - ``scheduler``: None for a local process pool (``workers`` processes), ``"local"`` for a
   ``dask.distributed.LocalCluster`` of ``workers`` processes, or a scheduler address
   (``tcp://host:8786``) to send the clips to an existing Dask cluster (``pip install
@@ -314,9 +319,34 @@ def _write_json(path: Path, obj) -> None:
 
 
 # ----------------------------------------------------------------------------- one clip, in a worker
+#: True only in a worker process of its own (set by :func:`become_worker_process`), never in the caller's
+_own_worker_process = False
+
+
+def become_worker_process() -> None:
+    """Mark this process as a batch worker of its own: its clips run numba's kernels on one thread.
+
+    Called by the local pool's initializer (a fresh forkserver/spawn process) and by the Dask
+    worker plugin when the worker is not in the caller's process; never in the caller's.
+    """
+    global _own_worker_process
+    _own_worker_process = True
+    _one_kernel_thread()
+
+
+def _one_kernel_thread() -> None:
+    """In a worker process of its own: this thread's kernels on one thread (numba's setting is per thread,
+    and Dask runs tasks on threads of its own)."""
+    if _own_worker_process:
+        from usdhands.jit import set_kernel_threads
+
+        set_kernel_threads(1)
+
+
 def run_clip(job: str, job_options, model: Path | None, src: Path, dst: Path) -> ClipRecord:
     """Run one job on one clip in this process; never raises for a bad clip (a ``failed`` record)."""
     start = time.perf_counter()
+    _one_kernel_thread()
     try:
         dst.parent.mkdir(parents=True, exist_ok=True)
         module, function, _ = JOBS[job]
@@ -338,6 +368,12 @@ def run_clip(job: str, job_options, model: Path | None, src: Path, dst: Path) ->
     seconds = time.perf_counter() - start
     return ClipRecord(str(src), str(dst), "failed" if error else "done", round(seconds, 4),
                       None if error is None else error.splitlines()[0])
+
+
+def _start_pool_worker(job: str, job_options) -> None:
+    """The local pool's initializer: runs in each fresh worker process only."""
+    become_worker_process()
+    _warm_worker(job, job_options)
 
 
 def _warm_worker(job: str, job_options) -> None:
@@ -381,7 +417,7 @@ def _pool(workers: int, job: str, job_options) -> ProcessPoolExecutor:
     # forkserver/spawn: a fresh interpreter per worker (fork would copy the parent's threads and locks)
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
-                               initializer=_warm_worker, initargs=(job, job_options))
+                               initializer=_start_pool_worker, initargs=(job, job_options))
 
 
 # ----------------------------------------------------------------------------- Dask
@@ -406,6 +442,9 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
                 client = stack.enter_context(Client(options.scheduler, timeout="10s"))
             except (OSError, TimeoutError) as e:
                 raise UsdHandsError(f"cannot reach the Dask scheduler {options.scheduler}: {e}") from None
+        from usdhands.jobs.dask_worker import OwnProcessWorker
+
+        client.register_plugin(OwnProcessWorker())
         client.run(_warm_worker, job, job_options)
         futures = {client.submit(run_clip, job, job_options, model, src, dst, pure=False): (src, dst)
                    for src, dst in todo}
