@@ -180,3 +180,87 @@ def test_workers_run_kernels_on_one_thread_and_the_callers_process_is_untouched(
 
         with batch._pool(1, "convert", usdhands.ConvertOptions()) as pool:
             assert pool.submit(kernel_threads).result() == 1
+
+
+def test_a_clip_that_kills_its_worker_is_retried_once_then_failed_and_the_others_are_done(clips, tmp_path):
+    """``tests/batch_dying_job.py`` ends the worker process (os._exit) on clips named die*: the pool
+    breaks and every clip in flight is retried once, alone; the killer fails, the others are done."""
+    for name in ("die_00.glb", "die_01.glb"):
+        shutil.copy(clips / "ok_00.glb", clips / name)
+    (clips / "sub" / "broken.glb").unlink()
+    out = tmp_path / "out"
+    report = run_batch([clips], BatchOptions(job="batch_dying_job:convert_or_die", out=out, workers=2,
+                                             job_options=usdhands.ConvertOptions()))
+    assert _statuses(report) == {"die_00.glb": "failed", "die_01.glb": "failed", "ok_00.glb": "done",
+                                 "ok_01.glb": "done", "sub/attention_00.glb": "done"}
+    failed = [c for c in report.clips if c.status == "failed"]
+    assert all(c.error == "the worker process died on this clip (retried once, alone)" for c in failed)
+    usdhands.convert(clips / "ok_01.glb", tmp_path / "alone.glb")
+    assert (out / "ok_01.glb").read_bytes() == (tmp_path / "alone.glb").read_bytes()
+    assert not (out / "die_00.glb").exists()
+    assert json.loads((out / "report.json").read_text())["failed"] == 2
+
+
+@pytest.fixture()
+def dask_cluster(tmp_path):
+    """``dask scheduler`` and ``dask worker`` (2 worker processes, 1 thread each) as subprocesses on a free
+    port: the address. The scheduler retries a task whose worker died once (allowed-failures 1) and
+    sends each worker one task at a time, so a death counts against the clip that caused it."""
+    pytest.importorskip("distributed")
+    import socket
+    import subprocess
+    import sys
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    here = os.path.dirname(os.path.abspath(__file__))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([os.path.dirname(here), here, os.environ.get("PYTHONPATH", "")]),
+               DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES="1",
+               DASK_DISTRIBUTED__SCHEDULER__WORKER_SATURATION="1.0")
+    address = f"tcp://127.0.0.1:{port}"
+    log = open(tmp_path / "dask.log", "w")
+    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", str(port),
+                               "--no-dashboard"], env=env, stdout=log, stderr=log, cwd=tmp_path)]
+    procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--nworkers", "2", "--nthreads",
+                                   "1", "--no-dashboard", "--local-directory", str(tmp_path / "dask")],
+                                  env=env, stdout=log, stderr=log, cwd=tmp_path))
+    try:
+        from distributed import Client
+
+        with Client(address, timeout="60s") as client:
+            client.wait_for_workers(2, timeout=180)
+        yield address
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+        log.close()
+
+
+def test_remote_scheduler_runs_the_batch_and_a_killer_clip_fails_alone(clips, tmp_path, dask_cluster):
+    shutil.copy(clips / "ok_00.glb", clips / "die_00.glb")
+    (clips / "sub" / "broken.glb").unlink()
+    out = tmp_path / "out"
+    report = run_batch([clips], BatchOptions(job="batch_dying_job:convert_or_die", out=out, workers=2,
+                                             scheduler=dask_cluster, job_options=usdhands.ConvertOptions()))
+    assert _statuses(report) == {"die_00.glb": "failed", "ok_00.glb": "done", "ok_01.glb": "done",
+                                 "sub/attention_00.glb": "done"}
+    assert next(c for c in report.clips if c.status == "failed").error.startswith("KilledWorker")
+    usdhands.convert(clips / "sub" / "attention_00.glb", tmp_path / "alone.glb")
+    assert (out / "sub" / "attention_00.glb").read_bytes() == (tmp_path / "alone.glb").read_bytes()
+    # the workers are processes of their own: the plugin made them run kernels on one thread
+    from distributed import Client
+
+    with Client(dask_cluster, timeout="60s") as client:
+        flags = client.run(lambda: __import__("usdhands.jobs.batch").jobs.batch._own_worker_process)
+    assert sorted(flags.values()) == [True, True]
+    # and through the command line, with --scheduler ADDRESS
+    code = usdhands.cli.main(["batch", str(clips / "ok_01.glb"), "--job", "convert", "--to", "usda",
+                              "--out", str(tmp_path / "cli"), "--scheduler", dask_cluster])
+    assert code == 0 and (tmp_path / "cli" / "ok_01.usda").stat().st_size > 0

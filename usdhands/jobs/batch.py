@@ -35,7 +35,9 @@
 - ``correct`` (and ``check`` with ``props``): a changed prop file reruns every clip, as a
   changed option does.
 
-Adding a job: an entry in :data:`JOBS` naming its module, function and options class.
+Adding a job: an entry in :data:`JOBS` naming its module, function and options class. A
+pipeline's own job runs without one: ``job="package.module:function"``, a function
+``(source, output, options)`` importable in the workers, with ``job_options`` given.
 """
 
 from __future__ import annotations
@@ -163,10 +165,13 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
         No inputs, an unknown job, bad options, or Dask missing for a ``scheduler``; a
         failing clip does not raise (it is recorded).
     """
-    if options.job not in JOBS:
-        raise UsdHandsError(f"unknown job {options.job!r}; expected one of {', '.join(JOBS)}")
+    if options.job not in JOBS and not _own_job(options.job):
+        raise UsdHandsError(f"unknown job {options.job!r}; expected one of {', '.join(JOBS)} "
+                            f"or package.module:function")
     if options.workers < 1:
         raise UsdHandsError(f"--workers must be at least 1, got {options.workers}")
+    if options.job_options is None and options.job not in JOBS:
+        raise UsdHandsError(f"job {options.job}: give its options (job_options)")
     job_options = options.job_options if options.job_options is not None else _options_class(options.job)()
     if options.job == "expand" and options.model is None:
         raise UsdHandsError("--job expand needs --model MODEL.json")
@@ -266,6 +271,20 @@ def output_name(rel: Path, options: BatchOptions) -> Path:
     return rel
 
 
+def _own_job(job: str) -> bool:
+    """``package.module:function``: a pipeline's own job."""
+    module, colon, function = job.partition(":")
+    return bool(colon) and all(part.isidentifier() for part in module.split(".") + [function])
+
+
+def _job_function(job: str):
+    if job in JOBS:
+        module, function, _ = JOBS[job]
+        return getattr(importlib.import_module(f"usdhands.jobs.{module}"), function)
+    module, _, function = job.partition(":")
+    return getattr(importlib.import_module(module), function)
+
+
 def _options_class(job: str):
     module, _, cls = JOBS[job]
     return getattr(importlib.import_module(f"usdhands.jobs.{module}"), cls)
@@ -349,8 +368,7 @@ def run_clip(job: str, job_options, model: Path | None, src: Path, dst: Path) ->
     _one_kernel_thread()
     try:
         dst.parent.mkdir(parents=True, exist_ok=True)
-        module, function, _ = JOBS[job]
-        run = getattr(importlib.import_module(f"usdhands.jobs.{module}"), function)
+        run = _job_function(job)
         error = None
         if job == "expand":
             run(src, model, dst, job_options)
@@ -378,8 +396,8 @@ def _start_pool_worker(job: str, job_options) -> None:
 
 def _warm_worker(job: str, job_options) -> None:
     """Worker start-up: import the job's module and load the database once."""
-    module = JOBS[job][0]
-    importlib.import_module(f"usdhands.jobs.{module}")
+    with contextlib.suppress(ImportError, AttributeError):  # a failing import is each clip's error
+        _job_function(job)
     if job == "synthesize":
         from usdhands.jobs.inputs import cached_database
 
@@ -401,14 +419,43 @@ def _run_local(todo, task, workers: int, report) -> None:
                     report(f.result())
                 except BrokenProcessPool:
                     broken.append((src, dst))
-    # clips in flight when a worker died: retried once, each alone, so only a clip that kills
-    # its worker again fails
-    for src, dst in broken:
-        with _pool(1, job, job_options) as pool:
-            try:
-                report(pool.submit(run_clip, job, job_options, model, src, dst).result())
-            except BrokenProcessPool:
-                report(ClipRecord(str(src), str(dst), "failed", 0.0, "the worker process died (twice) on this clip"))
+    if broken:
+        _retry_alone(broken, task, workers, report)
+
+
+def _retry_alone(clips, task, workers: int, report) -> None:
+    """The clips a dead worker took down, retried once, each alone in a process of its own.
+
+    A dead worker breaks the whole pool, so the clip that killed it cannot be told from the
+    others in flight. Here up to ``workers`` single-process pools run one clip at a time: a
+    clip that kills its process again is the one at fault and fails; only that pool is
+    replaced.
+    """
+    job, job_options, model = task
+    queue = list(clips)
+    slots: dict = {}  # future -> (pool, src, dst)
+    idle: list = []
+    try:
+        while queue or slots:
+            while queue and len(slots) < workers:
+                src, dst = queue.pop(0)
+                pool = idle.pop() if idle else _pool(1, job, job_options)
+                slots[pool.submit(run_clip, job, job_options, model, src, dst)] = (pool, src, dst)
+            done, _ = wait(slots, return_when=FIRST_COMPLETED)
+            for f in done:
+                pool, src, dst = slots.pop(f)
+                try:
+                    report(f.result())
+                    idle.append(pool)
+                except BrokenProcessPool:
+                    pool.shutdown(wait=False)
+                    report(ClipRecord(str(src), str(dst), "failed", 0.0,
+                                      "the worker process died on this clip (retried once, alone)"))
+    finally:
+        for pool, _, _ in slots.values():
+            pool.shutdown(wait=False, cancel_futures=True)
+        for pool in idle:
+            pool.shutdown(wait=True)
 
 
 def _pool(workers: int, job: str, job_options) -> ProcessPoolExecutor:
@@ -429,9 +476,11 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
         raise UsdHandsError("--scheduler needs Dask: pip install 'usdhands[dask]'") from None
     job, job_options, model = task
     with contextlib.ExitStack() as stack:
-        # a worker that dies is retried once by the scheduler (a local one: this setting; a
-        # remote one: its own distributed.scheduler.allowed-failures)
-        stack.enter_context(dask.config.set({"distributed.scheduler.allowed-failures": 1}))
+        # a worker that dies is retried once by the scheduler (a local one: these settings; a
+        # remote one: its own distributed.scheduler.allowed-failures); one task at a time per
+        # worker thread, so a death counts against the clip that caused it and no other
+        stack.enter_context(dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                                             "distributed.scheduler.worker-saturation": 1.0}))
         if options.scheduler == "local":
             cluster = stack.enter_context(LocalCluster(
                 n_workers=options.workers, threads_per_worker=1, processes=options.dask_processes,
