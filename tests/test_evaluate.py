@@ -289,3 +289,21 @@ def test_evaluate_predictors_reports_progress_per_predictor(gesture_files):
     shares = evaluate_predictors(es, DEFAULT_PREDICTORS[:3], 5, progress=lambda *a: calls.append(a))["predictors"]
     assert calls == [(i + 1, 3, p) for i, p in enumerate(DEFAULT_PREDICTORS[:3])]
     assert shares == evaluate_predictors(es, DEFAULT_PREDICTORS[:3], 5)["predictors"]
+
+
+def test_evaluate_job_reports_what_the_command_prints(gesture_files, capsys):
+    """The command parses, calls the evaluate job and prints: the same JSON for leave-one-out and holdout."""
+    from usdhands.jobs.evaluation import EvaluateOptions, evaluate
+
+    folder, paths = gesture_files
+    status, out, err = _run(capsys, "evaluate", *paths, "--labels", r"^([a-z]+)_\d+", "--json",
+                            "--predictors", "wrist_rot,wrist_pos+0.5rot")
+    assert status == 0, err
+    result = evaluate(paths, EvaluateOptions(labels=r"^([a-z]+)_\d+", predictors=("wrist_rot", "wrist_pos+0.5rot")))
+    assert result.analysis == "leave-one-out" and result.clips == len(paths)
+    assert json.loads(json.dumps(result.to_json())) == json.loads(out)
+    status, out, err = _run(capsys, "evaluate", "--holdout", *paths[:4], "--json", "--k", "2")
+    assert status == 0, err
+    held = evaluate(paths[:4], EvaluateOptions(holdout=True, k=2))
+    assert held.analysis == "holdout" and json.loads(json.dumps(held.to_json())) == json.loads(out)
+    assert capsys.readouterr().out == ""  # the job prints nothing

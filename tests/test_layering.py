@@ -42,7 +42,7 @@ def test_layer_imports_only_layers_below(layer, forbidden):
 
 
 #: commands backed by a job: they parse, call the job and print
-JOB_COMMANDS = ("synthesize", "splice", "reduce", "expand", "convert", "check", "correct")
+JOB_COMMANDS = ("synthesize", "splice", "reduce", "expand", "convert", "check", "correct", "evaluate")
 
 
 @pytest.mark.parametrize("command", JOB_COMMANDS)

@@ -12,7 +12,7 @@ The jobs, one call per capability (see :mod:`usdhands.jobs`)::
     result = usdhands.synthesize("take.usda", "take_fingers.usda", usdhands.SynthesizeOptions(k=8))
     print(result.to_json())
 
-``usdhands.synthesize``, ``splice``, ``reduce``, ``expand``, ``convert``, ``check``, ``correct`` and
+``usdhands.synthesize``, ``splice``, ``reduce``, ``expand``, ``convert``, ``check``, ``correct``, ``evaluate`` and
 their ``...Options`` / ``...Result`` classes are loaded on first use; so is
 :mod:`usdhands.usd`, the same jobs on an open ``Usd.Stage``.
 
@@ -34,7 +34,7 @@ _LAZY_JOBS = (
     "synthesize", "SynthesizeOptions", "SynthesizeResult", "splice", "SpliceOptions", "SpliceResult",
     "reduce", "ReduceOptions", "ReduceResult", "expand", "ExpandOptions", "ExpandResult",
     "convert", "ConvertOptions", "ConvertResult", "check", "CheckOptions", "CheckResult",
-    "correct", "CorrectOptions", "CorrectResult",
+    "correct", "CorrectOptions", "CorrectResult", "evaluate", "EvaluateOptions", "EvaluateResult",
 )
 
 

@@ -156,20 +156,3 @@ def add_prop_arguments(p, required: bool, margin: bool = True) -> None:
                    help="up axis of the prop files (default: what the file says; OBJ, STL, PLY, OFF: Y)")
     p.add_argument("--interaction-config", type=Path, default=None, metavar="JSON",
                    help="finger radii, joint limits and smoothing (schemas/interaction_config.schema.json)")
-
-
-def write_plots(folder, plotters) -> list:
-    """Run ``plotters`` (pairs of a plot function of no argument but the PNG path, and a
-    file name) into ``folder``, created if missing; the paths written, or [] with no folder."""
-    if folder is None:
-        return []
-    folder.mkdir(parents=True, exist_ok=True)
-    return [plot(folder / name) for plot, name in plotters]
-
-
-def print_json_with_plots(result: dict, written: list) -> None:
-    """``result`` as JSON, with the plots written (if any) under ``"plots"``."""
-    out = dict(result)
-    if written:
-        out["plots"] = [str(w) for w in written]
-    print_json(out)

@@ -59,7 +59,7 @@ def run_build(args) -> int:
     check_fps(args.fps)
     from usdhands.algorithms.synthesis.database import DatabaseClip, build_database, save_database
     from usdhands.jobs.inputs import (
-        expand_inputs, labeller, load_config, read_labelled, sample_database_items,
+        expand_inputs, labeller, load_config, read_labelled, sample_database_items, still_hands,
     )
 
     if args.samples and args.inputs:
@@ -96,7 +96,7 @@ def run_build(args) -> int:
                       f"(penetration {summary['penetration_before_mm']['max']:.2f} -> {after['max']:.2f} mm)",
                       file=sys.stderr)
             items.append(DatabaseClip(clip, handmap, label, str(p)))
-            still = _still_hands(clip, handmap)
+            still = still_hands(clip, handmap)
             if still and len(still) == sum(1 for h in handmap.sides if h.finger_joints):  # one idle hand is normal
                 where = f"{p} (animation {clip.name!r})" if args.animation == "all" else str(p)
                 print(f"usdhands: warning: {where}: the {' and '.join(still)} hand's fingers never move (a body-only "
@@ -129,18 +129,6 @@ def _read_all_animations(paths, label_of, handmap_path, progress):
                         else handmap_for(clip, p, handmap_path)))
         progress(i + 1, len(paths), p.name)
     return out
-
-
-def _still_hands(clip, handmap, tolerance_deg: float = 0.5) -> list[str]:
-    """Sides whose finger joints turn by less than ``tolerance_deg`` over the whole clip."""
-    from usdhands.model.rotations import quat_angle_deg
-
-    still = []
-    for hand in handmap.sides:
-        joints = [clip.skeleton.index(j) for j in hand.finger_joints]
-        if joints and quat_angle_deg(clip.rotations[:, joints], clip.rotations[:1, joints]).max() < tolerance_deg:
-            still.append(hand.side)
-    return still
 
 
 def _print_summary(db, path) -> None:

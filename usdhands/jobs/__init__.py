@@ -15,6 +15,7 @@ expand             ``expand(source, model, output, options)``            ExpandO
 convert            ``convert(source, output, options)``                  ConvertOptions/Result
 check              ``check(paths, options)`` (writes nothing)            CheckOptions/Result
 correct            ``correct(source, output, options)``                  CorrectOptions/Result
+evaluate           ``evaluate(inputs, options)`` (writes only plots)     EvaluateOptions/Result
 =================  ====================================================  =====================
 
 Adding a job (the pattern): a module named for what it does (``usdhands/jobs/correction.py``: a
@@ -43,6 +44,7 @@ JOBS = {
     "convert": "conversion", "ConvertOptions": "conversion", "ConvertResult": "conversion",
     "check": "validation", "CheckOptions": "validation", "CheckResult": "validation",
     "correct": "correction", "CorrectOptions": "correction", "CorrectResult": "correction",
+    "evaluate": "evaluation", "EvaluateOptions": "evaluation", "EvaluateResult": "evaluation",
 }
 
 __all__ = sorted(JOBS)

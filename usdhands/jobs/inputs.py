@@ -207,3 +207,15 @@ def cached_database(path: Path | None = None):
     db = load_database(folder, check_schema=False) if bundled else load_database(folder)
     _DATABASES[key] = (stamp, db)
     return db
+
+
+def still_hands(clip, handmap, tolerance_deg: float = 0.5) -> list[str]:
+    """Sides whose finger joints turn by less than ``tolerance_deg`` over the whole clip."""
+    from usdhands.model.rotations import quat_angle_deg
+
+    still = []
+    for hand in handmap.sides:
+        joints = [clip.skeleton.index(j) for j in hand.finger_joints]
+        if joints and quat_angle_deg(clip.rotations[:, joints], clip.rotations[:1, joints]).max() < tolerance_deg:
+            still.append(hand.side)
+    return still
