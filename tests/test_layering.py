@@ -42,7 +42,7 @@ def test_layer_imports_only_layers_below(layer, forbidden):
 
 
 #: commands backed by a job: they parse, call the job and print
-JOB_COMMANDS = ("synthesize", "splice", "reduce", "expand", "convert", "check", "correct", "evaluate")
+JOB_COMMANDS = ("synthesize", "splice", "reduce", "expand", "convert", "check", "correct", "evaluate", "db")
 
 
 @pytest.mark.parametrize("command", JOB_COMMANDS)
@@ -50,6 +50,13 @@ def test_job_commands_only_parse_call_a_job_and_print(command):
     mods = imported_modules(PKG / "commands" / f"{command}.py")
     assert any(m.startswith("usdhands.jobs.") for m in mods)
     assert sorted(m for m in mods if m.startswith(("usdhands.algorithms", "usdhands.formats", "pxr"))) == []
+
+
+def test_no_command_imports_the_algorithms():
+    """Every command, job-backed or not, reaches the methods through a job (usdhands/jobs)."""
+    bad = [f"{path.name} imports {m}" for path in sorted((PKG / "commands").glob("*.py"))
+           for m in imported_modules(path) if m == "usdhands.algorithms" or m.startswith("usdhands.algorithms.")]
+    assert bad == []
 
 
 def test_algorithms_are_rooms_by_method():

@@ -192,7 +192,7 @@ def _no_progress(done: int, total: int, what: str = "") -> None:
 
 def _items(inputs, options: EvaluateOptions, progress):
     """``(path, label, clip, handmap)`` for every clip evaluated."""
-    from usdhands.jobs.inputs import expand_inputs, labeller, read_labelled, sample_database_items
+    from usdhands.jobs.inputs import expand_inputs, labeller, read_labelled, sample_database_items, stage_progress
 
     if options.samples:
         if inputs:
@@ -205,16 +205,12 @@ def _items(inputs, options: EvaluateOptions, progress):
     if not synth and not (options.labels or options.labels_file):
         raise UsdHandsError("evaluate needs --labels REGEX or --labels-file CSV (or --holdout, --folds K)")
     return read_labelled(paths, labeller(options.labels, options.labels_file), options.fps, options.handmap,
-                         options.animation, _labelled(progress, "reading"), fingerless=not synth)
-
-
-def _labelled(progress, label: str):
-    """``progress`` with ``what`` prefixed by the stage (reading, leave-one-out, ...)."""
-    return lambda done, total, what="": progress(done, total, f"{label}: {what}" if what else label)
+                         options.animation, stage_progress(progress, "reading"), fingerless=not synth)
 
 
 def _leave_one_out(options: EvaluateOptions, items, cfg, predictors, progress) -> EvaluateResult:
     from usdhands.algorithms.synthesis.evaluation import evaluate_predictors, prepare_eval_set
+    from usdhands.jobs.inputs import stage_progress
 
     k = 5 if options.k is None else options.k
     unlabeled = [str(p) for p, lab, _, _ in items if lab is None]
@@ -230,7 +226,7 @@ def _leave_one_out(options: EvaluateOptions, items, cfg, predictors, progress) -
     try:
         es = prepare_eval_set([(lab, clip, hm) for _, lab, clip, hm in items], cfg, options.fps,
                               predictors=predictors, trim_rest=not options.keep_rest)
-        result = evaluate_predictors(es, predictors, k, cfg, progress=_labelled(progress, "leave-one-out"))
+        result = evaluate_predictors(es, predictors, k, cfg, progress=stage_progress(progress, "leave-one-out"))
     except ValueError as e:
         raise UsdHandsError(str(e)) from None
     result["idle_hands"] = [f"{c}:{s}" for c, s in es.idle]
@@ -283,19 +279,21 @@ def _database_items(items, flag: str, warnings: list) -> list:
 def _holdout(options: EvaluateOptions, dbitems, cfg, clips: int, warnings, progress) -> EvaluateResult:
     from usdhands.algorithms.synthesis.database import build_database
     from usdhands.algorithms.synthesis.evaluation import holdout_evaluation
+    from usdhands.jobs.inputs import stage_progress
 
     db = build_database(dbitems, fps=options.fps or 30.0, segmentation=cfg.segmentation)
     result = {"k": cfg.segment_cost.k, **holdout_evaluation(db, cfg, seed=options.seed,
-                                                             progress=_labelled(progress, "holdout"))}
+                                                             progress=stage_progress(progress, "holdout"))}
     return EvaluateResult("holdout", result, clips, (), tuple(warnings))
 
 
 def _folds(options: EvaluateOptions, dbitems, cfg, feature_sets, clips: int, warnings, progress) -> EvaluateResult:
     from usdhands.algorithms.synthesis.kfold import kfold_evaluation
+    from usdhands.jobs.inputs import stage_progress
 
     try:
         result = kfold_evaluation(dbitems, cfg, options.folds, fps=options.fps or 30.0, feature_sets=feature_sets,
-                                  seed=options.seed, progress=_labelled(progress, "k-fold"))
+                                  seed=options.seed, progress=stage_progress(progress, "k-fold"))
     except ValueError as e:
         raise UsdHandsError(str(e)) from None
     plots = []

@@ -219,3 +219,8 @@ def still_hands(clip, handmap, tolerance_deg: float = 0.5) -> list[str]:
         if joints and quat_angle_deg(clip.rotations[:, joints], clip.rotations[:1, joints]).max() < tolerance_deg:
             still.append(hand.side)
     return still
+
+
+def stage_progress(progress, stage: str):
+    """``progress(done, total, what)`` with ``what`` prefixed by ``stage`` (reading, building, ...)."""
+    return lambda done, total, what="": progress(done, total, f"{stage}: {what}" if what else stage)
