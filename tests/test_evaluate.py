@@ -307,3 +307,22 @@ def test_evaluate_job_reports_what_the_command_prints(gesture_files, capsys):
     held = evaluate(paths[:4], EvaluateOptions(holdout=True, k=2))
     assert held.analysis == "holdout" and json.loads(json.dumps(held.to_json())) == json.loads(out)
     assert capsys.readouterr().out == ""  # the job prints nothing
+
+
+def test_db_build_job_writes_the_commands_folder(gesture_files, capsys, tmp_path):
+    from usdhands.jobs.database import BuildDbOptions, build_db, database_info
+
+    folder, paths = gesture_files
+    status, out, err = _run(capsys, "db", "build", *paths[:4], "-o", tmp_path / "cli", "--labels", r"^([a-z]+)_",
+                            "--mirror", "--json")
+    assert status == 0, err
+    summary = build_db(paths[:4], tmp_path / "job", BuildDbOptions(labels=r"^([a-z]+)_", mirror=True))
+    cli_files = sorted(p.name for p in (tmp_path / "cli").iterdir())
+    assert cli_files == sorted(p.name for p in (tmp_path / "job").iterdir()) and "manifest.json" in cli_files
+    for name in cli_files:
+        assert (tmp_path / "cli" / name).read_bytes() == (tmp_path / "job" / name).read_bytes(), name
+    assert json.loads(out) == json.loads(json.dumps(summary.to_json()).replace(str(tmp_path / "job"),
+                                                                               str(tmp_path / "cli")))
+    info = database_info(tmp_path / "job")
+    assert info.manifest == summary.manifest
+    assert sum(left + right for _, left, right in info.segments_by_label) == summary.counts["segments"]
