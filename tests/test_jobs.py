@@ -154,3 +154,17 @@ def test_correct_job_without_props_is_refused(correct_scene, tmp_path):
     with pytest.raises(UsdHandsError, match="--props: name at least one prop"):
         usdhands.correct(correct_scene / "closing.usda", tmp_path / "o.usda")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_inspect_and_handmap_jobs_report_what_the_commands_print(ok_glb, dirs, capsys):
+    from usdhands.jobs.hand_mapping import HandMapOptions, map_hands
+    from usdhands.jobs.inspection import inspect_file
+
+    a, b = dirs
+    assert _cli(capsys, "inspect", ok_glb, "--json") == inspect_file(ok_glb).to_json()
+    cli = _cli(capsys, "handmap", ok_glb, "-o", a / "hands.json", "--json")
+    result = map_hands(ok_glb, b / "hands.json", HandMapOptions())
+    assert (a / "hands.json").read_bytes() == (b / "hands.json").read_bytes()
+    assert cli == result.to_json() and result.source == "detected" and result.written == (b / "hands.json",)
+    with pytest.raises(UsdHandsError, match="--write-schema needs a USD input"):
+        map_hands(ok_glb, options=HandMapOptions(), schema_output=b / "x.usda")

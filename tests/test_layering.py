@@ -41,8 +41,13 @@ def test_layer_imports_only_layers_below(layer, forbidden):
     assert bad == []
 
 
-#: commands backed by a job: they parse, call the job and print
-JOB_COMMANDS = ("synthesize", "splice", "reduce", "expand", "convert", "check", "correct", "evaluate", "db")
+#: every command: they parse, call a job and print (usd_plugin calls the schema plugin's registration)
+JOB_COMMANDS = tuple(sorted(p.stem for p in (PKG / "commands").glob("*.py")
+                            if p.stem not in ("__init__", "_common", "usd_plugin")))
+
+
+def test_every_command_is_backed_by_a_job():
+    assert {"synthesize", "correct", "evaluate", "db", "inspect", "handmap", "samples", "batch"} <= set(JOB_COMMANDS)
 
 
 @pytest.mark.parametrize("command", JOB_COMMANDS)

@@ -10,10 +10,6 @@ import time
 from pathlib import Path
 from typing import Iterator, Sequence
 
-# the option checks live in the jobs layer; commands import them from here too
-from usdhands.jobs.option_checks import MAX_FPS, check_fps, check_seed, parse_list  # noqa: F401
-
-
 _quiet = False
 
 

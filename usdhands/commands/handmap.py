@@ -3,17 +3,10 @@ skeleton, as a table or JSON, or authored on a USD Skeleton as ``UsdHandsHandMap
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
-from usdhands.commands._common import print_json, print_table
-from usdhands.commands._common import add_layer_argument
-from usdhands.jobs.outputs import MAIN_INPUT, USD_LAYER_SUFFIXES, check_paths, layer_options
-from usdhands.errors import AssetReadError, NoSkeletonError, UsdHandsError
-from usdhands.formats.hands import hands_for
-from usdhands.formats.io import read_asset
-from usdhands.formats.registry import atomic_output
+from usdhands.commands._common import add_layer_argument, print_json, print_table
 from usdhands.model.handmap import FINGERS, SIDES, HandMap
 from usdhands.model.skeleton import display_joint_names, short_joint_name
 
@@ -42,23 +35,6 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _pick_skeleton(asset, path: Path, animation, skeleton):
-    if not asset.skeletons:
-        raise NoSkeletonError("no skeleton in file", path=path)
-    if animation is not None:
-        try:
-            return asset.clip(animation).skeleton
-        except KeyError as e:
-            raise AssetReadError(str(e.args[0]).split(": ", 1)[-1], path=path) from None
-    if skeleton is None:
-        return asset.skeletons[0]
-    for i, sk in enumerate(asset.skeletons):
-        if sk.name == skeleton or short_joint_name(sk.name) == skeleton or str(i) == str(skeleton):
-            return sk
-    names = ", ".join(repr(s.name) for s in asset.skeletons)
-    raise AssetReadError(f"no skeleton named {skeleton!r}; there are {names}", path=path)
-
-
 def handmap_rows(hm: HandMap, joint_names=()) -> list[tuple]:
     """Table rows ``(side, part, joints)`` with short joint names where they are unambiguous among ``joint_names``."""
     shown = display_joint_names(joint_names)
@@ -78,43 +54,21 @@ def handmap_rows(hm: HandMap, joint_names=()) -> list[tuple]:
 
 
 def run(args) -> int:
-    check_paths({MAIN_INPUT: args.file, "--handmap": args.handmap},
-                {"-o": args.output, "--write-schema": args.write_schema})
-    if args.write_schema is not None:
-        _check_schema_output(args)
-    elif args.layer:
-        raise UsdHandsError("--as-layer goes with --write-schema OUT", path=args.file)
-    asset = read_asset(args.file)
-    sk = _pick_skeleton(asset, args.file, args.animation, args.skeleton)
-    hm, source = hands_for(args.file, sk, args.handmap, side_hint=args.side)
+    from usdhands.jobs.hand_mapping import HandMapOptions, map_hands
+
+    options = HandMapOptions(animation=args.animation, skeleton=args.skeleton, side=args.side, handmap=args.handmap,
+                             as_layer=args.layer)
+    result = map_hands(args.file, args.output, options, schema_output=args.write_schema)
     origin = {"override": f"from {args.handmap}", "file": "recorded in the file (UsdHandsHandMapAPI)",
-              "detected": "detected"}[source]
-    data = {"skeleton": sk.name, **hm.to_dict()}
-    if args.output is not None:
-        with atomic_output(args.output) as tmp:
-            tmp.write_text(json.dumps(data, indent=2) + "\n", encoding="utf-8")
+              "detected": "detected"}[result.source]
     if args.json:
-        print_json({"file": str(args.file), "source": source, "num_joints": sk.num_joints, **data})
+        print_json(result.to_json())
     else:
-        print(f"{args.file}: skeleton {sk.name!r}, {sk.num_joints} joints; hands {origin}")
-        print_table(handmap_rows(hm, sk.joint_names), ["side", "part", "joints (proximal to distal)"])
+        print(f"{args.file}: skeleton {result.skeleton!r}, {result.num_joints} joints; hands {origin}")
+        print_table(handmap_rows(result.handmap, result.joint_names), ["side", "part", "joints (proximal to distal)"])
     if args.output is not None:
         print(f"wrote {args.output}", file=sys.stderr)
     if args.write_schema is not None:
-        from usdhands.formats.usd_write import write_usd_hand_map
-
-        with atomic_output(args.write_schema) as tmp:
-            write_usd_hand_map(args.file, sk.name, hm, tmp, final_path=args.write_schema, as_layer=args.layer)
-        print(f"wrote {args.write_schema}: UsdHandsHandMapAPI on {sk.name}"
+        print(f"wrote {args.write_schema}: UsdHandsHandMapAPI on {result.skeleton}"
               f"{' (a layer over ' + str(args.file) + ')' if args.layer else ''}", file=sys.stderr)
     return 0
-
-
-def _check_schema_output(args) -> None:
-    """``--write-schema`` needs USD in and out (checked before any work)."""
-    if args.file.suffix.lower() not in USD_LAYER_SUFFIXES + (".usdz",):
-        raise UsdHandsError("--write-schema needs a USD input (the schema is authored on its Skeleton prim)",
-                            path=args.file)
-    if args.write_schema.suffix.lower() not in USD_LAYER_SUFFIXES:
-        raise UsdHandsError("--write-schema needs a USD output (.usd, .usda, .usdc)", path=args.write_schema)
-    layer_options(args.layer, args.file, args.write_schema)

@@ -5,11 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from usdhands.commands._common import print_json, print_table
-from usdhands.jobs.outputs import MAIN_INPUT, check_paths
-from usdhands.errors import NoHandsError
-from usdhands.formats.hands import hands_for
-from usdhands.formats.io import read_asset
-from usdhands.model.handmap import FINGERS, SIDES, HandMap
+from usdhands.model.handmap import FINGERS, SIDES
 from usdhands.model.skeleton import display_joint_names
 
 
@@ -23,49 +19,10 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _hands(path: Path, skeleton, override) -> HandMap:
-    try:
-        return hands_for(path, skeleton, override)[0]
-    except NoHandsError:
-        return HandMap()
-
-
-def inspect_asset(path: Path, handmap_path: Path | None = None) -> dict:
-    """The report ``usdhands inspect --json`` prints, as a dict."""
-    asset = read_asset(path)
-    skeletons = []
-    hands = HandMap()
-    for sk in asset.skeletons:
-        hm = _hands(path, sk, handmap_path)
-        if hands.left is None and hands.right is None:
-            hands = hm
-        skeletons.append({
-            "name": sk.name,
-            "joints": list(sk.joint_names),
-            "num_joints": sk.num_joints,
-            "meters_per_unit": sk.meters_per_unit,
-            "up_axis": sk.up_axis,
-            "hands": hm.to_dict(),
-        })
-    animations = []
-    for clip in asset.clips:
-        animations.append({
-            "name": clip.name,
-            "skeleton": asset.skeletons.index(clip.skeleton) if clip.skeleton in asset.skeletons else None,
-            "frames": clip.num_frames,
-            "fps": clip.fps,
-            "duration": clip.duration,
-        })
-    meshes = [{"name": m.name, "points": int(len(m.points)), "faces": int(len(m.face_vertex_counts)),
-               "influences": None if m.joint_indices is None else int(m.joint_indices.shape[1])}
-              for m in asset.meshes]
-    return {"file": str(path), "skeletons": skeletons, "animations": animations, "meshes": meshes,
-            "hands": hands.to_dict()}
-
-
 def run(args) -> int:
-    check_paths({MAIN_INPUT: args.file, "--handmap": args.handmap})
-    report = inspect_asset(args.file, args.handmap)
+    from usdhands.jobs.inspection import InspectOptions, inspect_file
+
+    report = inspect_file(args.file, InspectOptions(handmap=args.handmap)).to_json()
     if args.json:
         print_json(report)
         return 0

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from usdhands.commands._common import Progress, check_seed, parse_list, print_json, print_table
-from usdhands.errors import OutputPathError
+from usdhands.commands._common import Progress, print_json, print_table
 
 
 def register(sub) -> None:
@@ -26,34 +25,20 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from usdhands.samples.generate import FORMATS, generate_samples
+    from usdhands.jobs.option_checks import parse_list
+    from usdhands.jobs.sample_assets import SamplesOptions, write_samples
 
-    check_seed(args.seed)
-    formats = parse_list(args.formats, FORMATS)
-    if not formats:
-        raise OutputPathError("no format given; use --formats usd,gltf,bvh", path=args.outdir)
-    out: Path = args.outdir
-    if out.exists() and not out.is_dir():
-        raise OutputPathError("exists and is not a folder", path=out)
-    if not out.parent.resolve().is_dir():
-        raise OutputPathError(f"parent folder {str(out.parent)!r} does not exist", path=out)
-    try:
-        out.mkdir(exist_ok=True)
-    except OSError as e:
-        raise OutputPathError(f"cannot create the folder: {e.strerror}", path=out) from None
-    files = generate_samples(out, formats, args.layout, args.seed, progress=Progress("samples"))
+    options = SamplesOptions(formats=tuple(parse_list(args.formats)), layout=args.layout, seed=args.seed)
+    result = write_samples(args.outdir, options, progress=Progress("samples"))
     if args.json:
-        sizes = [(f.relative_to(out).as_posix(), f.stat().st_size) for f in files]
-        print_json({"outdir": str(out), "files": [{"path": p, "bytes": n} for p, n in sizes],
-                    "total_bytes": sum(n for _, n in sizes)})
+        print_json(result.to_json())
         return 0
-    groups: dict[str, list[Path]] = {}
-    for f in files:
-        rel = f.relative_to(out)
-        key = rel.parts[0] + "/" if len(rel.parts) > 1 else rel.name
-        groups.setdefault(key, []).append(f)
-    rows = [(k, len(v), f"{sum(p.stat().st_size for p in v) / 1e6:.2f}") for k, v in groups.items()]
-    total = sum(p.stat().st_size for p in files) / 1e6
-    rows.append(("total", len(files), f"{total:.2f}"))
+    groups: dict[str, list[int]] = {}
+    for rel, size in result.files:
+        parts = rel.split("/")
+        key = parts[0] + "/" if len(parts) > 1 else rel
+        groups.setdefault(key, []).append(size)
+    rows = [(k, len(v), f"{sum(v) / 1e6:.2f}") for k, v in groups.items()]
+    rows.append(("total", len(result.files), f"{result.total_bytes / 1e6:.2f}"))
     print_table(rows, ("path", "files", "MB"))
     return 0
