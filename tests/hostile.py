@@ -154,3 +154,68 @@ def glb_bytes(doc: dict | str, binary: bytes = b"") -> bytes:
         binary += b"\0" * (-len(binary) % 4)
         chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
     return b"glTF" + struct.pack("<II", 2, 12 + len(chunks)) + chunks
+
+
+def crate_seed(samples: Path, folder: Path) -> bytes:
+    """The sample humanoid (skeleton, animation, skinned mesh) as .usdc, with a custom-data dictionary."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.FindOrOpen(str(samples / "humanoid.usda"))
+    copy = Sdf.Layer.CreateAnonymous(".usda")
+    copy.TransferContent(layer)
+    copy.customLayerData = {"pipeline": {"step": "mocap", "take": 3}}
+    path = Path(folder) / "crate_seed.usdc"
+    copy.Export(str(path))
+    data = path.read_bytes()
+    path.unlink()
+    return data
+
+
+def crate_lies(good: bytes) -> dict[str, tuple[bytes, str]]:
+    """Crafted .usdc files from a good one (:func:`crate_seed`), each lying about one count or index USD trusts.
+
+    Returns class -> (bytes, piece of the expected error line). Each class is one the
+    usdc fuzzer found (or its sibling): without the check in usdhands/formats/usdc_crate.py
+    USD allocated gigabytes, printed ``posix_madvise`` lines on stderr, or crashed.
+    """
+    import struct
+
+    import numpy as np
+
+    from usdhands.formats.usdc_crate import _Crate
+
+    crate = _Crate(good)
+    crate.table_of_contents()
+    reps = np.frombuffer(crate.structural(), dtype="<u8").tolist()
+    toc = struct.unpack_from("<q", good, 16)[0]
+    out: dict[str, tuple[bytes, str]] = {}
+
+    def edit(fmt: str, at: int, value) -> bytes:
+        data = bytearray(good)
+        struct.pack_into(fmt, data, at, value)
+        return bytes(data)
+
+    def first(kind: int, *, array: bool = False) -> int:
+        """Payload offset of the first out-of-line value of ``kind``."""
+        return next(r & ((1 << 48) - 1) for r in reps
+                    if (r >> 48) & 0xFF == kind and not r & (1 << 62) and bool(r & (1 << 63)) == array
+                    and r & ((1 << 48) - 1))
+
+    # 117,178,119 sections in a 20 KB file: USD reserved 3.7 GB for the table of contents
+    out["toc_sections"] = (edit("<Q", toc, 117_178_119), "table of contents claims 117178119 entries")
+    # a section past the end: USD printed 'failed call to posix_madvise' (prefetch), then read on
+    names = [good[toc + 8 + 32 * k:toc + 24 + 32 * k].split(b"\0")[0] for k in range(6)]
+    specs = names.index(b"SPECS")
+    out["section_past_end"] = (edit("<q", toc + 8 + 32 * specs + 24, 10 ** 9), "section 'SPECS' claims bytes")
+    # a token vector (apiSchemas and the like) of 513 entries: indices past the token table, a segfault
+    out["token_index"] = (edit("<Q", first(41), 513), "names token")
+    # a small array claiming 2^40 entries: USD resizes before it reads
+    out["array_count"] = (edit("<Q", first(11, array=True), 1 << 40), "an array claims 1099511627776 entries")
+    # the token count: USD sizes the token table from it
+    tokens = names.index(b"TOKENS")
+    start = struct.unpack_from("<q", good, toc + 8 + 32 * tokens + 16)[0]
+    out["token_count"] = (edit("<Q", start, 1 << 40), "TOKENS claims 1099511627776 tokens")
+    # a dictionary value whose offset points backwards: USD prefetched (posix_madvise) a negative length
+    dictionary = first(31)
+    out["value_offset"] = (edit("<q", dictionary + 12, -(10 ** 6)), "value offset -1000000 points backwards")
+    return out

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from hostile import deep_json, glb_bytes, listing, run_batch, sha  # noqa: E402  (tests/ is on sys.path)
+from hostile import crate_lies, crate_seed, deep_json, glb_bytes, listing, run_batch, sha  # noqa: E402
 
 #: command -> its argument list; {input} is the hostile (or good) main input, {ext} its extension,
 #: {out} an output path without extension, {good} a good clip, {body} a body-only clip,
@@ -103,6 +103,15 @@ def main_input_cases(folder: Path, samples: Path) -> dict[str, tuple[Path, str]]
     add("bvh_far_root", "far.bvh", "\n".join(far) + "\n", "beyond 1e+30")
     motion = bvh_lines.index("MOTION")
     add("bvh_unclosed", "open.bvh", "\n".join(bvh_lines[:motion - 1] + bvh_lines[motion:]) + "\n", "")
+    # usdc fuzz findings: a table of contents of 117 million sections (> 3 GB), a token index past the table
+    # (a segfault), a section past the end (USD's posix_madvise line on stderr), also through a sublayer
+    lies = crate_lies(crate_seed(samples, folder))
+    for name in ("toc_sections", "token_index", "section_past_end"):
+        data, message = lies[name]
+        add(f"usdc_{name}", f"{name}.usdc", data, message)
+    (folder / "lie_sub.usdc").write_bytes(lies["token_index"][0])
+    add("usda_composes_lie", "composes.usda", "#usda 1.0\n(\n    subLayers = [@./lie_sub.usdc@]\n)\n",
+        "composes")
     return cases
 
 

@@ -441,3 +441,16 @@ def test_fuzz_usda_attribute_of_unknown_type(sample_assets, tmp_path):
                                                              "uniform matrix4q[] bindTransforms"))
     check_promise(["inspect", bad], folder=tmp_path, inputs=[bad], names=bad,
                   message="an attribute holds a value of an unknown type")
+
+
+def test_fuzz_usdc_array_attribute_holding_a_payload(sample_assets, tmp_path):
+    """TypeError: object of type 'Payload' has no len() (13 atheris findings on .usdc: restTransforms held a Payload)."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    layer.TransferContent(Sdf.Layer.FindOrOpen(str(sample_assets / "humanoid.usda")))
+    layer.GetAttributeAtPath("/Root/Humanoid.restTransforms").SetInfo("default", Sdf.Payload("x.usd"))
+    bad = tmp_path / "payload.usdc"
+    layer.Export(str(bad))
+    check_promise(["inspect", bad], folder=tmp_path, inputs=[bad], names=bad,
+                  message="cannot read as USD: an attribute holds a Payload where an array belongs")

@@ -16,6 +16,7 @@ import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
 
 from usdhands.errors import AssetReadError
+from usdhands.formats.usdc_crate import check_crate
 from usdhands.model.rotations import quat_canonical, quat_multiply, trs_to_xform, xform_to_trs
 
 __all__ = [
@@ -85,6 +86,50 @@ def tf_error_reason(err: BaseException, path: str | os.PathLike | None = None) -
     return first or "unknown error"
 
 
+#: Most layers (the file, its sublayers, references and payloads) checked before a stage opens.
+MAX_LAYERS = 10_000
+
+
+def checked_layers(path: Path) -> list[Sdf.Layer]:
+    """Open ``path`` and every local layer it composes, each crate file checked first.
+
+    USD opens sublayers, references and payloads while it composes a stage: a text layer
+    naming a crafted .usdc would hand it to USD's crate reader unchecked (a segfault with
+    a token index past the table). Each layer is checked (:func:`check_crate`) before
+    ``Sdf.Layer.FindOrOpen`` reads its structure, then its composition dependencies are
+    followed. Returns the opened layers (keep them alive until the stage is open).
+
+    Raises
+    ------
+    AssetReadError
+        A crate file (the input or one it composes) whose claims its bytes cannot hold.
+    """
+    held, seen, todo = [], set(), [Path(path)]
+    while todo and len(seen) < MAX_LAYERS:
+        here = todo.pop()
+        key = os.path.realpath(here)
+        if key in seen or not os.path.isfile(key):
+            continue  # a missing layer: USD reports it (a warning) when it composes
+        seen.add(key)
+        try:
+            check_crate(here)
+        except OSError as e:
+            raise AssetReadError(f"cannot read ({e.strerror or e})", path=here) from None
+        except AssetReadError as e:
+            if here == Path(path):
+                raise
+            raise AssetReadError(f"composes {here}: {e.message}", path=path) from None
+        layer = Sdf.Layer.FindOrOpen(str(here))
+        if layer is None:
+            continue
+        held.append(layer)
+        for asset in layer.GetCompositionAssetDependencies():
+            if "://" in asset or asset.startswith("anon:"):
+                continue
+            todo.append(Path(layer.ComputeAbsolutePath(asset).split("[", 1)[0]))  # a package member: the package
+    return held
+
+
 def open_stage(path: str | os.PathLike) -> Usd.Stage:
     """Open a USD file, all payloads loaded.
 
@@ -100,9 +145,11 @@ def open_stage(path: str | os.PathLike) -> Usd.Stage:
         raise AssetReadError("is a folder, not a file", path=path)
     with quiet_diagnostics():
         try:
+            layers = checked_layers(path)  # held open: Stage.Open finds them in USD's layer registry
             stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
         except Tf.ErrorException as e:
             raise AssetReadError(f"cannot read as USD: {tf_error_reason(e, path)}", path=path) from None
+    del layers
     if stage is None:
         raise AssetReadError("cannot read as USD", path=path)
     return stage

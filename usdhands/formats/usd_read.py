@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +48,8 @@ from usdhands.model.skeleton import Skeleton
 __all__ = ["read_usd", "read_stage", "read_skeleton", "frame_times"]
 
 _PREDICATE = Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)
+#: numpy/len() refusing a value that is not an array: "object of type 'Payload' has no len()"
+_WRONG_VALUE = re.compile(r"object of type '(\w+)' has no len\(\)")
 _log = logging.getLogger(__name__)
 
 
@@ -88,11 +91,16 @@ def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
             raise AssetReadError(f"cannot read as USD: {tf_error_reason(e, path)}", path=path) from None
         except UnicodeDecodeError as e:  # a token or name of a corrupt .usdc that is not UTF-8
             raise AssetReadError(f"cannot read as USD: a name or token is not UTF-8 ({e.reason})", path=path) from None
-        except TypeError as e:  # an attribute of a type USD does not know (UnregisteredValue) where arrays belong
-            if "UnregisteredValue" not in str(e):
+        except TypeError as e:  # an attribute holding a value of another type where arrays belong
+            if "UnregisteredValue" in str(e):  # a type USD does not know (.usda fuzz)
+                raise AssetReadError("cannot read as USD: an attribute holds a value of an unknown type",
+                                     path=path) from None
+            held = _WRONG_VALUE.match(str(e))
+            if held is None:
                 raise
-            raise AssetReadError("cannot read as USD: an attribute holds a value of an unknown type", path=path) \
-                from None
+            # a corrupt .usdc whose array attribute holds a Payload, a Specifier... (.usdc fuzz)
+            raise AssetReadError(f"cannot read as USD: an attribute holds a {held.group(1)} where an array belongs",
+                                 path=path) from None
 
 
 def read_stage(stage: Usd.Stage, *, fps: float | None = None, path: str | os.PathLike | None = None) -> Asset:

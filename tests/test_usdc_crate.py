@@ -1,0 +1,146 @@
+"""The .usdc (crate) check before USD opens a file (usdhands/formats/usdc_crate.py).
+
+USD's crate reader trusts the counts and indices a file states. The usdc fuzzer found
+files that made it allocate more than 3 GB (a table of contents of 117 million
+sections), print ``failed call to posix_madvise`` on stderr (a section or a value
+offset past the file), and crash (a token index past the token table). Each class is
+built here from the sample humanoid and must fail in one line; every file USD itself
+writes (dictionaries, references, payloads, list ops, compressed arrays, time samples,
+packages) must pass the check untouched.
+"""
+
+from __future__ import annotations
+
+import zipfile
+
+import pytest
+
+from hostile import crate_lies, crate_seed, run_batch  # noqa: E402  (tests/ is on sys.path)
+from usdhands.errors import AssetReadError
+from usdhands.formats.usdc_crate import check_crate, check_crate_bytes, lz4_block_decompress
+
+
+def rich_layer(path):
+    """A .usdc holding every kind of value the check walks, written by USD itself."""
+    from pxr import Gf, Sdf, Usd, Vt
+
+    layer = Sdf.Layer.CreateNew(str(path))
+    layer.customLayerData = {"a": 1, "b": {"c": "x", "d": Vt.IntArray([1, 2, 3])}, "e": Sdf.AssetPath("x.usd")}
+    stage = Usd.Stage.Open(layer)
+    root = stage.DefinePrim("/Root", "Xform")
+    root.SetCustomData({"k": "v", "n": 3.5, "l": ["a", "b"]})
+    root.GetReferences().AddInternalReference("/Other", Sdf.LayerOffset(1, 2))
+    root.GetPayloads().AddInternalPayload("/Other", Sdf.LayerOffset(3))
+    root.GetInherits().AddInherit("/Class")
+    variants = root.GetVariantSets().AddVariantSet("look")
+    variants.AddVariant("red")
+    variants.SetVariantSelection("red")
+    root.SetMetadata("apiSchemas", Sdf.TokenListOp.Create(prependedItems=["SkelBindingAPI"], deletedItems=["X"]))
+    stage.DefinePrim("/Other")
+    prim = stage.DefinePrim("/Root/Attrs")
+    T = Sdf.ValueTypeNames
+    values = {
+        "ints": (T.IntArray, Vt.IntArray(list(range(100)))),  # compressed integers
+        "ints64": (T.Int64Array, Vt.Int64Array([2 ** 40 + i for i in range(50)])),
+        "floats_int": (T.FloatArray, Vt.FloatArray([float(i) for i in range(64)])),  # 'i' code
+        "floats_lut": (T.FloatArray, Vt.FloatArray([0.5, 0.25] * 40)),  # 't' code: lookup table
+        "floats_raw": (T.FloatArray, Vt.FloatArray([i / 7 for i in range(100)])),
+        "halfs": (T.HalfArray, Vt.HalfArray([1.0] * 40)),
+        "tokens": (T.TokenArray, Vt.TokenArray(["a", "b", "c"] * 20)),
+        "strings": (T.StringArray, Vt.StringArray(["x", "yy"] * 20)),
+        "assets": (T.AssetArray, Sdf.AssetPathArray([Sdf.AssetPath("a.png")] * 3)),
+        "matrices": (T.Matrix4dArray, Vt.Matrix4dArray([Gf.Matrix4d(2)] * 5)),
+        "quats": (T.QuatfArray, Vt.QuatfArray([Gf.Quatf(1, 0, 0, 0)] * 700)),  # zero-copy sized
+        "empty": (T.IntArray, Vt.IntArray()),
+        "token": (T.Token, "hello"),
+        "string": (T.String, "a string"),
+        "matrix": (T.Matrix4d, Gf.Matrix4d(3)),
+    }
+    for name, (kind, value) in values.items():
+        prim.CreateAttribute(name, kind).Set(value)
+    animated = prim.CreateAttribute("animated", T.Float3Array)
+    for frame in range(20):
+        animated.Set(Vt.Vec3fArray([Gf.Vec3f(frame, 0, 0)] * 30), frame)
+    prim.CreateRelationship("rel").SetTargets(["/Root", "/Root/Attrs"])
+    layer.Save()
+
+
+def test_files_usd_writes_pass(sample_assets, tmp_path):
+    rich = tmp_path / "rich.usdc"
+    rich_layer(rich)
+    check_crate(rich)
+    check_crate(sample_assets / "conversation_bodyonly.usdc")
+    check_crate_bytes(crate_seed(sample_assets, tmp_path))
+    text = sample_assets / "humanoid.usda"
+    check_crate(text)  # not a crate: nothing to check
+
+
+def test_third_party_package_passes(shared_assets):
+    check_crate(shared_assets / "usd_cesiumman" / "CesiumMan.usdz")
+
+
+@pytest.mark.parametrize("lie", ["toc_sections", "section_past_end", "token_index", "array_count", "token_count",
+                                 "value_offset"])
+def test_each_lie_is_refused_by_the_check(lie, sample_assets, tmp_path):
+    data, message = crate_lies(crate_seed(sample_assets, tmp_path))[lie]
+    with pytest.raises(AssetReadError) as e:
+        check_crate_bytes(data, tmp_path / "x.usdc")
+    assert message in str(e.value)
+    assert str(e.value).startswith(f"{tmp_path / 'x.usdc'}: cannot read as USD: ")
+
+
+def test_lies_keep_the_promise_in_every_reading_command(sample_assets, tmp_path):
+    """One subprocess, fd 2 captured: USD's own posix_madvise line would be a second line."""
+    lies = crate_lies(crate_seed(sample_assets, tmp_path))
+    cases, expected = [], []
+    for name, (data, message) in lies.items():
+        path = tmp_path / f"{name}.usdc"
+        path.write_bytes(data)
+        for argv in (["inspect", path], ["convert", path, tmp_path / f"{name}_out.glb"]):
+            cases.append(argv)
+            expected.append((name, path, message))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for (name, path, message), result in zip(expected, run_batch(cases)):
+        lines = result["stderr"].splitlines()
+        assert result["code"] == 2, (name, result)
+        assert lines == [lines[0]] and lines[0].startswith(f"usdhands: error: {path}: cannot read as USD: "), (
+            name, result["stderr"])
+        assert message in lines[0], (name, lines[0])
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_a_package_holding_a_lying_crate_names_the_member(sample_assets, tmp_path):
+    data, message = crate_lies(crate_seed(sample_assets, tmp_path))["token_count"]
+    package = tmp_path / "bad.usdz"
+    with zipfile.ZipFile(package, "w", compression=zipfile.ZIP_STORED) as z:
+        z.writestr("root.usdc", data)
+    with pytest.raises(AssetReadError) as e:
+        check_crate(package)
+    assert str(e.value).startswith(f"{package}: root.usdc: cannot read as USD: ")
+    assert message in str(e.value)
+
+
+def test_lz4_blocks():
+    assert lz4_block_decompress(b"\x40abcd", 100) == b"abcd"
+    # 'ab' then a match 2 back, 6 long (overlapping): the last two bytes repeated
+    assert lz4_block_decompress(b"\x22ab\x02\x00", 100) == b"abababab"
+    with pytest.raises(ValueError, match="offset outside the output"):
+        lz4_block_decompress(b"\x22ab\x09\x00", 100)
+    with pytest.raises(ValueError, match="more than 5 bytes"):
+        lz4_block_decompress(b"\x22ab\x02\x00", 5)
+    with pytest.raises(ValueError, match="literals run past"):
+        lz4_block_decompress(b"\x90ab", 100)
+
+
+def test_a_text_layer_composing_a_lying_crate_is_refused(sample_assets, tmp_path):
+    """USD opens sublayers while composing: the crafted crate crashed the interpreter through a .usda."""
+    data, message = crate_lies(crate_seed(sample_assets, tmp_path))["token_index"]
+    (tmp_path / "lie.usdc").write_bytes(data)
+    top = tmp_path / "shot.usda"
+    top.write_text('#usda 1.0\n(\n    subLayers = [@./lie.usdc@]\n)\n')
+    [result] = run_batch([["inspect", top]])
+    assert result["code"] == 2, result
+    assert result["stderr"].splitlines() == [
+        f"usdhands: error: {top}: composes {tmp_path / 'lie.usdc'}: cannot read as USD: "
+        + result["stderr"].split("cannot read as USD: ", 1)[1].rstrip("\n")]
+    assert message in result["stderr"]

@@ -1,0 +1,520 @@
+"""What a ``.usdc`` (USD crate) file claims, checked against its size before USD opens it.
+
+USD's crate reader trusts the counts a file states: it allocates the table of contents,
+the token, field, path and spec tables and every array at the size written in the file
+before it reads a byte of them, so a 20 KB file claiming 117 million sections asked
+for 3.7 GB, and a section or an offset past the end of the file made USD print
+``failed call to posix_madvise`` on stderr. :func:`check_crate` reads the same layout
+(bootstrap, table of contents, the six structural sections, then every value the
+fields point to: arrays, time samples, dictionaries, list ops, vectors) and refuses,
+in one line, any count that the bytes after it cannot hold. It allocates at most what
+the file's own sections decompress to, so a normal file costs a few milliseconds
+(the bundled ``conversation_bodyonly.usdc``: see benchmarks/bench_usdc_check.py).
+
+The layout is the one of USD's ``crateFile.cpp`` (versions 0.4.0 to 0.14.0 checked in
+full; older files, which USD no longer writes, get the table-of-contents and section
+checks). Claims are bounded by the LZ4 ratio (:data:`LZ4_MAX_RATIO`): a count of
+compressed integers can be at most about 4 x 255 per compressed byte.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from usdhands.errors import AssetReadError
+
+__all__ = ["CRATE_MAGIC", "check_crate", "check_crate_bytes", "lz4_block_decompress"]
+
+#: The first 8 bytes of every crate file.
+CRATE_MAGIC = b"PXR-USDC"
+#: Size of the bootstrap header (ident, version, tocOffset, 8 reserved int64).
+_BOOTSTRAP = 88
+#: Size of one table-of-contents entry (name[16], start, size).
+_SECTION = 32
+#: At most this many output bytes per input byte of an LZ4 block (each 255 length byte adds 255).
+LZ4_MAX_RATIO = 256
+#: Fewest elements a compressed int/float array is stored compressed with (USD's MinCompressedArraySize).
+_MIN_COMPRESSED_ARRAY = 16
+#: Deepest nesting of dictionaries / values inside values that is walked.
+_MAX_VALUE_DEPTH = 64
+
+# Type enumerants of crateDataTypes.h -> bytes per array element as stored (indices for strings/tokens/paths).
+_ELEMENT_BYTES = {1: 1, 2: 1, 3: 4, 4: 4, 5: 8, 6: 8, 7: 2, 8: 4, 9: 8, 10: 4, 11: 4, 12: 4,
+                  13: 32, 14: 72, 15: 128, 16: 32, 17: 16, 18: 8, 19: 16, 20: 8, 21: 4, 22: 8,
+                  23: 24, 24: 12, 25: 6, 26: 12, 27: 32, 28: 16, 29: 8, 30: 16, 56: 8, 57: 4}
+_COMPRESSED_INTS = {3, 4, 5, 6}  # Int, UInt, Int64, UInt64: stored as compressed integers
+_COMPRESSED_FLOATS = {7, 8, 9}  # Half, Float, Double: 'i' (integers) or 't' (lookup table)
+_ELEMENT_TABLE = np.zeros(256, dtype=np.int64)
+_ELEMENT_TABLE[list(_ELEMENT_BYTES)] = list(_ELEMENT_BYTES.values())
+_COMPRESSIBLE = np.zeros(256, dtype=bool)
+_COMPRESSIBLE[list(_COMPRESSED_INTS | _COMPRESSED_FLOATS)] = True
+# ValueRep bits (crateFile.h)
+_ARRAY, _INLINED, _COMPRESSED, _PAYLOAD = 1 << 63, 1 << 62, 1 << 61, (1 << 48) - 1
+_DICTIONARY, _VALUE, _UNREGISTERED_VALUE, _TIME_SAMPLES = 31, 52, 53, 46
+_STRING_KINDS, _TOKEN_KINDS, _PATH_EXPRESSION = {10}, {11, 12}, 57  # string, token/asset path: an index
+_PAYLOAD_KIND = 47
+# vectors of indices: type -> (indices per entry, table); of numbers: type -> bytes per entry
+_INDEX_VECTORS = {40: (1, "path"), 41: (1, "token"), 50: (1, "string"), 45: (2, "string"), 58: (2, "path")}
+_VECTORS = {48: 8, 49: 16}
+# list ops: of indices -> table; of numbers -> bytes per item; references, payloads, values walked
+_INDEX_LIST_OPS = {32: "token", 33: "string", 34: "path"}
+_NUMBER_LIST_OPS = {36: 4, 37: 8, 38: 4, 39: 8}
+_REFERENCE_LIST_OP, _PAYLOAD_LIST_OP = 35, 55
+_LIST_OPS = {32, 33, 34, 35, 36, 37, 38, 39, 54, 55}
+
+
+class _Corrupt(Exception):
+    """What is wrong, raised inside the walk and turned into one AssetReadError."""
+
+
+def lz4_block_decompress(src: bytes, limit: int) -> bytes:
+    """Decode one LZ4 block (the format USD's TfFastCompression writes); at most ``limit`` bytes out.
+
+    Raises ValueError for a malformed block or one that decodes to more than ``limit``.
+    """
+    out = bytearray()
+    i, n = 0, len(src)
+    while i < n:
+        token = src[i]
+        i += 1
+        literal = token >> 4
+        if literal == 15:
+            while True:
+                if i >= n:
+                    raise ValueError("LZ4 literal length runs past the block")
+                b = src[i]
+                i += 1
+                literal += b
+                if b != 255:
+                    break
+        if i + literal > n:
+            raise ValueError("LZ4 literals run past the block")
+        out += src[i:i + literal]
+        i += literal
+        if i == n:
+            break  # the last sequence holds literals only
+        if i + 2 > n:
+            raise ValueError("LZ4 match offset runs past the block")
+        offset = src[i] | (src[i + 1] << 8)
+        i += 2
+        if offset == 0 or offset > len(out):
+            raise ValueError("LZ4 match offset outside the output")
+        length = token & 15
+        if length == 15:
+            while True:
+                if i >= n:
+                    raise ValueError("LZ4 match length runs past the block")
+                b = src[i]
+                i += 1
+                length += b
+                if b != 255:
+                    break
+        length += 4
+        if len(out) + length > limit:
+            raise ValueError(f"LZ4 block decodes to more than {limit} bytes")
+        start = len(out) - offset
+        if offset >= length:
+            out += out[start:start + length]
+        else:  # an overlapping copy repeats the last `offset` bytes
+            pattern = bytes(out[start:])
+            out += (pattern * (length // offset + 1))[:length]
+        if len(out) > limit:
+            raise ValueError(f"LZ4 block decodes to more than {limit} bytes")
+    if len(out) > limit:
+        raise ValueError(f"LZ4 block decodes to more than {limit} bytes")
+    return bytes(out)
+
+
+class _Crate:
+    """Reads a crate's claims from its bytes; every method raises :class:`_Corrupt` on a lie."""
+
+    def __init__(self, data: bytes):
+        self.data = data
+        self.size = len(data)
+        self.version = (0, 0, 0)
+        self.sections: dict[str, tuple[int, int]] = {}
+        #: entries of the token, string and path tables (values index into them)
+        self.tables = {"token": 0, "string": 0, "path": 0}
+
+    # -- primitive reads -------------------------------------------------------------------
+    def u64(self, at: int, what: str) -> int:
+        if at < 0 or at + 8 > self.size:
+            raise _Corrupt(f"{what} at byte {at} is past the end of the file ({self.size} bytes)")
+        return struct.unpack_from("<Q", self.data, at)[0]
+
+    def i64(self, at: int, what: str) -> int:
+        if at < 0 or at + 8 > self.size:
+            raise _Corrupt(f"{what} at byte {at} is past the end of the file ({self.size} bytes)")
+        return struct.unpack_from("<q", self.data, at)[0]
+
+    def u32(self, at: int, what: str) -> int:
+        if at < 0 or at + 4 > self.size:
+            raise _Corrupt(f"{what} at byte {at} is past the end of the file ({self.size} bytes)")
+        return struct.unpack_from("<I", self.data, at)[0]
+
+    def fits(self, at: int, nbytes: int, what: str, end: int | None = None) -> None:
+        """``nbytes`` from ``at`` lie inside the file (or before ``end``)."""
+        end = self.size if end is None else end
+        if at < 0 or nbytes < 0 or at + nbytes > end:
+            raise _Corrupt(f"{what} claims {nbytes} bytes at byte {at}, past the end of its "
+                           f"{'section' if end != self.size else 'file'} ({end} bytes)")
+
+    def indices(self, values: np.ndarray, table: str, what: str) -> None:
+        """Every index in ``values`` names an entry of the ``table`` (USD looks them up unchecked)."""
+        if len(values) and int(values.max()) >= self.tables[table]:
+            raise _Corrupt(f"{what} names {table} {int(values.max())} of {self.tables[table]}")
+
+    def index_run(self, at: int, n: int, table: str, what: str) -> None:
+        """``n`` uint32 indices into ``table`` stored from ``at``."""
+        self.count(n, at, 4, what)
+        self.indices(np.frombuffer(self.data, dtype="<u4", count=n, offset=at), table, what)
+
+    def count(self, n: int, at: int, element: int, what: str, end: int | None = None) -> int:
+        """``n`` elements of ``element`` bytes each fit from ``at``; returns ``n``."""
+        end = self.size if end is None else end
+        room = max(end - at, 0)
+        if n > room // max(element, 1):
+            raise _Corrupt(f"{what} claims {n} entries; the {room} bytes after it hold at most "
+                           f"{room // max(element, 1)}")
+        return n
+
+    # -- compressed blocks -----------------------------------------------------------------
+    def compressed_span(self, at: int, size: int, what: str, end: int) -> None:
+        """A TfFastCompression buffer: its chunk table (first byte) must stay inside ``size`` bytes."""
+        self.fits(at, size, what, end)
+        if size == 0:
+            raise _Corrupt(f"{what} is empty")
+        chunks = self.data[at]
+        pos, stop = at + 1, at + size
+        for _ in range(chunks):  # 0 chunks: one block filling the rest
+            if pos + 4 > stop:
+                raise _Corrupt(f"{what}: its chunk table runs past its {size} bytes")
+            n = struct.unpack_from("<i", self.data, pos)[0]
+            pos += 4
+            if n < 0 or pos + n > stop:
+                raise _Corrupt(f"{what}: a chunk of {n} bytes runs past its {size} bytes")
+            pos += n
+
+    def decompress(self, at: int, size: int, limit: int, what: str, end: int) -> bytes:
+        """The bytes of a TfFastCompression buffer (at most ``limit``)."""
+        self.compressed_span(at, size, what, end)
+        chunks = self.data[at]
+        try:
+            if chunks == 0:
+                return lz4_block_decompress(self.data[at + 1:at + size], limit)
+            out, pos = bytearray(), at + 1
+            for _ in range(chunks):
+                n = struct.unpack_from("<i", self.data, pos)[0]
+                out += lz4_block_decompress(self.data[pos + 4:pos + 4 + n], limit - len(out))
+                pos += 4 + n
+            return bytes(out)
+        except ValueError as e:
+            raise _Corrupt(f"{what}: {e}") from None
+
+    def compressed_ints(self, at: int, n: int, what: str, end: int | None = None) -> int:
+        """``n`` integers stored compressed from ``at`` (uint64 size, then the buffer); returns the end."""
+        end = self.size if end is None else end
+        size = self.u64(at, f"{what} size")
+        self.compressed_span(at + 8, size, what, end)
+        # 2 bits of code per integer after LZ4: at most 4 integers per decoded byte
+        most = 4 * LZ4_MAX_RATIO * size + 64
+        if n > most:
+            raise _Corrupt(f"{what} claims {n} integers; its {size} compressed bytes hold at most {most}")
+        return at + 8 + size
+
+    # -- layout ----------------------------------------------------------------------------
+    def table_of_contents(self) -> None:
+        if self.size < _BOOTSTRAP:
+            raise _Corrupt(f"a .usdc file of {self.size} bytes is shorter than its {_BOOTSTRAP}-byte header")
+        self.version = tuple(self.data[8:11])
+        toc = self.i64(16, "table of contents offset")
+        if toc + 8 > self.size:  # USD's words for it
+            raise _Corrupt(f"Sdf crate file corrupt, possibly truncated: table of contents at offset {toc} but "
+                           f"file size is {self.size}")
+        if toc < _BOOTSTRAP:
+            raise _Corrupt(f"table of contents at offset {toc} is inside the header")
+        n = self.count(self.u64(toc, "section count"), toc + 8, _SECTION, "table of contents")
+        for k in range(n):
+            at = toc + 8 + k * _SECTION
+            name = self.data[at:at + 16].split(b"\0", 1)[0].decode("latin-1")
+            start, size = struct.unpack_from("<qq", self.data, at + 16)
+            if start < 0 or size < 0 or start + size > self.size:
+                raise _Corrupt(f"section {name!r} claims bytes {start} to {start + size}, outside the "
+                               f"file ({self.size} bytes)")
+            self.sections.setdefault(name, (start, start + size))
+
+    def structural(self) -> bytes | None:
+        """Check the six structural sections; returns the decompressed value reps of FIELDS (or None)."""
+        compressed = self.version >= (0, 4, 0)
+        reps = None
+        if "TOKENS" in self.sections:
+            start, end = self.sections["TOKENS"]
+            n = self.u64(start, "token count")
+            if compressed:
+                raw, packed = self.u64(start + 8, "token bytes"), self.u64(start + 16, "token compressed bytes")
+                self.compressed_span(start + 24, packed, "TOKENS", end)
+                if raw > LZ4_MAX_RATIO * packed + 64:
+                    raise _Corrupt(f"TOKENS claims {raw} bytes from {packed} compressed bytes")
+            else:
+                raw = self.u64(start + 8, "token bytes")
+                self.fits(start + 16, raw, "TOKENS", end)
+            if n > max(raw, 1):
+                raise _Corrupt(f"TOKENS claims {n} tokens in {raw} bytes")
+            self.tables["token"] = n
+        if "STRINGS" in self.sections:
+            start, end = self.sections["STRINGS"]
+            n = self.count(self.u64(start, "string count"), start + 8, 4, "STRINGS", end)
+            self.tables["string"] = n
+            self.indices(np.frombuffer(self.data, dtype="<u4", count=n, offset=start + 8), "token", "STRINGS")
+        if "FIELDS" in self.sections:
+            start, end = self.sections["FIELDS"]
+            n = self.u64(start, "field count")
+            if compressed:
+                at = self.compressed_ints(start + 8, n, "FIELDS tokens", end)
+                size = self.u64(at, "FIELDS value reps size")
+                if n * 8 > LZ4_MAX_RATIO * size + 64:
+                    raise _Corrupt(f"FIELDS claims {n} fields from {size} compressed bytes")
+                reps = self.decompress(at + 8, size, n * 8, "FIELDS value reps", end)
+                if len(reps) != n * 8:
+                    raise _Corrupt(f"FIELDS value reps decode to {len(reps)} bytes for {n} fields")
+            else:
+                self.count(n, start + 8, 16, "FIELDS", end)
+        for name, arrays in (("FIELDSETS", 1), ("SPECS", 3)):
+            if name in self.sections:
+                start, end = self.sections[name]
+                n = self.u64(start, f"{name} count")
+                if compressed:
+                    at = start + 8
+                    for _ in range(arrays):
+                        at = self.compressed_ints(at, n, name, end)
+                else:
+                    self.count(n, start + 8, 4 * arrays, name, end)
+        if "PATHS" in self.sections:
+            start, end = self.sections["PATHS"]
+            n = self.u64(start, "path count")
+            self.tables["path"] = n
+            if compressed:
+                self.count(n, start, 1, "PATHS")  # a path table entry per byte of the file at most
+                encoded = self.u64(start + 8, "encoded path count")
+                at = start + 16
+                for _ in range(3):
+                    at = self.compressed_ints(at, encoded, "PATHS", end)
+            else:
+                self.count(n, start + 8, 9, "PATHS", end)
+        return reps
+
+    # -- values ----------------------------------------------------------------------------
+    def values(self, reps: bytes) -> None:
+        if self.version < (0, 5, 0):
+            return  # arrays still carried a rank then; USD has not written these since 2017
+        self.array_reps: list[np.ndarray] = []
+        seen: set[int] = set()
+        self.many(np.frombuffer(reps, dtype="<u8"), 0, seen)
+        if self.array_reps:
+            self.arrays(np.unique(np.concatenate(self.array_reps)))
+
+    def many(self, reps: np.ndarray, depth: int, seen: set[int]) -> None:
+        """Check a run of value reps: arrays are collected for :meth:`arrays`, the rest walked here."""
+        inlined = (reps & np.uint64(_INLINED)) != 0
+        kind = (reps >> np.uint64(48)) & np.uint64(0xFF)
+        for kinds, table in ((_STRING_KINDS, "string"), (_TOKEN_KINDS, "token")):  # payload: an index
+            named = inlined & np.isin(kind, kinds) & ((reps & np.uint64(_ARRAY)) == 0)
+            self.indices((reps[named] & np.uint64(0xFFFFFFFF)), table, "a value")
+        reps = reps[~inlined]
+        arrays = (reps & np.uint64(_ARRAY)) != 0
+        self.array_reps.append(reps[arrays])
+        for rep in np.unique(reps[~arrays]).tolist():
+            self.value(rep, depth, seen)
+
+    def value(self, rep: int, depth: int, seen: set[int]) -> None:
+        if rep in seen:
+            return
+        seen.add(rep)
+        if depth > _MAX_VALUE_DEPTH:
+            raise _Corrupt(f"values nested more than {_MAX_VALUE_DEPTH} deep")
+        kind = (rep >> 48) & 0xFF
+        at = rep & _PAYLOAD
+        if rep & _INLINED:
+            if not rep & _ARRAY and kind in _STRING_KINDS | _TOKEN_KINDS:
+                self.indices(np.array([at & 0xFFFFFFFF]), "string" if kind in _STRING_KINDS else "token", "a value")
+        elif rep & _ARRAY:
+            self.array_reps.append(np.array([rep], dtype=np.uint64))
+        elif rep & (1 << 60):  # an array edit (0.14): not walked
+            return
+        elif kind in _STRING_KINDS | _TOKEN_KINDS or kind == _PATH_EXPRESSION:  # stored out of line: an index
+            self.index_run(at, 1, "token" if kind in _TOKEN_KINDS else "string", "a value")
+        elif kind == _DICTIONARY:
+            self.dictionary(at, depth, seen)
+        elif kind in (_VALUE, _UNREGISTERED_VALUE):
+            self.vt_value(at, depth, seen)
+        elif kind == _TIME_SAMPLES:
+            jump = self.i64(at, "time samples offset")
+            if jump < 8:
+                raise _Corrupt(f"time samples offset {jump} points backwards")
+            times = at + jump
+            self.value(self.u64(times, "time samples times"), depth + 1, seen)
+            jump = self.i64(times + 8, "time samples values offset")
+            if jump < 8:
+                raise _Corrupt(f"time samples values offset {jump} points backwards")
+            where = times + 8 + jump
+            n = self.count(self.u64(where, "time sample count"), where + 8, 8, "time samples")
+            self.many(np.frombuffer(self.data, dtype="<u8", count=n, offset=where + 8), depth + 1, seen)
+        elif kind in _INDEX_VECTORS:
+            n = self.u64(at, "vector size")
+            width, table = _INDEX_VECTORS[kind]
+            self.index_run(at + 8, n * width, table, "a vector value")
+        elif kind in _VECTORS:
+            self.count(self.u64(at, "vector size"), at + 8, _VECTORS[kind], "a vector value")
+        elif kind == _PAYLOAD_KIND:
+            self.payload(at)
+        elif kind in _LIST_OPS:
+            self.fits(at, 1, "a list op")
+            header, pos = self.data[at], at + 1
+            for bit in range(1, 7):
+                if header & (1 << bit):
+                    pos = self.list_items(kind, pos, depth, seen)
+
+    def list_items(self, kind: int, at: int, depth: int, seen: set[int]) -> int:
+        """One vector of a list op at ``at``; returns the position after it."""
+        n = self.u64(at, "list op size")
+        pos = at + 8
+        if kind in _INDEX_LIST_OPS:
+            self.index_run(pos, n, _INDEX_LIST_OPS[kind], "a list op")
+            return pos + 4 * n
+        if kind in _NUMBER_LIST_OPS:
+            self.count(n, pos, _NUMBER_LIST_OPS[kind], "a list op")
+            return pos + n * _NUMBER_LIST_OPS[kind]
+        self.count(n, pos, 16, "a list op")  # references, payloads, values: 16 bytes at the least
+        for _ in range(n):
+            if kind == _REFERENCE_LIST_OP:  # asset path, prim path, layer offset, customData
+                self.index_run(pos, 1, "string", "a reference")
+                self.index_run(pos + 4, 1, "path", "a reference")
+                pos = self.dictionary(pos + 24, depth, seen)
+            elif kind == _PAYLOAD_LIST_OP:
+                pos = self.payload(pos)
+            else:  # unregistered values
+                pos = self.vt_value(pos, depth, seen)
+        return pos
+
+    def payload(self, at: int) -> int:
+        """An SdfPayload (asset path, prim path, layer offset from 0.8.0); returns the position after it."""
+        self.index_run(at, 1, "string", "a payload")
+        self.index_run(at + 4, 1, "path", "a payload")
+        return at + (24 if self.version >= (0, 8, 0) else 8)
+
+    def dictionary(self, at: int, depth: int, seen: set[int]) -> int:
+        """A VtDictionary (count, then string-index keys and values); returns the position after it."""
+        n = self.count(self.u64(at, "dictionary size"), at + 8, 12, "a dictionary")
+        pos = at + 8
+        for _ in range(n):
+            self.index_run(pos, 1, "string", "a dictionary key")
+            pos = self.vt_value(pos + 4, depth, seen)
+        return pos
+
+    def vt_value(self, at: int, depth: int, seen: set[int]) -> int:
+        """A VtValue stored as an int64 jump then a rep; returns the position after it."""
+        jump = self.i64(at, "value offset")
+        if jump < 8:  # USD prefetches `jump` bytes from here (posix_madvise), then seeks
+            raise _Corrupt(f"value offset {jump} points backwards")
+        where = at + jump
+        self.value(self.u64(where, "value"), depth + 1, seen)
+        return where + 8
+
+    def arrays(self, reps: np.ndarray) -> None:
+        """Every array's element count against the bytes after it (vectorised: a clip holds thousands)."""
+        kind = ((reps >> np.uint64(48)) & np.uint64(0xFF)).astype(np.intp)
+        at = (reps & np.uint64(_PAYLOAD)).astype(np.int64)
+        element = _ELEMENT_TABLE[kind]
+        keep = (at != 0) & (element > 0)  # 0: an empty array; no element size: not an array type (USD refuses)
+        reps, kind, at, element = reps[keep], kind[keep], at[keep], element[keep]
+        wide = self.version >= (0, 7, 0)
+        head = 8 if wide else 4
+        outside = at + head > self.size
+        if outside.any():
+            k = int(np.argmax(outside))
+            raise _Corrupt(f"an array at byte {at[k]} is past the end of the file ({self.size} bytes)")
+        raw = np.frombuffer(self.data, dtype=np.uint8)
+        gathered = raw[at[:, None] + np.arange(head)]
+        n = np.ascontiguousarray(gathered).view("<u8" if wide else "<u4")[:, 0].astype(np.uint64)
+        room = (self.size - at - head).astype(np.uint64) // element.astype(np.uint64)
+        compressed = ((reps & np.uint64(_COMPRESSED)) != 0) & _COMPRESSIBLE[kind] & (n >= _MIN_COMPRESSED_ARRAY)
+        plain_over = ~compressed & (n > room)
+        if plain_over.any():
+            k = int(np.argmax(plain_over))
+            raise _Corrupt(f"an array claims {n[k]} entries; the {self.size - at[k] - head} bytes after it "
+                           f"hold at most {room[k]}")
+        for k in np.flatnonzero(compressed).tolist():
+            self.compressed_array(int(kind[k]), int(at[k]) + head, int(n[k]), int(element[k]))
+        for k in np.flatnonzero(np.isin(kind, list(_STRING_KINDS | _TOKEN_KINDS | {_PATH_EXPRESSION}))).tolist():
+            table = "token" if int(kind[k]) in _TOKEN_KINDS else "string"
+            self.index_run(int(at[k]) + head, int(n[k]), table, "an array")
+
+    def compressed_array(self, kind: int, pos: int, n: int, element: int) -> None:
+        if kind in _COMPRESSED_FLOATS:
+            self.fits(pos, 1, "a compressed array")
+            code = self.data[pos]
+            pos += 1
+            if code == ord("t"):
+                lut = self.count(self.u32(pos, "lookup table size"), pos + 4, element, "a lookup table")
+                pos += 4 + lut * element
+            elif code != ord("i"):
+                raise _Corrupt(f"compressed array code {code} is neither 'i' nor 't'")
+        self.compressed_ints(pos, n, "a compressed array")
+
+
+def check_crate_bytes(data: bytes, path: str | os.PathLike | None = None) -> None:
+    """Refuse crate bytes whose claims the bytes cannot hold (see the module docstring).
+
+    Raises
+    ------
+    AssetReadError
+        One line naming ``path`` and the first claim that does not fit.
+    """
+    crate = _Crate(data)
+    try:
+        crate.table_of_contents()
+        reps = crate.structural()
+        if reps is not None:
+            crate.values(reps)
+    except _Corrupt as e:
+        raise AssetReadError(f"cannot read as USD: {e}", path=path) from None
+
+
+def check_crate(path: str | os.PathLike) -> None:
+    """Check ``path`` with :func:`check_crate_bytes` if it is a crate file (else nothing).
+
+    A ``.usdz`` package is checked member by member (each crate file it stores).
+    """
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(8)
+        if head == CRATE_MAGIC:
+            f.seek(0)
+            check_crate_bytes(f.read(), path)
+            return
+    if head[:4] == b"PK\x03\x04":
+        _check_package(path)
+
+
+def _check_package(path: Path) -> None:
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as package:
+            for info in package.infolist():
+                if info.compress_type != zipfile.ZIP_STORED or info.file_size < 8:
+                    continue  # USD reads only stored members; it refuses the others itself
+                with package.open(info) as member:
+                    if member.read(8) != CRATE_MAGIC:
+                        continue
+                data = package.read(info)
+                try:
+                    check_crate_bytes(data)
+                except AssetReadError as e:
+                    raise AssetReadError(f"{info.filename}: {e.message}", path=path) from None
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError):
+        return  # not a readable package: USD says so itself
