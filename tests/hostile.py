@@ -215,7 +215,52 @@ def crate_lies(good: bytes) -> dict[str, tuple[bytes, str]]:
     tokens = names.index(b"TOKENS")
     start = struct.unpack_from("<q", good, toc + 8 + 32 * tokens + 16)[0]
     out["token_count"] = (edit("<Q", start, 1 << 40), "TOKENS claims 1099511627776 tokens")
+    # a prim spec retyped as a Mapper: USD aborted the interpreter ('Dereferenced an invalid SdfPrimSpec')
+    out["spec_type"] = (respec(good, crate, toc, names), "SPECS: a spec of type 4 on a prim path")
     # a dictionary value whose offset points backwards: USD prefetched (posix_madvise) a negative length
     dictionary = first(31)
     out["value_offset"] = (edit("<q", dictionary + 12, -(10 ** 6)), "value offset -1000000 points backwards")
     return out
+
+
+def _lz4_literals(data: bytes) -> bytes:
+    """One LZ4 block holding ``data`` as literals (valid, uncompressed), framed as USD's TfFastCompression."""
+    n = len(data)
+    head = bytes([0xF0]) + b"\xff" * ((n - 15) // 255) + bytes([(n - 15) % 255]) if n >= 15 else bytes([n << 4])
+    return b"\0" + head + data
+
+
+def _encode_ints(values) -> bytes:
+    """Sdf's integer coding with every delta stored in 32 bits (common delta 0), LZ4-framed, size first."""
+    import struct
+
+    import numpy as np
+
+    deltas = np.diff(np.asarray(values, dtype=np.int64), prepend=0).astype("<i4")
+    codes = bytes([0xFF]) * ((2 * len(deltas) + 7) // 8)
+    body = _lz4_literals(struct.pack("<i", 0) + codes + deltas.tobytes())
+    return struct.pack("<Q", len(body)) + body
+
+
+def respec(good: bytes, crate, toc: int, names: list, retype: bool = True) -> bytes:
+    """``good`` with its SPECS section rewritten (appended, the table of contents pointed at it):
+    the first prim spec (type 6) made a Mapper (type 4), or (``retype=False``) left as it was."""
+    import struct
+
+    from usdhands.formats.usdc_crate import decode_ints
+
+    k = names.index(b"SPECS")
+    start, end = crate.sections["SPECS"]
+    n = struct.unpack_from("<Q", good, start)[0]
+    arrays, at = [], start + 8
+    for _ in range(3):
+        size = struct.unpack_from("<Q", good, at)[0]
+        raw = crate.decompress(at + 8, size, 4 + (2 * n + 7) // 8 + 4 * n, "SPECS", end)
+        arrays.append(decode_ints(raw, n).tolist())
+        at += 8 + size
+    if retype:
+        arrays[2][arrays[2].index(6)] = 4
+    section = struct.pack("<Q", n) + b"".join(_encode_ints(a) for a in arrays)
+    data = bytearray(good)
+    struct.pack_into("<qq", data, toc + 8 + 32 * k + 16, len(good), len(section))
+    return bytes(data) + section

@@ -80,7 +80,7 @@ def test_third_party_package_passes(shared_assets):
 
 
 @pytest.mark.parametrize("lie", ["toc_sections", "section_past_end", "token_index", "array_count", "token_count",
-                                 "value_offset"])
+                                 "spec_type", "value_offset"])
 def test_each_lie_is_refused_by_the_check(lie, sample_assets, tmp_path):
     data, message = crate_lies(crate_seed(sample_assets, tmp_path))[lie]
     with pytest.raises(AssetReadError) as e:
@@ -118,6 +118,33 @@ def test_a_package_holding_a_lying_crate_names_the_member(sample_assets, tmp_pat
         check_crate(package)
     assert str(e.value).startswith(f"{package}: root.usdc: cannot read as USD: ")
     assert message in str(e.value)
+
+
+def test_the_rewritten_sections_of_the_cases_are_valid(sample_assets, tmp_path):
+    """The spec-type case rewrites SPECS with its own encoder: unchanged types give a file USD reads."""
+    import struct
+
+    from hostile import _encode_ints, respec  # noqa: E402
+
+    from usdhands.formats.io import read_asset
+    from usdhands.formats.usdc_crate import _Crate, decode_ints
+
+    values = [7, 6, 6, 1, 1, 8, 1, 300000, -5]
+    body = _encode_ints(values)[8:]
+    assert decode_ints(lz4_block_decompress(body[1:], 1000), len(values)).tolist() == values
+    good = crate_seed(sample_assets, tmp_path)
+    crate = _Crate(good)
+    crate.table_of_contents()
+    toc = struct.unpack_from("<q", good, 16)[0]
+    names = [good[toc + 8 + 32 * k:toc + 24 + 32 * k].split(b"\0")[0] for k in range(6)]
+    same = tmp_path / "same.usdc"
+    same.write_bytes(respec(good, crate, toc, names, retype=False))
+    check_crate(same)
+    original = tmp_path / "original.usdc"
+    original.write_bytes(good)
+    a, b = read_asset(same), read_asset(original)
+    assert a.skeletons[0].joint_names == b.skeletons[0].joint_names
+    assert (a.clips[0].rotations == b.clips[0].rotations).all()
 
 
 def test_lz4_blocks():

@@ -67,6 +67,12 @@ _REFERENCE_LIST_OP, _PAYLOAD_LIST_OP = 35, 55
 _LIST_OPS = {32, 33, 34, 35, 36, 37, 38, 39, 54, 55}
 
 
+#: SdfSpecType values each kind of path may carry (pseudo-root 7; prim 6, variant 10, variant set 11;
+#: attribute 1, relationship 8; below a property: connection 2, expression 3, mapper 4, mapper arg 5,
+#: relationship target 9). Out-of-range types are USD's own check.
+_SPEC_TYPES = {"root": {7}, "prim": {6, 10, 11}, "property": {1, 8}, "target": {2, 3, 4, 5, 9}}
+
+
 class _Corrupt(Exception):
     """What is wrong, raised inside the walk and turned into one AssetReadError."""
 
@@ -127,6 +133,32 @@ def lz4_block_decompress(src: bytes, limit: int) -> bytes:
     if len(out) > limit:
         raise ValueError(f"LZ4 block decodes to more than {limit} bytes")
     return bytes(out)
+
+
+def decode_ints(encoded: bytes, n: int, width: int = 4) -> np.ndarray:
+    """Sdf's integer coding (a common delta, 2-bit codes, 8/16/32-bit deltas), decoded: ``n`` int64.
+
+    Raises ValueError when the bytes are too few for ``n`` integers.
+    """
+    common_size = width
+    codes_size = (2 * n + 7) // 8
+    if len(encoded) < common_size + codes_size:
+        raise ValueError(f"{len(encoded)} bytes hold no {n} coded integers")
+    common = int.from_bytes(encoded[:common_size], "little", signed=True)
+    packed = np.frombuffer(encoded, dtype=np.uint8, count=codes_size, offset=common_size)
+    codes = ((packed[:, None] >> np.array([0, 2, 4, 6], dtype=np.uint8)) & 3).reshape(-1)[:n]
+    sizes = np.array([0, 1, 2, 4] if width == 4 else [0, 2, 4, 8], dtype=np.int64)[codes]
+    starts = common_size + codes_size + np.concatenate([[0], np.cumsum(sizes)[:-1]]) if n else np.zeros(0, np.int64)
+    if n and starts[-1] + sizes[-1] > len(encoded):
+        raise ValueError(f"{len(encoded)} bytes hold no {n} coded integers")
+    raw = np.frombuffer(encoded, dtype=np.uint8)
+    deltas = np.full(n, common, dtype=np.int64)
+    for size, kind in ((1, "<i1"), (2, "<i2"), (4, "<i4"), (8, "<i8")):
+        pick = np.flatnonzero(sizes == size)
+        if len(pick):
+            bytes_ = raw[starts[pick, None] + np.arange(size)]
+            deltas[pick] = np.ascontiguousarray(bytes_).view(kind)[:, 0]
+    return np.cumsum(deltas)
 
 
 class _Crate:
@@ -226,6 +258,54 @@ class _Crate:
             raise _Corrupt(f"{what} claims {n} integers; its {size} compressed bytes hold at most {most}")
         return at + 8 + size
 
+    def ints(self, at: int, n: int, what: str, end: int) -> tuple[np.ndarray, int]:
+        """``n`` compressed 32-bit integers from ``at``, decoded; and the position after them."""
+        after = self.compressed_ints(at, n, what, end)
+        limit = 4 + (2 * n + 7) // 8 + 4 * n
+        raw = self.decompress(at + 8, after - at - 8, limit, what, end)
+        try:
+            values = decode_ints(raw, n)
+        except ValueError as e:
+            raise _Corrupt(f"{what}: {e}") from None
+        return values, after
+
+    def spec_types(self, specs: list[np.ndarray], paths: list[np.ndarray]) -> None:
+        """Each spec's type fits its path: the root, a prim (or variant), a property, or below a property.
+
+        USD checks the type's range, not this: a Mapper spec on a prim path aborted the
+        interpreter ('Dereferenced an invalid SdfPrimSpec'). The path tree is walked as
+        USD builds it (each entry once: a jump back would make USD loop).
+        """
+        indexes, elements, jumps = (a.tolist() for a in paths)
+        n = len(indexes)
+        kind = [""] * n  # "root", "prim", "property", "target"
+        todo = [(0, None)] if n else []
+        while todo:
+            here, parent = todo.pop()
+            while True:
+                if not 0 <= here < n or kind[here]:
+                    raise _Corrupt(f"PATHS: its jumps table reaches entry {here} twice or outside 0..{n - 1}")
+                if parent is None:
+                    kind[here] = "root"
+                elif elements[here] < 0:
+                    kind[here] = "property"
+                else:
+                    kind[here] = "target" if kind[parent] in ("property", "target") else "prim"
+                jump = jumps[here]
+                has_child, has_sibling = jump > 0 or jump == -1, jump >= 0
+                if has_child and has_sibling:
+                    todo.append((here + jump, parent))
+                if has_child:
+                    parent = here
+                if not (has_child or has_sibling):
+                    break
+                here += 1
+        of_path = dict(zip(indexes, kind))
+        for path_index, spec_type in zip(specs[0].tolist(), specs[2].tolist()):
+            where = of_path.get(path_index)
+            if where is not None and spec_type not in _SPEC_TYPES[where]:
+                raise _Corrupt(f"SPECS: a spec of type {spec_type} on a {where} path")
+
     # -- layout ----------------------------------------------------------------------------
     def table_of_contents(self) -> None:
         if self.size < _BOOTSTRAP:
@@ -283,14 +363,18 @@ class _Crate:
                     raise _Corrupt(f"FIELDS value reps decode to {len(reps)} bytes for {n} fields")
             else:
                 self.count(n, start + 8, 16, "FIELDS", end)
+        specs = paths = None
         for name, arrays in (("FIELDSETS", 1), ("SPECS", 3)):
             if name in self.sections:
                 start, end = self.sections[name]
                 n = self.u64(start, f"{name} count")
                 if compressed:
-                    at = start + 8
+                    at, decoded = start + 8, []
                     for _ in range(arrays):
-                        at = self.compressed_ints(at, n, name, end)
+                        values, at = self.ints(at, n, name, end)
+                        decoded.append(values)
+                    if name == "SPECS":
+                        specs = decoded
                 else:
                     self.count(n, start + 8, 4 * arrays, name, end)
         if "PATHS" in self.sections:
@@ -300,11 +384,14 @@ class _Crate:
             if compressed:
                 self.count(n, start, 1, "PATHS")  # a path table entry per byte of the file at most
                 encoded = self.u64(start + 8, "encoded path count")
-                at = start + 16
+                at, paths = start + 16, []
                 for _ in range(3):
-                    at = self.compressed_ints(at, encoded, "PATHS", end)
+                    values, at = self.ints(at, encoded, "PATHS", end)
+                    paths.append(values)
             else:
                 self.count(n, start + 8, 9, "PATHS", end)
+        if specs is not None and paths is not None:
+            self.spec_types(specs, paths)
         return reps
 
     # -- values ----------------------------------------------------------------------------
