@@ -2,7 +2,8 @@
 
 Each class of bad input of issue 8 (missing, folder, named pipe, /dev/zero, empty,
 truncated, not UTF-8, JSON nested 100,000 deep, NaN, huge integers, lying offsets,
-absurd sizes, a newline in the name, outputs that cannot be written, unknown options)
+absurd sizes, a newline in the name, outputs that cannot be written, unknown options,
+crafted .usdc files, a reader warning before the error)
 is built by code, given to every command in :data:`COMMANDS` as its main input and to
 each side-file option in :data:`SIDE_FILES`, and must keep the promise: exit status 2,
 exactly one stderr line ``usdhands: error: FILE: ...`` naming the bad file (USD's own
@@ -82,6 +83,14 @@ def main_input_cases(folder: Path, samples: Path) -> dict[str, tuple[Path, str]]
     add("devzero", "zero.bvh", lambda p: p.symlink_to("/dev/zero"), "not a regular file")
     add("empty", "empty.glb", b"", "")
     add("truncated", "half.glb", ok[:len(ok) // 2], "truncated .glb")
+    # a reader warning (an unusable recorded fps) before the error (a channel naming a missing sampler):
+    # at default verbosity the error alone
+    warned = json.loads(json.dumps(doc))
+    broken = json.loads(json.dumps(warned["animations"][0]))
+    warned["animations"][0]["extras"] = {"usdhands": {"fps": -1}}
+    broken["channels"][0]["sampler"] = 99
+    warned["animations"].append(broken)
+    add("warning_then_error", "warned.glb", glb_bytes(warned, binary), "sampler 99 out of range")
     add("newline_in_name", "new\nline.glb", ok[:30], "")
     add("deep_json", "deep.gltf", '{"asset": {"version": "2.0"}, "extras": ' + deep_json(100_000) + "}",
         "nested 100001 deep")

@@ -106,28 +106,59 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help(sys.stderr)
         return EXIT_USER_ERROR
-    with _logging_to_stderr(logging.INFO if args.verbose else logging.WARNING):
-        return _run(args)
+    with _logging_to_stderr(logging.INFO if args.verbose else logging.WARNING) as held:
+        code = _run(args)
+        if code in (EXIT_USER_ERROR, EXIT_TERMINATED, 130):
+            held.clear()  # a bad input is one line: the error, not what the reader warned on the way
+        return code
+
+
+class _HeldWarnings(logging.Handler):
+    """Holds the records of a command at default verbosity; they are printed when it ends
+    (:meth:`flush`) unless it failed (:meth:`clear`), so a bad input stays one stderr line."""
+
+    def __init__(self, stream):
+        super().__init__()
+        self.stream = stream
+        self.records: list[logging.LogRecord] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
+
+    def clear(self) -> None:
+        self.records = []
+
+    def flush(self) -> None:
+        for record in self.records:
+            self.stream.write(self.format(record) + "\n")
+        self.records = []
+        self.stream.flush()
 
 
 @contextlib.contextmanager
 def _logging_to_stderr(level: int):
     """The library's loggers (``usdhands.*``) print ``usdhands: message`` lines on the current
     stderr at ``level`` and above while a command runs (also when called in-process, where
-    the root logger may already have handlers); restored afterwards."""
+    the root logger may already have handlers); restored afterwards.
+
+    With ``-v`` (INFO) the lines stream as they come; at the default level the warnings are
+    held and printed when the command ends, and dropped when it fails with a user error
+    (the yielded handler's ``clear``)."""
     log = logging.getLogger("usdhands")
-    handler = logging.StreamHandler(sys.stderr)
+    held = _HeldWarnings(sys.stderr)
+    handler = logging.StreamHandler(sys.stderr) if level < logging.WARNING else held
     handler.setFormatter(logging.Formatter("usdhands: %(message)s"))
     saved = log.level, log.propagate
     log.addHandler(handler)
     log.setLevel(level)
     log.propagate = False
     try:
-        yield
+        yield held
     finally:
         log.removeHandler(handler)
         log.setLevel(saved[0])
         log.propagate = saved[1]
+        held.flush()
 
 
 def _run(args) -> int:
