@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from usdhands.errors import AssetReadError
+from usdhands.input_files import check_regular_file
 from usdhands.model.prop import PropMesh
 from usdhands.model.units import up_axis_xform
 
@@ -88,11 +89,7 @@ def read_props(path: str | os.PathLike, *, meters_per_unit: float, up_axis: str,
     AssetReadError
         Missing file, not a mesh, no triangles, non-finite coordinates; one line.
     """
-    path = Path(path)
-    if not path.exists():
-        raise AssetReadError("no such file", path=path)
-    if path.is_dir():
-        raise AssetReadError("is a folder, not a file", path=path)
+    path = check_regular_file(path)  # missing, a folder, a named pipe, a device: one line, nothing opened
     suffix = path.suffix.lower()
     if suffix in USD_SUFFIXES:
         from usdhands.formats.usd_props import read_usd_props

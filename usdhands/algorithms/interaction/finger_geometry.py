@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from usdhands.errors import ConfigError
+from usdhands.input_files import read_json
 from usdhands.json_schemas import first_schema_error
 from usdhands.model.handmap import FINGERS, HandSide
 from usdhands.model.rotations import DEFAULT_EULER_ORDER
@@ -96,14 +97,8 @@ def load_interaction_config(path: str | Path) -> InteractionConfig:
         Missing, not JSON, or not matching the schema (the message names the key).
     """
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError("no such configuration file", path=path) from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(f"not valid JSON: {e}", path=path) from None
-    except OSError as e:
-        raise ConfigError(f"cannot read the configuration: {e.strerror}", path=path) from None
+    # a named pipe or a device refused before it is opened; strict JSON (NaN, nesting, huge integers)
+    data = read_json(path, what="configuration file", error=ConfigError)
     error = first_schema_error(data, "interaction_config")
     if error is not None:
         where, message = error

@@ -46,7 +46,7 @@ from usdhands.algorithms.synthesis.wrist_features import (
     NUM_WRIST_FEATURES, WRIST_FEATURE_NAMES, mirror_features, reach_cm, wrist_features,
 )
 from usdhands.errors import ConfigError
-from usdhands.input_files import read_json
+from usdhands.input_files import check_regular_file, read_json
 from usdhands.json_schemas import first_schema_error, load_schema
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
@@ -378,6 +378,8 @@ def load_database(path: str | os.PathLike, mmap: bool = True, *, check_schema: b
     path = Path(path)
     mf = path / "manifest.json"
     if path.exists() and not path.is_dir():
+        if not path.is_file():  # a named pipe, a device
+            raise ConfigError("not a regular file", path=path)
         raise ConfigError("is a file, not a finger database (a folder made by 'usdhands db build')", path=path)
     if not path.is_dir():
         raise ConfigError("no such finger database folder", path=path)
@@ -398,6 +400,10 @@ def load_database(path: str | os.PathLike, mmap: bool = True, *, check_schema: b
     for name in ARRAYS:
         spec = manifest["arrays"][name]
         f = path / spec["file"]
+        named = Path(spec["file"])
+        if named.is_absolute() or ".." in named.parts:  # the manifest names files inside its folder
+            raise ConfigError(f"array {name!r}: file {spec['file']!r} is outside the database folder", path=mf)
+        check_regular_file(f, what=f"array file {name!r}", error=ConfigError)  # a pipe would block np.load
         try:
             a = np.load(f, mmap_mode="r" if mmap else None, allow_pickle=False)
         except (OSError, ValueError) as e:
