@@ -171,11 +171,14 @@ def correct(source: str | os.PathLike, output: str | os.PathLike, options: Corre
 
     source, output = Path(source), Path(output)
     progress = progress or _no_progress
-    check_paths({MAIN_INPUT: source, "--props": options.props, "--handmap": options.handmap,
-                 "--interaction-config": options.interaction_config}, {"-o": output})
+    from usdhands.jobs.plots.interaction import FILES
+
+    inputs = {MAIN_INPUT: source, "--props": options.props, "--handmap": options.handmap,
+              "--interaction-config": options.interaction_config}
+    check_paths(inputs, {"-o": output})
     write_opts = layer_options(options.as_layer, source, output)
     check_correct_options(options)
-    check_plot_folder(options.plot)
+    check_plot_folder(options.plot, FILES, inputs)
     progress(0, 3, "reading")
     clip = read_clip(source, animation=options.animation)
     handmap = handmap_for(clip, source, options.handmap)

@@ -31,6 +31,9 @@ from usdhands.errors import UsdHandsError
 
 ProgressCallback = Callable[[int, int, str], None]
 
+#: The PNGs ``--plot`` may write (leave-one-out's pair, then k-fold's).
+PLOT_FILES = ("predictors.png", "confusion.png", "kfold_errors.png", "kfold_worst_window.png")
+
 
 @dataclass(frozen=True)
 class EvaluateOptions:
@@ -148,11 +151,12 @@ def evaluate(inputs: Sequence[str | os.PathLike], options: EvaluateOptions = Eva
     progress = progress or _no_progress
     check_fps(options.fps)
     check_seed(options.seed)
-    check_paths({MAIN_INPUT: inputs, "--labels-file": options.labels_file, "--config": options.config,
-                 "--handmap": options.handmap})
+    named_inputs = {MAIN_INPUT: inputs, "--labels-file": options.labels_file, "--config": options.config,
+                    "--handmap": options.handmap}
+    check_paths(named_inputs)
     if options.k is not None and options.k < 1:
         raise UsdHandsError(f"--k must be at least 1, got {options.k}")
-    check_plot_folder(options.plot)
+    check_plot_folder(options.plot, PLOT_FILES, named_inputs)
     cfg = load_config(options.config)
     predictors = list(options.predictors or ()) or list(DEFAULT_PREDICTORS)
     for name in predictors:

@@ -21,8 +21,13 @@ def bundled_database_path() -> Path:
     return Path(str(resources.files("usdhands").joinpath("data", BUNDLED_NAME)))
 
 
-def check_plot_folder(folder: Path | None) -> None:
-    """Refuse a ``--plot DIR`` that cannot be a folder, before any work."""
+def check_plot_folder(folder: Path | None, pngs: tuple[str, ...] = (), inputs: dict | None = None) -> None:
+    """Refuse a ``--plot DIR`` that cannot be a folder, before any work.
+
+    ``pngs`` are the file names the command may write into it and ``inputs`` the mapping
+    given to :func:`~usdhands.jobs.outputs.check_paths` (label -> path or paths): a PNG
+    that would land on an input (same path, symlink, hard link) is refused, naming it.
+    """
     if folder is None:
         return
     require_matplotlib(folder)
@@ -34,6 +39,17 @@ def check_plot_folder(folder: Path | None) -> None:
         parent = parent.parent
     if not parent.is_dir():
         raise UsdHandsError(f"--plot folder cannot be made: {str(parent)!r} is a file", path=folder)
+    from usdhands.errors import OutputPathError
+    from usdhands.formats.registry import same_file
+    from usdhands.jobs.outputs import MAIN_INPUT, each_path
+
+    for label, value in (inputs or {}).items():
+        for p in each_path(value):
+            for name in pngs:
+                if same_file(folder / name, p):
+                    what = "the input" if label == MAIN_INPUT else f"the {label} file"
+                    raise OutputPathError(f"--plot would write {name} over {what}; choose another folder",
+                                          path=folder / name)
 
 
 def expand_inputs(inputs: list[Path]) -> list[Path]:

@@ -18,7 +18,8 @@ MAIN_INPUT = "input"
 PathArg = Union[str, os.PathLike, Iterable[Union[str, os.PathLike]], None]
 
 
-def _each(value) -> list[Path]:
+def each_path(value) -> list[Path]:
+    """The paths of a check_paths value: None, one path, or several."""
     if value is None:
         return []
     if isinstance(value, (str, os.PathLike)):
@@ -63,7 +64,7 @@ def check_paths(inputs: Mapping[str, PathArg], outputs: Mapping[str, PathArg] | 
         hard link (:func:`~usdhands.formats.registry.same_file`); an output whose
         folder does not exist or that is a folder.
     """
-    given = [(label, p) for label, value in inputs.items() for p in _each(value)]
+    given = [(label, p) for label, value in inputs.items() for p in each_path(value)]
     for _, p in given:
         try:
             mode = os.stat(p).st_mode
@@ -79,14 +80,14 @@ def check_paths(inputs: Mapping[str, PathArg], outputs: Mapping[str, PathArg] | 
 
     written: list[tuple[str, Path]] = []
     for label, value in (outputs or {}).items():
-        for out in _each(value):
+        for out in each_path(value):
             for other, p in given + written:
                 if same_file(out, p):
                     raise refuse(out, other)
             check_output_path(out)
             written.append((label, out))
     for label, value in (replaced_folders or {}).items():
-        for folder in _each(value):
+        for folder in each_path(value):
             for other, p in given + written:
                 if same_file(folder, p):
                     raise refuse(folder, other, "folder")

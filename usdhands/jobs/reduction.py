@@ -154,8 +154,10 @@ def reduce(source: str | os.PathLike, output: str | os.PathLike | None = None,
     write_opts = layer_options(options.as_layer, source, output) if output is not None else {}
     if options.as_layer and output is None:
         raise UsdHandsError("--as-layer needs -o OUT")
+    from usdhands.jobs.plots.reduction import FILES
+
     check_paths({MAIN_INPUT: source, "--handmap": options.handmap}, {"-o": output, "--model": model_output})
-    check_plot_folder(options.plot)
+    check_plot_folder(options.plot, FILES, {MAIN_INPUT: source, "--handmap": options.handmap})
     progress(0, 3, "reading")
     clip, handmap, curves, sides = load_finger_curves(source, options.animation, options.handmap, options.hands,
                                                       options.order)

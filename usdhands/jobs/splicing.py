@@ -157,10 +157,13 @@ def splice(body: str | os.PathLike, hands: str | os.PathLike, output: str | os.P
                                  ("--transfer", options.transfer, ("auto", "local", "copy", "hand"))):
         if value not in allowed:
             raise UsdHandsError(f"bad {name} {value!r}: expected one of {', '.join(allowed)}")
-    check_paths({MAIN_INPUT: (body_path, hands_path), "--body-markers": options.body_markers,
-                 "--hands-markers": options.hands_markers, "--body-handmap": options.body_handmap,
-                 "--hands-handmap": options.hands_handmap}, {"-o": output})
-    check_plot_folder(options.plot)
+    from usdhands.jobs.plots.splicing import FILES
+
+    inputs = {MAIN_INPUT: (body_path, hands_path), "--body-markers": options.body_markers,
+              "--hands-markers": options.hands_markers, "--body-handmap": options.body_handmap,
+              "--hands-handmap": options.hands_handmap}
+    check_paths(inputs, {"-o": output})
+    check_plot_folder(options.plot, FILES, inputs)
     opts = layer_options(options.as_layer, body_path, output)
     body_clip = read_clip(body_path, animation=options.animation)
     hands_clip = read_clip(hands_path, animation=options.hands_animation)

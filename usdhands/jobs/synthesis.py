@@ -366,10 +366,13 @@ def _check_output(source: Path, output: Path, options: SynthesizeOptions) -> Non
     from usdhands.jobs.inputs import check_plot_folder
     from usdhands.jobs.outputs import MAIN_INPUT, check_paths
 
-    check_paths({MAIN_INPUT: source, "--db": options.db, "--config": options.config, "--handmap": options.handmap,
-                 "--props": options.props, "--interaction-config": options.interaction_config}, {"-o": output})
+    from usdhands.jobs.plots.synthesis import FILES
+
+    inputs = {MAIN_INPUT: source, "--db": options.db, "--config": options.config, "--handmap": options.handmap,
+              "--props": options.props, "--interaction-config": options.interaction_config}
+    check_paths(inputs, {"-o": output})
     layer_options(options.as_layer, source, output)
-    check_plot_folder(options.plot)
+    check_plot_folder(options.plot, FILES, inputs)
     if options.finger_reference not in ("rest", "input"):
         raise UsdHandsError(f"finger_reference must be 'rest' or 'input', got {options.finger_reference!r}")
     if not options.graft_hands and source.exists():

@@ -6,6 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
+#: Every file name a run may write into the plot folder (checked against the inputs first).
+FILES = ("penetration_depth.png", "worst_frame.png")
+
 
 def plot_correction(folder: Path, before, after, handmap, colliders, report, config) -> list[Path]:
     """Write ``penetration_depth.png`` and ``worst_frame.png`` into ``folder``; returns the paths."""

@@ -16,6 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+#: Every file name a run may write into the plot folder (checked against the inputs first).
+FILES = ("reduction_ranges.png", "reduction_rmsd1.png", "reduction_rmsd2.png", "reduction_scatter.png",
+         "reduction_curves.png")
+
 __all__ = ["plot_reduction"]
 
 

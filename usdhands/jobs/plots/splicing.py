@@ -7,6 +7,9 @@ from typing import Sequence
 
 import numpy as np
 
+#: Every file name a run may write into the plot folder (checked against the inputs first).
+FILES = ("splice_left.png", "splice_right.png")
+
 
 def plot_alignment(alignment, path: str | Path, *, title: str = "", constraints: Sequence = (),
                    truth: np.ndarray | None = None, hand_label: str = "hand frame", dpi: int = 64) -> Path:

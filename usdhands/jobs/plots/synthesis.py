@@ -6,6 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
+#: Every file name a run may write into the plot folder (checked against the inputs first).
+FILES = tuple(f"{side}_{what}.png" for side in ("left", "right") for what in ("segments", "graph", "fingers"))
+
 
 def _plt():
     import matplotlib
