@@ -1,7 +1,7 @@
 """Run many ``usdhands`` command lines in one process; used by tests/test_hostile_corpus.py.
 
 Reads a JSON list of argument lists on stdin and prints a JSON list of
-``{"code": int, "stderr": str, "stdout_bytes": int}``, one per command line. Everything
+``{"code": int, "stderr": str, "stdout_bytes": int, "stdout": str}`` (its first 4000 characters), one per command line. Everything
 written to file descriptor 2 while a command runs is captured (Python's and USD's own
 diagnostics alike), so a stray line from a library counts against the one-line promise.
 The caller runs this under resource limits (tests/hostile.py), which bound the whole batch.
@@ -42,7 +42,7 @@ def run_one(argv: list[str]) -> dict:
             os.close(saved)
         capture.seek(0)
         err = capture.read().decode("utf-8", errors="replace")
-    return {"code": code, "stderr": err, "stdout_bytes": len(out.getvalue())}
+    return {"code": code, "stderr": err, "stdout_bytes": len(out.getvalue()), "stdout": out.getvalue()[:4000]}
 
 
 def main() -> None:

@@ -39,6 +39,9 @@ COMMANDS: dict[str, list[str]] = {
     "splice": ["splice", "{body}", "{input}", "-o", "{out}.glb"],
     "reduce": ["reduce", "{input}", "-o", "{out}{ext}"],
     "expand": ["expand", "{input}", "--model", "{model}", "-o", "{out}{ext}"],
+    "correct": ["correct", "{input}", "--props", "{prop}", "-o", "{out}{ext}"],
+    "check": ["check", "{input}"],
+    "batch": ["batch", "{input}", "--job", "convert", "--to", "usda", "--out", "{out}_batch", "--workers", "1"],
 }
 
 #: command -> side-file option -> (kind of file it takes, "json" or "csv"; option of the
@@ -51,6 +54,7 @@ SIDE_FILES: dict[str, dict[str, tuple[str, str | None]]] = {
     "splice": {"--hands-markers": ("csv", None)},
     "reduce": {"--handmap": ("json", None)},
     "expand": {"--model": ("json", "--model")},
+    "correct": {"--handmap": ("json", None), "--interaction-config": ("json", None)},
 }
 
 
@@ -167,26 +171,50 @@ def corpus(tmp_path_factory, sample_assets):
     for kind in ("json", "csv"):
         (folder / kind).mkdir()
         side[kind] = side_file_cases(folder / kind, kind)
-    return {"folder": folder, "good": good, "body": body, "model": model, "main": main_cases, "side": side}
+    prop = folder / "good_table.obj"
+    shutil.copy(sample_assets / "props" / "table.obj", prop)
+    return {"folder": folder, "good": good, "body": body, "model": model, "prop": prop, "main": main_cases,
+            "side": side}
 
 
 def _fill(template: list[str], corpus, input_path: Path, out: Path) -> list[str]:
     values = {"input": input_path, "good": corpus["good"], "body": corpus["body"], "model": corpus["model"],
-              "out": out, "ext": input_path.suffix or ".glb"}
+              "prop": corpus["prop"], "out": out, "ext": input_path.suffix or ".glb"}
     return [a.format(**values) for a in template]
 
 
-def _check(results, expected, corpus):
+def _check(results, expected, corpus, command: str = ""):
+    """The failures among ``results``: each must be one error line naming the file, exit 2; or, for
+    ``check``, its findings on that file (exit 1, the summary line alone on stderr); or, for
+    ``batch``, the clip recorded as failed with that line in ``report.json`` (exit 1: a failing
+    clip does not stop a batch), nothing else written (the batch's folder is then removed)."""
     inputs = [corpus["good"], corpus["body"], corpus["model"]]
     failures = []
-    for (label, path, message), result in zip(expected, results):
+    for (label, path, message, out_dir), result in zip(expected, results):
         lines = result["stderr"].rstrip("\n").split("\n") if result["stderr"].strip() else []
         shown = str(path).replace("\n", "\\n")
         ok = (result["code"] == 2 and len(lines) == 1 and lines[0].startswith(f"usdhands: error: {shown}")
               and message in lines[0])
+        if not ok and command == "check" and result["code"] == 1:  # a rule found something in the file
+            found = result["stdout"].splitlines()
+            ok = (found != [] and all(f.startswith(str(path)) for f in found) and len(lines) == 1
+                  and lines[0].startswith("checked 1 file(s): 0 passed"))
+        if not ok and command == "batch" and result["code"] == 1 and out_dir is not None:
+            report = json.loads((out_dir / "report.json").read_text())
+            [clip] = report["clips"]
+            ok = (clip["status"] == "failed" and clip["error"].startswith(shown) and message in clip["error"]
+                  and sorted(p.name for p in out_dir.iterdir()) == ["batch_options.json", "report.json"]
+                  and "Traceback" not in result["stderr"] and "\n" not in clip["error"])
+        if out_dir is not None and out_dir.exists():
+            shutil.rmtree(out_dir)
         if not ok:
             failures.append(f"{label}: exit {result['code']}, stderr {result['stderr'][-400:]!r}")
     return failures, inputs
+
+
+def _batch_out(argv: list[str]) -> Path | None:
+    """The ``--out`` folder of a batch command line (None for other commands)."""
+    return Path(argv[argv.index("--out") + 1]) if argv[0] == "batch" else None
 
 
 @pytest.mark.parametrize("command", sorted(COMMANDS))
@@ -196,22 +224,22 @@ def test_every_hostile_input_keeps_the_promise(command, corpus):
     out_folder.mkdir(parents=True)
     cases, expected = [], []
     for name, (path, message) in corpus["main"].items():
-        cases.append(_fill(COMMANDS[command], corpus, path, out_folder / "out"))
-        expected.append((f"input {name}", path, message))
+        cases.append(_fill(COMMANDS[command], corpus, path, out_folder / f"case{len(cases)}"))
+        expected.append((f"input {name}", path, message, _batch_out(cases[-1])))
     for option, (kind, replaces) in SIDE_FILES.get(command, {}).items():
         for name, (path, message) in corpus["side"][kind].items():
-            argv = _fill(COMMANDS[command], corpus, corpus["good"], out_folder / "out")
+            argv = _fill(COMMANDS[command], corpus, corpus["good"], out_folder / f"case{len(cases)}")
             if replaces is not None:  # drop the template's option this one stands for
                 k = argv.index(replaces)
                 del argv[k:k + 2]
             argv += [option, str(path)]
             cases.append(argv)
-            expected.append((f"{option} {name}", path, message))
+            expected.append((f"{option} {name}", path, message, None))
     # outputs that cannot be written, and a misused option (the message names the output or nothing)
     before = {p: sha(p) for p in (corpus["good"], corpus["body"], corpus["model"])}
     files_before = listing(folder)
     results = run_batch(cases)
-    failures, inputs = _check(results, expected, corpus)
+    failures, inputs = _check(results, expected, corpus, command)
     assert failures == [], "\n".join(failures)
     assert listing(folder) == files_before, "an output or a temporary file was left behind"
     assert {p: sha(p) for p in inputs} == before
@@ -228,9 +256,9 @@ def test_unwritable_outputs_and_bad_options(command, corpus):
         argv = _fill(templates, corpus, corpus["good"], out)
         shown = next(a for a in argv if a.startswith(str(out)))
         cases.append(argv)
-        expected.append((label, shown, ""))
+        expected.append((label, shown, "", None))
     cases.append(_fill(templates, corpus, corpus["good"], folder / "out") + ["--bogus"])
-    expected.append(("unknown option", "", "unrecognized arguments: --bogus"))
+    expected.append(("unknown option", "", "unrecognized arguments: --bogus", None))
     files_before = listing(folder)
     results = run_batch(cases)
     failures, _ = _check(results, expected, corpus)

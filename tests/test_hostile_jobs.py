@@ -46,6 +46,8 @@ DRIVER = textwrap.dedent('''
     else:
         x.mkdir()
     table = samples / "props" / "table.obj"
+    cup = folder / "cup.glb"
+    shutil.copy(samples / "interaction" / "cup_grasp.glb", cup)
     S = usdhands.SynthesizeOptions
 
     def stage_hook(**options):
@@ -86,6 +88,11 @@ DRIVER = textwrap.dedent('''
                                                         usdhands.SpliceOptions(hands_markers=x)),
         "splice hands_handmap": lambda: usdhands.splice(body, good, folder / "o.glb",
                                                         usdhands.SpliceOptions(hands_handmap=x)),
+        "correct props": lambda: usdhands.correct(cup, folder / "o.glb", usdhands.CorrectOptions(props=(x,))),
+        "correct handmap": lambda: usdhands.correct(cup, folder / "o.glb",
+                                                    usdhands.CorrectOptions(props=(table,), handmap=x)),
+        "correct interaction_config": lambda: usdhands.correct(
+            cup, folder / "o.glb", usdhands.CorrectOptions(props=(table,), interaction_config=x)),
         "stage hook handmap": lambda: stage_hook(handmap=x),
         "stage hook config": lambda: stage_hook(config=x),
         "stage hook db": lambda: stage_hook(db=x),

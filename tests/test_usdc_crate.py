@@ -147,6 +147,27 @@ def test_the_rewritten_sections_of_the_cases_are_valid(sample_assets, tmp_path):
     assert (a.clips[0].rotations == b.clips[0].rotations).all()
 
 
+def test_spec_types_against_the_path_tree():
+    """Root, prim and property entries carry their own spec types; an entry the tree never reaches has
+    no path (USD leaves it empty) and is not judged (the usdc fuzz: 978 KeyErrors before this)."""
+    import numpy as np
+
+    from usdhands.formats.usdc_crate import _Corrupt, _Crate
+
+    crate = _Crate(b"")
+    # root -> /A (child) -> /A.x (property, last); entry 3 unreached
+    paths = [np.array([0, 1, 2, 3]), np.array([0, 5, -6, 7]), np.array([-1, -1, -2, -2])]
+    specs = [np.array([0, 1, 2, 3]), np.zeros(4, dtype=int), np.array([7, 6, 1, 4])]
+    crate.spec_types(specs, paths)
+    specs[2] = np.array([7, 4, 1, 4])
+    with pytest.raises(_Corrupt, match="a spec of type 4 on a prim path"):
+        crate.spec_types(specs, paths)
+    specs[2] = np.array([7, 6, 1, 4])
+    # entry 1's sibling jump lands on its own child: two tasks of USD would build entry 2 at once
+    with pytest.raises(_Corrupt, match="reaches entry 2 twice"):
+        crate.spec_types(specs, [paths[0], paths[1], np.array([-1, 1, -2, -2])])
+
+
 def test_lz4_blocks():
     assert lz4_block_decompress(b"\x40abcd", 100) == b"abcd"
     # 'ab' then a match 2 back, 6 long (overlapping): the last two bytes repeated

@@ -29,7 +29,7 @@ import sys
 import warnings
 
 from usdhands import __version__
-from usdhands.errors import UsdHandsError
+from usdhands.errors import UsdHandsError, one_line
 
 EXIT_USER_ERROR = 2
 #: Exit status after SIGTERM (128 + 15, as a shell reports a process it terminated).
@@ -46,11 +46,6 @@ class Terminated(KeyboardInterrupt):
 
 def _on_sigterm(signum, frame):
     raise Terminated()
-
-
-def one_line(text: str) -> str:
-    """``text`` with control characters escaped (a file name holding a newline stays on one line)."""
-    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in text)
 
 
 class _Parser(argparse.ArgumentParser):

@@ -11,6 +11,11 @@ from __future__ import annotations
 from pathlib import Path
 
 
+def one_line(text: str) -> str:
+    """``text`` with control characters escaped (a file name holding a newline stays on one line)."""
+    return "".join(c if c.isprintable() or c == " " else repr(c)[1:-1] for c in text)
+
+
 class UsdHandsError(Exception):
     """Root of the project's errors about assets and user input.
 

@@ -47,11 +47,15 @@ def run(args) -> int:
     if args.json:
         print_json(result.to_json())
         return result.exit_status
+    from usdhands.errors import one_line
+
     for fc in result.files:
         if fc.error:
-            print(f"usdhands: error: {fc.error}", file=sys.stderr)
+            print(f"usdhands: error: {one_line(fc.error)}", file=sys.stderr)
         for finding in fc.findings:
             print(finding)
-    ok = sum(fc.status == "ok" for fc in result.files)
-    print(f"checked {len(result.files)} file(s): {ok} passed, {len(result.findings)} finding(s)", file=sys.stderr)
+    if not any(fc.error for fc in result.files):  # an unreadable file: its error line alone says it
+        ok = sum(fc.status == "ok" for fc in result.files)
+        print(f"checked {len(result.files)} file(s): {ok} passed, {len(result.findings)} finding(s)",
+              file=sys.stderr)
     return result.exit_status

@@ -14,7 +14,7 @@ from pxr import Usd, UsdSkel
 
 from usdhands.errors import NoHandsError, UsdHandsError
 from usdhands.formats.usd_common import bound_animation_path, open_stage, quiet_diagnostics, skeleton_tokens_and_names
-from usdhands.formats.usd_read import read_skeleton
+from usdhands.formats.usd_read import read_skeleton, stage_units
 from usdhands.formats.usd_schema_data import read_finger_motion, read_hand_map
 from usdhands.model.findings import Finding, provenance_problem
 from usdhands.model.hand_detection import detect_hands
@@ -31,6 +31,7 @@ MAX_TIMES_CHECKED = 100_000
 def audit_usd(path: str | os.PathLike, *, require_provenance: bool = False) -> list[Finding]:
     """The findings of a USD file; :class:`~usdhands.errors.AssetReadError` when it cannot be opened."""
     stage = open_stage(path)
+    stage_units(stage, path)  # units every reader refuses: unreadable here too, not a pass
     return audit_stage(stage, str(path), require_provenance=require_provenance)
 
 

@@ -122,13 +122,19 @@ MAX_RATE = 1e4
 MAX_FRAMES = 1_000_000
 
 
-def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
+def stage_units(stage: Usd.Stage, path: Path) -> tuple[float, float]:
+    """``(timeCodesPerSecond, metersPerUnit)`` of a stage; AssetReadError when usdhands cannot use them."""
     tcps = float(stage.GetTimeCodesPerSecond())
     if not (MIN_RATE <= tcps <= MAX_RATE):  # also NaN; 0 divided by zero, 1e300 collapsed float32 key times
         raise AssetReadError(f"timeCodesPerSecond {tcps:g} is outside {MIN_RATE:g}..{MAX_RATE:g}", path=path)
     mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
     if not (mpu > 0 and np.isfinite(mpu)):  # 0 raised ValueError from the Skeleton
         raise AssetReadError(f"metersPerUnit {mpu:g} is not a positive finite number", path=path)
+    return tcps, mpu
+
+
+def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
+    tcps, mpu = stage_units(stage, path)
     up = str(UsdGeom.GetStageUpAxis(stage)).upper()
     up = up if up in ("Y", "Z") else "Y"
     cache = UsdSkel.Cache()

@@ -300,7 +300,7 @@ class _Crate:
                 if not (has_child or has_sibling):
                     break
                 here += 1
-        of_path = dict(zip(indexes, kind))
+        of_path = {i: k for i, k in zip(indexes, kind) if k}  # an entry the walk never reaches: no path
         for path_index, spec_type in zip(specs[0].tolist(), specs[2].tolist()):
             where = of_path.get(path_index)
             if where is not None and spec_type not in _SPEC_TYPES[where]:

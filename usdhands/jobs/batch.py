@@ -55,7 +55,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-from usdhands.errors import UsdHandsError
+from usdhands.errors import UsdHandsError, one_line
 
 ANIMATION_EXTENSIONS = (".usd", ".usda", ".usdc", ".usdz", ".gltf", ".glb", ".bvh")
 
@@ -189,7 +189,9 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
     for src, rel in collect_inputs(inputs, extensions):
         pairs.append((src, out / output_name(rel, options)))
     if not pairs:
-        raise UsdHandsError("no input clips found")
+        named = [Path(p) for p in inputs]
+        raise UsdHandsError(f"no input clips found ({', '.join(extensions)})",
+                            path=named[0] if len(named) == 1 else None)
     resolved = {Path(p).resolve() for p, _ in pairs}
     out.mkdir(parents=True, exist_ok=True)
     recorded = _record_options(out, options, job_options)
@@ -237,6 +239,10 @@ def collect_inputs(inputs: Sequence[str | os.PathLike], extensions=ANIMATION_EXT
                 if f.is_file() and f.suffix.lower() in extensions:
                     out.append((f, f.relative_to(p)))
         elif p.suffix.lower() in extensions:
+            if not p.exists():  # a clip named on the command line (or in a list): refused before any work
+                raise UsdHandsError("no such file", path=p)
+            if not p.is_file():  # a named pipe would block a worker forever, /dev/zero never end
+                raise UsdHandsError("not a regular file", path=p)
             out.append((p, Path(p.name)))
         elif p.is_file():
             try:
@@ -385,7 +391,7 @@ def run_clip(job: str, job_options, model: Path | None, src: Path, dst: Path) ->
         error = f"{type(e).__name__}: {e}"
     seconds = time.perf_counter() - start
     return ClipRecord(str(src), str(dst), "failed" if error else "done", round(seconds, 4),
-                      None if error is None else error.splitlines()[0])
+                      None if error is None else one_line(error))
 
 
 def _start_pool_worker(job: str, job_options) -> None:
@@ -502,4 +508,4 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
             try:
                 report(future.result())
             except Exception as e:  # KilledWorker and the like: the clip took its worker down twice
-                report(ClipRecord(str(src), str(dst), "failed", 0.0, f"{type(e).__name__}: {e}".splitlines()[0]))
+                report(ClipRecord(str(src), str(dst), "failed", 0.0, one_line(f"{type(e).__name__}: {e}")))

@@ -166,11 +166,10 @@ def check_usd_stage(stage, options: CheckOptions = CheckOptions()) -> list[Findi
 
 
 def _check_file(path: Path, options: CheckOptions) -> list[Finding]:
-    from usdhands.errors import AssetReadError
     from usdhands.formats.registry import handler_for
+    from usdhands.input_files import check_regular_file
 
-    if not path.is_file():
-        raise AssetReadError("no such file" if not path.exists() else "not a file", path=path)
+    check_regular_file(path)  # missing, a folder, a named pipe, a device: the readers' words
     kind = handler_for(path, "read").name
     findings = _audit(path, kind, options)
     if options.props and not _unsound(findings):
