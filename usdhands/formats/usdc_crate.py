@@ -77,6 +77,20 @@ class _Corrupt(Exception):
     """What is wrong, raised inside the walk and turned into one AssetReadError."""
 
 
+def _lz4_length(src: bytes, i: int, length: int, what: str) -> tuple[int, int]:
+    """A sequence's length: the token's 4 bits, extended by bytes while they are 255; and the next position."""
+    if length != 15:
+        return length, i
+    while True:
+        if i >= len(src):
+            raise ValueError(f"LZ4 {what} length runs past the block")
+        b = src[i]
+        i += 1
+        length += b
+        if b != 255:
+            return length, i
+
+
 def lz4_block_decompress(src: bytes, limit: int) -> bytes:
     """Decode one LZ4 block (the format USD's TfFastCompression writes); at most ``limit`` bytes out.
 
@@ -87,16 +101,7 @@ def lz4_block_decompress(src: bytes, limit: int) -> bytes:
     while i < n:
         token = src[i]
         i += 1
-        literal = token >> 4
-        if literal == 15:
-            while True:
-                if i >= n:
-                    raise ValueError("LZ4 literal length runs past the block")
-                b = src[i]
-                i += 1
-                literal += b
-                if b != 255:
-                    break
+        literal, i = _lz4_length(src, i, token >> 4, "literal")
         if i + literal > n:
             raise ValueError("LZ4 literals run past the block")
         out += src[i:i + literal]
@@ -109,16 +114,7 @@ def lz4_block_decompress(src: bytes, limit: int) -> bytes:
         i += 2
         if offset == 0 or offset > len(out):
             raise ValueError("LZ4 match offset outside the output")
-        length = token & 15
-        if length == 15:
-            while True:
-                if i >= n:
-                    raise ValueError("LZ4 match length runs past the block")
-                b = src[i]
-                i += 1
-                length += b
-                if b != 255:
-                    break
+        length, i = _lz4_length(src, i, token & 15, "match")
         length += 4
         if len(out) + length > limit:
             raise ValueError(f"LZ4 block decodes to more than {limit} bytes")
