@@ -215,6 +215,12 @@ def crate_lies(good: bytes) -> dict[str, tuple[bytes, str]]:
     tokens = names.index(b"TOKENS")
     start = struct.unpack_from("<q", good, toc + 8 + 32 * tokens + 16)[0]
     out["token_count"] = (edit("<Q", start, 1 << 40), "TOKENS claims 1099511627776 tokens")
+    # the root's primChildren naming a prim it does not have: USD aborted ('Dereferenced an invalid SdfPrimSpec')
+    start, end = crate.sections["TOKENS"]
+    raw, packed = struct.unpack_from("<QQ", good, start + 8)
+    tokens = crate.decompress(start + 24, packed, raw, "TOKENS", end).split(b"\0")
+    out["child_without_spec"] = (edit("<I", first(41) + 8, tokens.index(b"Humanoid")),
+                                 "primChildren of </> lists </Humanoid>, which has no spec")
     # a prim spec retyped as a Mapper: USD aborted the interpreter ('Dereferenced an invalid SdfPrimSpec')
     out["spec_type"] = (respec(good, crate, toc, names), "SPECS: a spec of type 4 on a prim path")
     # a dictionary value whose offset points backwards: USD prefetched (posix_madvise) a negative length

@@ -117,9 +117,10 @@ def main_input_cases(folder: Path, samples: Path) -> dict[str, tuple[Path, str]]
     motion = bvh_lines.index("MOTION")
     add("bvh_unclosed", "open.bvh", "\n".join(bvh_lines[:motion - 1] + bvh_lines[motion:]) + "\n", "")
     # usdc fuzz findings: a table of contents of 117 million sections (> 3 GB), a token index past the table
-    # (a segfault), a section past the end (USD's posix_madvise line on stderr), also through a sublayer
+    # (a segfault), a section past the end (USD's posix_madvise line on stderr), a prim spec typed as a Mapper
+    # and a listed child without a spec (SIGABRT), also through a sublayer
     lies = crate_lies(crate_seed(samples, folder))
-    for name in ("toc_sections", "token_index", "section_past_end"):
+    for name in ("toc_sections", "token_index", "section_past_end", "spec_type", "child_without_spec"):
         data, message = lies[name]
         add(f"usdc_{name}", f"{name}.usdc", data, message)
     (folder / "lie_sub.usdc").write_bytes(lies["token_index"][0])

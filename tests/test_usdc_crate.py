@@ -89,6 +89,19 @@ def test_each_lie_is_refused_by_the_check(lie, sample_assets, tmp_path):
     assert str(e.value).startswith(f"{tmp_path / 'x.usdc'}: cannot read as USD: ")
 
 
+def test_a_listed_child_without_a_spec_is_refused_before_usd_composes(sample_assets, tmp_path):
+    """The crate's byte layout is sound here; the lie is in what a spec lists (checked through Sdf)."""
+    from usdhands.formats.usd_common import open_stage
+
+    data, message = crate_lies(crate_seed(sample_assets, tmp_path))["child_without_spec"]
+    check_crate_bytes(data)  # nothing the bytes cannot hold
+    bad = tmp_path / "child.usdc"
+    bad.write_bytes(data)
+    with pytest.raises(AssetReadError) as e:
+        open_stage(bad)
+    assert str(e.value) == f"{bad}: cannot read as USD: {message}"
+
+
 def test_lies_keep_the_promise_in_every_reading_command(sample_assets, tmp_path):
     """One subprocess, fd 2 captured: USD's own posix_madvise line would be a second line."""
     lies = crate_lies(crate_seed(sample_assets, tmp_path))

@@ -90,6 +90,54 @@ def tf_error_reason(err: BaseException, path: str | os.PathLike | None = None) -
 MAX_LAYERS = 10_000
 
 
+def _children(spec, key: str) -> list[str]:
+    """The names a spec's children field (``primChildren``, ``properties``...) lists."""
+    try:
+        return list(spec.GetInfo(key)) if spec.HasInfo(key) else []
+    except Tf.ErrorException:  # not a field of this kind of spec
+        return []
+
+
+def check_children(layer: Sdf.Layer, path: Path) -> None:
+    """Every child a crate layer's specs list (prims, variant sets, variants, properties) has a spec.
+
+    A crate file stores the lists apart from the specs: a child listed without one aborted
+    the interpreter while USD composed the stage ('Dereferenced an invalid SdfPrimSpec',
+    usdc fuzz). Text layers list what they define and are not walked.
+
+    Raises
+    ------
+    AssetReadError
+        Naming the first listed child that has no spec.
+    """
+    def missing(where, key: str, child) -> AssetReadError:
+        return AssetReadError(f"cannot read as USD: {key} of <{where}> lists <{child}>, which has no spec", path=path)
+
+    todo = [Sdf.Path.absoluteRootPath]
+    while todo:
+        here = todo.pop()
+        spec = layer.GetObjectAtPath(here)
+        for name in _children(spec, "primChildren"):
+            child = here.AppendChild(name)
+            if child.isEmpty or layer.GetObjectAtPath(child) is None:
+                raise missing(here, "primChildren", child if not child.isEmpty else name)
+            todo.append(child)
+        for name in _children(spec, "variantSetChildren"):
+            variant_set = here.AppendVariantSelection(name, "")
+            vs_spec = None if variant_set.isEmpty else layer.GetObjectAtPath(variant_set)
+            if vs_spec is None:
+                raise missing(here, "variantSetChildren", variant_set if not variant_set.isEmpty else name)
+            for variant in _children(vs_spec, "variantChildren"):
+                child = here.AppendVariantSelection(name, variant)
+                if child.isEmpty or layer.GetObjectAtPath(child) is None:
+                    raise missing(variant_set, "variantChildren", child if not child.isEmpty else variant)
+                todo.append(child)
+        for name in _children(spec, "properties"):
+            child = here.AppendProperty(name)
+            if child.isEmpty or layer.GetObjectAtPath(child) is None:
+                raise missing(here, "properties", child if not child.isEmpty else name)
+
+
 def checked_layers(path: Path) -> list[Sdf.Layer]:
     """Open ``path`` and every local layer it composes, each crate file checked first.
 
@@ -112,14 +160,16 @@ def checked_layers(path: Path) -> list[Sdf.Layer]:
             continue  # a missing layer: USD reports it (a warning) when it composes
         seen.add(key)
         try:
-            check_crate(here)
+            crate = check_crate(here)
+            layer = Sdf.Layer.FindOrOpen(str(here))
+            if crate and layer is not None:
+                check_children(layer, here)
         except OSError as e:
             raise AssetReadError(f"cannot read ({e.strerror or e})", path=here) from None
         except AssetReadError as e:
             if here == Path(path):
                 raise
             raise AssetReadError(f"composes {here}: {e.message}", path=path) from None
-        layer = Sdf.Layer.FindOrOpen(str(here))
         if layer is None:
             continue
         held.append(layer)

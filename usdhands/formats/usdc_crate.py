@@ -567,10 +567,10 @@ def check_crate_bytes(data: bytes, path: str | os.PathLike | None = None) -> Non
         raise AssetReadError(f"cannot read as USD: {e}", path=path) from None
 
 
-def check_crate(path: str | os.PathLike) -> None:
-    """Check ``path`` with :func:`check_crate_bytes` if it is a crate file (else nothing).
+def check_crate(path: str | os.PathLike) -> bool:
+    """Check ``path`` with :func:`check_crate_bytes` if it is a crate file; whether it was one.
 
-    A ``.usdz`` package is checked member by member (each crate file it stores).
+    A ``.usdz`` package is checked member by member (each crate file it stores; True).
     """
     path = Path(path)
     with open(path, "rb") as f:
@@ -578,9 +578,11 @@ def check_crate(path: str | os.PathLike) -> None:
         if head == CRATE_MAGIC:
             f.seek(0)
             check_crate_bytes(f.read(), path)
-            return
+            return True
     if head[:4] == b"PK\x03\x04":
         _check_package(path)
+        return True
+    return False
 
 
 def _check_package(path: Path) -> None:
