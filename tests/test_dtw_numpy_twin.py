@@ -111,7 +111,12 @@ def test_search_choice_follows_the_work(monkeypatch):
     qb = np.array([[0, 30], [30, 60]])
     ds = np.array([[0, 30], [30, 55], [55, 90]])
     monkeypatch.setattr(segment_cost, "_kernel_loaded", lambda: False)
+    monkeypatch.setattr(segment_cost, "_numpy_cells_searched", [0.0])
     assert segment_cost._search_kernel(qb, ds, 1.5, 0.3, "kim") is twin.search
+    # a process that has searched a lot in NumPy loads the kernel
+    monkeypatch.setattr(segment_cost, "_numpy_cells_searched", [segment_cost.NUMPY_SEARCH_PROCESS_CELLS])
+    assert segment_cost._search_kernel(qb, ds, 1.5, 0.3, "kim") is kern.search
+    monkeypatch.setattr(segment_cost, "_numpy_cells_searched", [0.0])
     assert segment_cost._search_kernel(qb, ds, 1.5, 0.3, "keogh") is kern.search
     monkeypatch.setattr(segment_cost, "NUMPY_SEARCH_MAX_CELLS", 100)
     assert segment_cost._search_kernel(qb, ds, 1.5, 0.3, "kim") is kern.search
@@ -126,6 +131,7 @@ def test_synthesize_with_either_search_writes_the_same_file(sample_assets, tmp_p
 
     src = sample_assets / "conversation_bodyonly.bvh"
     monkeypatch.setattr(segment_cost, "_kernel_loaded", lambda: False)
+    monkeypatch.setattr(segment_cost, "_numpy_cells_searched", [0.0])
     usdhands.synthesize(src, tmp_path / "numpy.bvh")
     monkeypatch.setattr(segment_cost, "NUMPY_SEARCH_MAX_CELLS", -1)
     usdhands.synthesize(src, tmp_path / "kernel.bvh")

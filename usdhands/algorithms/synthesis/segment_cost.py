@@ -333,6 +333,12 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
 #: kernel takes about 0.5 s, the NumPy search about 25 ns per cell (the sample
 #: conversation against the bundled database: 1.9 M cells a hand, 50 ms).
 NUMPY_SEARCH_MAX_CELLS = 8e6
+#: Cells a process searches in NumPy in all before it loads the kernel instead (about the
+#: kernel's loading time): a command on one short clip never loads numba, a process that
+#: synthesizes many (a batch worker) loads it after the first few clips. Either way the
+#: results are the same to the bit.
+NUMPY_SEARCH_PROCESS_CELLS = 20e6
+_numpy_cells_searched = [0.0]
 
 
 def _search_kernel(query_bounds: np.ndarray, db_segments: np.ndarray, length_factor: float, band: float,
@@ -346,7 +352,8 @@ def _search_kernel(query_bounds: np.ndarray, db_segments: np.ndarray, length_fac
     if bound != "keogh" and not _kernel_loaded():
         cells = _dtw_numpy.estimated_cells(query_bounds[:, 1] - query_bounds[:, 0],
                                            db_segments[:, 1] - db_segments[:, 0], length_factor, band)
-        if cells <= NUMPY_SEARCH_MAX_CELLS:
+        if cells <= NUMPY_SEARCH_MAX_CELLS and _numpy_cells_searched[0] + cells <= NUMPY_SEARCH_PROCESS_CELLS:
+            _numpy_cells_searched[0] += cells
             return _dtw_numpy.search
     from usdhands.algorithms.synthesis import _dtw_kernel
 
