@@ -268,19 +268,14 @@ def _parse_bvh_streamed(path: Path) -> BvhFile | None:
         C = sum(len(j.channels) for j in joints)
         if C == 0 or frames == 0:
             return None
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
-                values = np.loadtxt(f, dtype=np.float64, comments=None, ndmin=2)
-        except ValueError:
-            return None
-    if values.ndim != 2 or (len(values) and values.shape[1] != C) or not np.isfinite(values).all():
+        values = _motion_values(f, C)  # the rest of the open file
+    if values is None:
         return None
     if len(values) == frames + 1 and not values[0].any():
         values = values[1:]  # the Leap Motion rest line (see _parse_motion)
-    if len(values) != frames or (frames and values.shape[1] != C):
+    if len(values) != frames:
         return None
-    return BvhFile(joints, "\n".join(lines[:motion_line]) + "\n", frame_time, values.reshape(frames, C))
+    return BvhFile(joints, "\n".join(lines[:motion_line]) + "\n", frame_time, values)
 
 
 def _parse_hierarchy(head: list[str], path: Path) -> list[BvhJoint]:
@@ -461,8 +456,9 @@ def _parse_motion(lines: list[str], motion_line: int, C: int, path) -> tuple[np.
     return values, frame_time
 
 
-def _motion_values(lines: list[str], C: int) -> np.ndarray | None:
-    """The motion lines as a ``(T, C)`` float64 array, or None when they are not ``C`` finite numbers each.
+def _motion_values(lines, C: int) -> np.ndarray | None:
+    """The motion lines (a list of str, or an open text file) as a ``(T, C)`` float64 array, or None
+    when they are not ``C`` finite numbers each.
 
     The fast path of :func:`_parse_motion`: ``np.loadtxt``'s C parser, which skips
     blank lines and refuses a row with another number of values or a token that is
