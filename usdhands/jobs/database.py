@@ -174,8 +174,14 @@ def build_db(inputs: Sequence[str | os.PathLike], output: str | os.PathLike,
                 where = f"{p} (animation {clip.name!r})" if options.animation == "all" else str(p)
                 messages.append(("warning", f"{where}: the {' and '.join(still)} hand's fingers never move (a "
                                             f"body-only clip?); its frozen fingers go into the database as they are"))
-    db = build_database(items, fps=options.fps, mirror=options.mirror, segmentation=cfg.segmentation,
-                        progress=stage_progress(progress, "building"))
+    from usdhands.algorithms.synthesis.feature_sets import extra_keys, feature_terms
+
+    try:
+        db = build_database(items, fps=options.fps, mirror=options.mirror, segmentation=cfg.segmentation,
+                            progress=stage_progress(progress, "building"),
+                            arm_features=extra_keys(feature_terms(cfg.segment_cost)))
+    except ValueError as e:  # segment_cost.features naming a joint a hand map lacks
+        raise UsdHandsError(str(e), path=options.config) from None
     path = save_database(db, output)
     return _summary(db, path, tuple(messages))
 

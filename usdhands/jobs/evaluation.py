@@ -285,7 +285,13 @@ def _holdout(options: EvaluateOptions, dbitems, cfg, clips: int, warnings, progr
     from usdhands.algorithms.synthesis.evaluation import holdout_evaluation
     from usdhands.jobs.inputs import stage_progress
 
-    db = build_database(dbitems, fps=options.fps or 30.0, segmentation=cfg.segmentation)
+    from usdhands.algorithms.synthesis.feature_sets import extra_keys, feature_terms
+
+    try:
+        db = build_database(dbitems, fps=options.fps or 30.0, segmentation=cfg.segmentation,
+                            arm_features=extra_keys(feature_terms(cfg.segment_cost)))
+    except ValueError as e:  # segment_cost.features naming a joint a hand map lacks
+        raise UsdHandsError(str(e), path=options.config) from None
     result = {"k": cfg.segment_cost.k, **holdout_evaluation(db, cfg, seed=options.seed,
                                                              progress=stage_progress(progress, "holdout"))}
     return EvaluateResult("holdout", result, clips, (), tuple(warnings))

@@ -288,6 +288,7 @@ def prepare_hands(source, options, asset, clip, db, cfg, warnings, handmap=None)
     for s in with_fingers:
         if s not in db_sides:
             raise UsdHandsError(f"the database has no {s}-hand motion; rebuild it with --mirror", path=db.path)
+    _check_features(source, cfg, db, handmap, with_fingers)
     differ = {key: (value, db.segmentation[key]) for key, value in vars(cfg.segmentation).items()
               if key in db.segmentation and abs(float(value) - float(db.segmentation[key])) > 1e-9}
     if differ:
@@ -295,6 +296,22 @@ def prepare_hands(source, options, asset, clip, db, cfg, warnings, handmap=None)
                         + ", ".join(f"{key} {a:g} here, {b:g} there" for key, (a, b) in differ.items())
                         + "); rebuild the database with the same --config for like segments")
     return clip, handmap, with_fingers, added
+
+
+def _check_features(source, cfg, db, handmap, sides) -> None:
+    """The database and the rig have what ``segment_cost.features`` names, or a one-line error."""
+    from usdhands.algorithms.synthesis.feature_sets import check_keys, extra_keys, feature_terms
+
+    keys = extra_keys(feature_terms(cfg.segment_cost))
+    missing = [key for key in keys if key not in db.arm_feature_names]
+    if missing:
+        raise UsdHandsError(f"the database holds no {', '.join(missing)} features, which segment_cost.features "
+                            f"names; build it with this configuration (usdhands db build --config)", path=db.path)
+    for side in sides:
+        try:
+            check_keys(handmap, side, keys)
+        except ValueError as e:
+            raise UsdHandsError(str(e), path=source) from None
 
 
 def _synthesize_all(source, output, options, asset, db, cfg, progress) -> SynthesizeResult:

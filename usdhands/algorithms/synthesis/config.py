@@ -2,7 +2,9 @@
 
 The values come from Jörg, Hodgins and Safonova 2012 (seed 000, §3): segments of
 0.33 s to 2 s cut where the wrist speed crosses a threshold near zero, the segment
-cost of eq. 1 (``wP = 1``, ``wR = 0.5``, length within a factor 1.5, ``k = 5``), the
+cost of eq. 1 (``wP = 1``, ``wR = 0.5``, length within a factor 1.5, ``k = 5``; other
+arm features with ``segment_cost.features``, see
+:mod:`~usdhands.algorithms.synthesis.feature_sets`), the
 transition cost of eq. 2 (``wJ = 1``, ``wW = 0.5``), the path cost of eq. 3
 (``wS = 1``, ``wT = 0.5``, each term divided by its mean over the candidates so the
 weights mean what the paper says: see docs/synthesis.md) and seam blending past 5° mean
@@ -49,10 +51,18 @@ class SegmentCostConfig:
     dtw_band: float = 0.3
     k: int = 5
     lower_bound: str = "kim"
+    features: str | None = None
 
     def __post_init__(self) -> None:
         if self.lower_bound not in ("kim", "keogh", "none"):
             raise ValueError(f"Expected lower_bound 'kim', 'keogh' or 'none', got {self.lower_bound!r}")
+        if self.features is not None:
+            from usdhands.algorithms.synthesis.feature_sets import parse_feature_set
+
+            if not isinstance(self.features, str):
+                raise ValueError(f"Expected features to be a feature set such as 'wrist_pos+0.5rot', "
+                                 f"got {self.features!r}")
+            parse_feature_set(self.features)  # says which term does not parse
 
 
 @dataclass(frozen=True)
@@ -137,6 +147,9 @@ class SynthesisConfig:
             bad = set(sec) - names
             if bad:
                 raise ValueError(f"Unknown keys {sorted(bad)} in section {name!r}; expected {sorted(names)}")
+            if name == "segment_cost" and sec.get("features") is not None and {"w_position", "w_rotation"} & set(sec):
+                raise ValueError("segment_cost.features names the weights of every term ('wrist_pos+0.5rot'): "
+                                 "give it without w_position and w_rotation")
             parts[name] = kind(**sec)
         return cls(**parts)
 

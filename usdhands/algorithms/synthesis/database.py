@@ -15,6 +15,8 @@ On disk (format ``usdhands-finger-database``, version 2) a database is a folder:
     DB/fingers.npy     (F, M) float32   finger DOF curves (deg), the M DOFs of dof_index
     DB/tracks.npy      (R, 5) int64     start, stop (frames), clip, side (0 left, 1 right), mirrored
     DB/segments.npy    (N, 3) int64     start, stop (frames), track
+    DB/arm_features.npy (F, C) float32  optional: other arm feature columns (elbow, shoulder, velocities,
+                                        the other hand), listed in the manifest's arm_features
 
 Frames of all tracks are concatenated in ``features`` and ``fingers``. The manifest
 lists the clips (name, source file, animation, label), the labels, the frame rate,
@@ -43,7 +45,7 @@ from usdhands.algorithms.synthesis.finger_transfer import (
 from usdhands.algorithms.synthesis.segmentation import segment_by_speed, wrist_speed
 from usdhands.algorithms.synthesis.config import SegmentationConfig
 from usdhands.algorithms.synthesis.wrist_features import (
-    NUM_WRIST_FEATURES, WRIST_FEATURE_NAMES, mirror_features, reach_cm, wrist_features,
+    NUM_WRIST_FEATURES, WRIST_FEATURE_NAMES, mirror_features, reach_cm, world_xforms_for, wrist_features,
 )
 from usdhands.errors import ConfigError
 from usdhands.input_files import check_regular_file, read_json
@@ -57,6 +59,7 @@ __all__ = ["FORMAT", "VERSION", "same_rate", "DatabaseClip", "FingerDatabase", "
 FORMAT = "usdhands-finger-database"
 VERSION = 2
 ARRAYS = ("features", "fingers", "tracks", "segments")
+OPTIONAL_ARRAY = "arm_features"
 
 
 @dataclass(frozen=True)
@@ -93,6 +96,11 @@ class FingerDatabase:
         Per side, the rest geometry of a hand of the database
         (:func:`usdhands.algorithms.synthesis.hand_graft.hand_template`), for grafting.
     path : Path or None
+    arm_features : (F, C) float or None
+        Columns of other feature keys (:mod:`~usdhands.algorithms.synthesis.feature_sets`),
+        laid out as ``arm_feature_names``.
+    arm_feature_names : tuple of str
+        Feature keys in ``arm_features``, in order (``"elbow_pos"``, ``"other_wrist_vel"``...).
     """
 
     fps: float
@@ -106,6 +114,8 @@ class FingerDatabase:
     segmentation: dict = field(default_factory=dict)
     hands: dict = field(default_factory=dict)
     path: Path | None = None
+    arm_features: np.ndarray | None = None
+    arm_feature_names: tuple = ()
 
     @property
     def labels(self) -> list[str]:
@@ -194,6 +204,7 @@ class FingerDatabase:
 
     def manifest(self) -> dict:
         """The manifest dict written beside the arrays."""
+        extra = {} if self.arm_features is None else {"arm_features": list(self.arm_feature_names)}
         return {
             "format": FORMAT,
             "version": VERSION,
@@ -209,9 +220,13 @@ class FingerDatabase:
             "hands": dict(self.hands),
             "counts": {"frames": self.num_frames, "tracks": int(len(self.tracks)),
                        "segments": int(len(self.segments)), "clips": len(self.clips)},
+            **extra,
             "arrays": {name: {"file": f"{name}.npy", "shape": list(getattr(self, name).shape),
-                              "dtype": str(getattr(self, name).dtype)} for name in ARRAYS},
+                              "dtype": str(getattr(self, name).dtype)} for name in self._array_names()},
         }
+
+    def _array_names(self) -> tuple:
+        return ARRAYS if self.arm_features is None else ARRAYS + (OPTIONAL_ARRAY,)
 
 
 def same_rate(a: float, b: float) -> bool:
@@ -230,7 +245,8 @@ def segment_track(features: np.ndarray, fps: float, config: SegmentationConfig) 
 
 
 def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = False,
-                   segmentation: SegmentationConfig | None = None, progress=None) -> FingerDatabase:
+                   segmentation: SegmentationConfig | None = None, progress=None,
+                   arm_features=()) -> FingerDatabase:
     """Build a database in memory.
 
     Parameters
@@ -243,11 +259,15 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
     segmentation : SegmentationConfig, optional
     progress : callable, optional
         ``progress(done, total, label)``.
+    arm_features : sequence of str
+        Feature keys besides the wrist's to store (``arm_features.npy``), e.g. the
+        :func:`~usdhands.algorithms.synthesis.feature_sets.extra_keys` of a configuration.
 
     Raises
     ------
     ValueError
-        No clip has a hand with fingers.
+        No clip has a hand with fingers, or a feature key names a joint some hand map
+        lacks.
     """
     seg_cfg = segmentation or SegmentationConfig()
     from usdhands.algorithms.synthesis.hand_graft import hand_template, mirror_template
@@ -266,7 +286,8 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
             rig = hand_rig(clip.skeleton, hand)
             feats = wrist_features(clip, hand, 1.0, world)
             curves = canonical_curves(clip, rig)
-            prepared.append((ci, SIDES.index(hand.side), feats, curves, reach_cm(clip.skeleton, hand), rig.present))
+            prepared.append((ci, SIDES.index(hand.side), feats, curves, reach_cm(clip.skeleton, hand), rig.present,
+                             (clip, item.handmap)))
             if hand.side not in hands:
                 hands[hand.side] = hand_template(clip.skeleton, hand)
         if progress:
@@ -277,13 +298,20 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
         for side, other in (("left", "right"), ("right", "left")):
             if side not in hands and other in hands:
                 hands[side] = mirror_template(hands[other])
+    keys = list(dict.fromkeys(arm_features))
     ref_reach = float(np.median([p[4] for p in prepared]))
     present = np.logical_and.reduce([p[5] for p in prepared])
     dof_index = np.nonzero(np.repeat(present, 3))[0]
-    feats_all, fing_all, tracks, segments = [], [], [], []
+    feats_all, fing_all, arm_all, tracks, segments = [], [], [], [], []
     start = 0
     variants = [False, True] if mirror else [False]
-    for ci, side, feats, curves, reach, _ in prepared:
+    for ci, side, feats, curves, reach, _, (clip, handmap) in prepared:
+        arm = None
+        if keys:
+            from usdhands.algorithms.synthesis.feature_sets import hand_columns, mirror_columns
+
+            arm = hand_columns(clip, handmap, SIDES[side], keys, ref_reach,
+                               world_xforms_for(clip, [h for h in handmap.sides]))
         scaled = feats.copy()
         scaled[:, :3] *= ref_reach / reach
         bounds = segment_track(scaled, fps, seg_cfg)
@@ -298,6 +326,9 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
                 segments.append((start + a, start + b, ti))
             feats_all.append(f)
             fing_all.append(c[:, dof_index])
+            if arm is not None:
+                arm_all.append(np.concatenate([mirror_columns(key, arm[key]) if mirrored else arm[key]
+                                               for key in keys], axis=1))
             start += T
     return FingerDatabase(
         fps=float(fps), reach_cm=ref_reach,
@@ -309,6 +340,8 @@ def build_database(items: list[DatabaseClip], fps: float = 30.0, mirror: bool = 
         clips=clips_meta,
         segmentation={k: float(v) for k, v in vars(seg_cfg).items()},
         hands=hands,
+        arm_features=np.concatenate(arm_all).astype(np.float32) if keys else None,
+        arm_feature_names=tuple(keys),
     )
 
 
@@ -338,7 +371,7 @@ def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
         raise ConfigError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
     try:
         os.chmod(tmp, 0o755)  # mkdtemp makes it private
-        for name in ARRAYS:
+        for name in db._array_names():
             np.save(tmp / f"{name}.npy", np.ascontiguousarray(getattr(db, name)))
         (tmp / "manifest.json").write_text(json.dumps(db.manifest(), indent=1) + "\n")
         if path.exists():
@@ -397,7 +430,11 @@ def load_database(path: str | os.PathLike, mmap: bool = True, *, check_schema: b
         where, message = error
         raise ConfigError(f"invalid database manifest at {where}: {message}", path=mf)
     arrays = {}
-    for name in ARRAYS:
+    names = manifest.get("arm_features")
+    if (names is None) != (OPTIONAL_ARRAY not in manifest["arrays"]):
+        raise ConfigError(f"the manifest lists arm_features and the array {OPTIONAL_ARRAY!r} only together",
+                          path=mf)
+    for name in ARRAYS + (() if names is None else (OPTIONAL_ARRAY,)):
         spec = manifest["arrays"][name]
         f = path / spec["file"]
         named = Path(spec["file"])
@@ -430,14 +467,29 @@ def load_database(path: str | os.PathLike, mmap: bool = True, *, check_schema: b
         if len(bad):
             raise ConfigError(f"segment {int(bad[0])} ({int(sg[bad[0], 0])}..{int(sg[bad[0], 1])}) is empty or "
                               f"outside its track; {len(bad)} such segments", path=path / _spec_file(manifest, "segments"))
+    if names is not None:
+        from usdhands.algorithms.synthesis.feature_sets import key_width, parse_feature_set
+
+        try:
+            for key in names:
+                if parse_feature_set(key) != [(key, 1.0)]:
+                    raise ValueError(key)
+        except ValueError:
+            raise ConfigError(f"arm_features lists {key!r}, not a feature key such as 'elbow_pos'", path=mf) from None
+        if arrays[OPTIONAL_ARRAY].shape != (F, sum(key_width(k) for k in names)):
+            raise ConfigError(f"array {OPTIONAL_ARRAY!r} has shape {list(arrays[OPTIONAL_ARRAY].shape)}, the "
+                              f"features {names} need ({F}, {sum(key_width(k) for k in names)})",
+                              path=path / _spec_file(manifest, OPTIONAL_ARRAY))
     # synthesis reads every feature row anyway (F x 12): check them here, not the fingers
-    finite = np.isfinite(arrays["features"]).all(axis=1)
-    if not finite.all():
-        raise ConfigError(f"features hold NaN or infinite values (first at frame {int(np.argmin(finite))})",
-                          path=path / _spec_file(manifest, "features"))
+    for name in ("features",) + (() if names is None else (OPTIONAL_ARRAY,)):
+        finite = np.isfinite(arrays[name]).all(axis=1)
+        if not finite.all():
+            raise ConfigError(f"{name.replace('_', ' ')} hold NaN or infinite values (first at frame "
+                              f"{int(np.argmin(finite))})", path=path / _spec_file(manifest, name))
     return FingerDatabase(
         fps=float(manifest["fps"]), reach_cm=float(manifest["reach_cm"]),
         features=arrays["features"], fingers=arrays["fingers"], dof_index=dof_index,
         tracks=np.asarray(tr), segments=np.asarray(sg), clips=manifest["clips"],
         segmentation=manifest.get("segmentation", {}), hands=manifest.get("hands", {}), path=path,
+        arm_features=arrays.get(OPTIONAL_ARRAY), arm_feature_names=tuple(names or ()),
     )

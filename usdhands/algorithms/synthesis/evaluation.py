@@ -43,7 +43,7 @@ from usdhands.algorithms.synthesis.finger_transfer import NUM_SLOTS, ORDER
 from usdhands.algorithms.synthesis.segment_cost import knn_segments, weight_features
 from usdhands.algorithms.synthesis.segmentation import wrist_speed
 from usdhands.algorithms.synthesis.stitching import stitch_fragments
-from usdhands.algorithms.synthesis.synthesize import db_side_segments, segment_weights, synthesize_hand
+from usdhands.algorithms.synthesis.synthesize import db_side_segments, db_weighted_features, synthesize_hand
 from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.algorithms.synthesis.wrist_features import FEATURE_JOINTS, arm_features
 from usdhands.model.clip import Clip
@@ -381,7 +381,7 @@ def holdout_evaluation(db: FingerDatabase, config: SynthesisConfig | None = None
 
     cfg = config or SynthesisConfig()
     rng = np.random.default_rng(seed)
-    dw = weight_features(db.features, segment_weights(cfg))
+    dw = db_weighted_features(db, cfg)
     slots = np.nonzero(db.dof_mask().reshape(-1, 3).all(axis=1))[0]
     methods = ("synthesis", "mean_pose", "random_segments", "nearest_wrist")
     err = {m: [] for m in methods}
@@ -396,7 +396,8 @@ def holdout_evaluation(db: FingerDatabase, config: SynthesisConfig | None = None
         seg_idx = db_side_segments(db, side, (c,))
         if not len(seg_idx):
             continue
-        syn = synthesize_hand(feats, db, side, cfg, (c,), dw)
+        syn = synthesize_hand(feats, db, side, cfg, (c,), dw,
+                              query_weighted=None if cfg.segment_cost.features is None else dw[a:b])
         rows = np.concatenate([np.arange(*db.segments[i, :2]) for i in seg_idx])
         mean_pose = np.broadcast_to(db.full_curves(rows).mean(axis=0), truth.shape)
         rand = random_segments(db, seg_idx, syn.bounds, rng, cfg)

@@ -30,13 +30,11 @@ mean angular speed and its ratio to the truth's; the largest frame-to-frame jump
 any joint, against the truth's; and the share of repeated frames (no joint moves by
 1e-3° or more), against the truth's.
 
-Feature sets. A feature set names the columns behind the segment cost as a sum of
-weighted terms ``[weight*]<joint>_<pos|rot|vel>``, joint ``wrist``, ``elbow`` or
-``shoulder``, optionally prefixed ``other_`` for the other hand's; a term of only
-``pos``, ``rot`` or ``vel`` keeps the previous term's joint. ``vel`` is the
-joint's velocity (cm/s). The paper's is ``wrist_pos+0.5rot`` (:data:`PAPER_FEATURES`).
-Each set is synthesized on the same folds, so sets compare as the paper's §4
-compares predictors, but on the finger error itself.
+Feature sets (:mod:`~usdhands.algorithms.synthesis.feature_sets`). The main synthesis
+uses the configuration's features (``segment_cost.features``, the paper's
+``wrist_pos+0.5rot`` by default); each set of ``feature_sets`` is synthesized on the
+same folds besides, so sets compare as the paper's §4 compares predictors, but on the
+finger error itself.
 """
 
 from __future__ import annotations
@@ -47,34 +45,21 @@ import numpy as np
 
 from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.algorithms.synthesis.database import DatabaseClip, FingerDatabase, build_database, same_rate
-from usdhands.algorithms.synthesis.evaluation import parse_terms, random_segments, slot_quats
+from usdhands.algorithms.synthesis.evaluation import random_segments, slot_quats
+from usdhands.algorithms.synthesis.feature_sets import PAPER_FEATURES, extra_keys, feature_terms, hand_columns, \
+    parse_feature_set
 from usdhands.algorithms.synthesis.finger_transfer import dof_names
 from usdhands.algorithms.synthesis.segment_cost import weight_features
-from usdhands.algorithms.synthesis.synthesize import db_side_segments, segment_weights, synthesize_hand
-from usdhands.algorithms.synthesis.wrist_features import arm_features, reach_cm
+from usdhands.algorithms.synthesis.synthesize import db_side_segments, db_weighted_features, synthesize_hand
+from usdhands.algorithms.synthesis.wrist_features import world_xforms_for
 from usdhands.model.handmap import SIDES
 from usdhands.model.rotations import quat_angle_deg
 
 __all__ = ["METHODS", "PAPER_FEATURES", "parse_feature_set", "kfold_evaluation", "window_bounds"]
 
 METHODS = ("synthesis", "mean_pose", "medoid_pose", "nearest_frame", "nearest_10_mean", "random_segments")
-PAPER_FEATURES = "wrist_pos+0.5rot"
 REPEAT_DEG = 1e-3
 MEDOID_SAMPLE = 2000
-
-def parse_feature_set(name: str) -> list[tuple[str, float]]:
-    """Terms of a feature set: ``[("wrist_pos", 1.0), ("wrist_rot", 0.5), ("other_wrist_pos", 0.5)]``.
-
-    The grammar of :func:`~usdhands.algorithms.synthesis.evaluation.parse_terms` with
-    ``vel`` and ``other_``.
-
-    Raises
-    ------
-    ValueError
-        Quoting the name and the term that does not parse.
-    """
-    return parse_terms(name, "feature set", extended=True)
-
 
 def window_bounds(start: int, stop: int, folds: int) -> np.ndarray:
     """Edges ``(folds + 1,)`` of ``folds`` contiguous windows of ``[start, stop)`` of near-equal length."""
@@ -101,39 +86,21 @@ class _Tally:
         self.repeated += int((step.max(axis=1) < REPEAT_DEG).sum())
 
 
-def _track_features(items: list[DatabaseClip], db: FingerDatabase, fps: float, keys: set) -> list[dict]:
-    """Per real track of ``db`` (in its order), the columns the feature sets name, ``(T, 3|9)`` each."""
+def _track_columns(items: list[DatabaseClip], db: FingerDatabase, keys) -> list[dict]:
+    """Per real track of ``db`` (in its order), the columns ``{key: (T, 3|9)}`` of the keys its hand map allows."""
     out = []
     for item in items:
-        clip = item.clip if same_rate(item.clip.fps, fps) else item.clip.resample(fps)
-        world = clip.world_xforms()
-        hands = {h.side: h for h in item.handmap.sides}
-        cache = {}
-
-        def features(hand):
-            if hand.side not in cache:
-                scale = db.reach_cm / reach_cm(clip.skeleton, hand)
-                roles = ("shoulder", "elbow", "wrist")
-                roles = tuple(r for r in roles if r == "wrist" or getattr(hand, {"elbow": "forearm"}.get(r, r)))
-                f = arm_features(clip, hand, scale, roles, world)
-                for r in roles:
-                    f[f"{r}_vel"] = np.gradient(f[f"{r}_pos"], axis=0) * fps if len(clip.rotations) > 1 else \
-                        np.zeros_like(f[f"{r}_pos"])
-                cache[hand.side] = f
-            return cache[hand.side]
-
+        clip = item.clip if same_rate(item.clip.fps, db.fps) else item.clip.resample(db.fps)
+        world = world_xforms_for(clip, list(item.handmap.sides))
         for hand in item.handmap.sides:
             if not hand.finger_joints:
                 continue
-            own = features(hand)
             cols = {}
             for key in keys:
-                if key.startswith("other_"):
-                    o = hands.get("right" if hand.side == "left" else "left")
-                    if o is not None and key[6:] in features(o):
-                        cols[key] = features(o)[key[6:]]
-                elif key in own:
-                    cols[key] = own[key]
+                try:
+                    cols.update(hand_columns(clip, item.handmap, hand.side, [key], db.reach_cm, world))
+                except ValueError:  # a joint this hand map lacks: the sets naming it are left out
+                    pass
             out.append(cols)
     return out
 
@@ -206,18 +173,19 @@ def kfold_evaluation(items: list[DatabaseClip], config: SynthesisConfig | None =
         raise ValueError(f"Expected at least 2 folds, got {folds}")
     sets = [s for s in dict.fromkeys(feature_sets) if s]
     parsed = {s: parse_feature_set(s) for s in sets}
-    db = build_database(items, fps=fps, segmentation=cfg.segmentation)
+    db = build_database(items, fps=fps, segmentation=cfg.segmentation,
+                        arm_features=extra_keys(feature_terms(cfg.segment_cost)))
     real = [t for t in range(len(db.tracks)) if not db.tracks[t, 4]]
     lens = [int(db.tracks[t, 1] - db.tracks[t, 0]) for t in real]
     if len({int(db.tracks[t, 2]) % folds for t in real}) < 2 and not any(n / folds >= min_window_s * fps for n in lens):
         raise ValueError(f"{folds} folds need more than one take, or a take of {folds * min_window_s:g} s or more")
     rng = np.random.default_rng(seed)
     sc = cfg.segment_cost
-    dw = weight_features(db.features, segment_weights(cfg))
+    dw = db_weighted_features(db, cfg)
     set_dw, left_out = {}, []
     if sets:
         keys = {key for terms in parsed.values() for key, _ in terms}
-        columns = _track_features(items, db, db.fps, keys)
+        columns = _track_columns(items, db, sorted(keys))
         for s in sets:
             w = _weighted(columns, parsed[s], lens)
             if w is None:
@@ -267,7 +235,8 @@ def kfold_evaluation(items: list[DatabaseClip], config: SynthesisConfig | None =
             feats = np.asarray(db.features[a:b], dtype=np.float64)
             truth = db.full_curves(slice(a, b))
             n = b - a
-            syn = synthesize_hand(feats, db, side, cfg, (), dw, segments=allowed)
+            syn = synthesize_hand(feats, db, side, cfg, (), dw, segments=allowed,
+                                  query_weighted=None if sc.features is None else dw[a:b])
             k10 = min(10, len(rows))
             _, nn = tree.query(dw[a:b], k=k10)
             nn = nn.reshape(n, k10)

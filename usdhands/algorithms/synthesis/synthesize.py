@@ -35,6 +35,7 @@ from usdhands.algorithms.synthesis.segmentation import wrist_speed
 from usdhands.algorithms.synthesis.segment_cost import SearchResult, knn_segments, weight_features
 from usdhands.algorithms.synthesis.stitching import SeamReport, stitch_fragments
 from usdhands.algorithms.synthesis.config import SynthesisConfig
+from usdhands.algorithms.synthesis.feature_sets import extra_keys, feature_terms, hand_columns, weighted_columns
 from usdhands.algorithms.synthesis.wrist_features import NUM_WRIST_FEATURES, reach_cm, world_xforms_for, wrist_features
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import SIDES, HandMap
@@ -42,7 +43,8 @@ from usdhands.model.handmap import SIDES, HandMap
 _log = logging.getLogger(__name__)
 
 __all__ = ["HandSynthesis", "ClipSynthesis", "synthesize_hand", "synthesize_clip", "db_side_segments",
-           "resample_rows", "segment_weights", "candidate_weights", "played_weights"]
+           "resample_rows", "segment_weights", "db_weighted_features", "query_features", "candidate_weights",
+           "played_weights"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -193,6 +195,9 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
         raise ValueError(f"Expected features to have shape (T, {NUM_WRIST_FEATURES}) with T > 0, got {feats.shape}")
     sc = cfg.segment_cost
     weights = segment_weights(cfg)
+    if query_weighted is None and sc.features is not None:
+        raise ValueError(f"Features {sc.features!r} need query_weighted and db_weighted "
+                         f"(query_features, db_weighted_features)")
     if query_weighted is not None:
         if db_weighted is None or np.shape(query_weighted) != (len(feats), np.shape(db_weighted)[1]):
             raise ValueError("Expected query_weighted (T, D) with db_weighted (F, D)")
@@ -299,9 +304,49 @@ def played_weights(costs: np.ndarray, cand: np.ndarray, path: np.ndarray, mix: f
 
 
 def segment_weights(config: SynthesisConfig) -> list[float]:
-    """Weights of the wrist feature columns in eq. 1: ``wP`` for the 3 positions, ``wR`` for the rotation entries."""
+    """Weights of the wrist feature columns in eq. 1: ``wP`` for the 3 positions, ``wR`` for the rotation entries.
+
+    Only for the paper's features (``segment_cost.features`` unset); see :func:`db_weighted_features`.
+    """
     sc = config.segment_cost
     return [sc.w_position] * 3 + [sc.w_rotation] * (NUM_WRIST_FEATURES - 3)
+
+
+def db_weighted_features(db: FingerDatabase, config: SynthesisConfig) -> np.ndarray:
+    """The database's weighted feature columns of eq. 1, ``(F, D)`` float64, for the configuration's features.
+
+    The paper's wrist features weighted by ``w_position``/``w_rotation``, or the
+    columns of ``segment_cost.features`` (:mod:`~usdhands.algorithms.synthesis.feature_sets`).
+
+    Raises
+    ------
+    ValueError
+        The features name columns the database does not hold (built without them).
+    """
+    terms = feature_terms(config.segment_cost)
+    missing = [key for key in extra_keys(terms) if key not in db.arm_feature_names]
+    if missing:
+        raise ValueError(f"The database holds no {', '.join(repr(k) for k in missing)} features; build it with a "
+                         f"configuration naming them (segment_cost.features)")
+    if config.segment_cost.features is None:
+        return weight_features(db.features, segment_weights(config))
+    return weighted_columns(db.features, db.arm_features, db.arm_feature_names, terms)
+
+
+def query_features(clip: Clip, handmap: HandMap, side: str, wrist: np.ndarray, reach: float,
+                   config: SynthesisConfig, world: np.ndarray | None = None) -> np.ndarray | None:
+    """The input's weighted feature columns ``(T, D)`` for ``segment_cost.features``, at the clip's rate.
+
+    ``wrist (T, 12)`` are the hand's wrist features (scaled to ``reach``, the database's
+    body size). None for the paper's features (synthesis weights ``wrist`` itself).
+    """
+    if config.segment_cost.features is None:
+        return None
+    terms = feature_terms(config.segment_cost)
+    keys = extra_keys(terms)
+    cols = hand_columns(clip, handmap, side, keys, reach, world)
+    extra = np.concatenate([cols[key] for key in keys], axis=1) if keys else None
+    return weighted_columns(wrist, extra, keys, terms)
 
 
 def resample_rows(values: np.ndarray, fps_from: float, fps_to: float, n_to: int) -> np.ndarray:
@@ -369,10 +414,11 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
     for h in hands:
         if h not in SIDES:
             raise ValueError(f"Expected hands among {SIDES}, got {h!r}")
-    world = world_xforms_for(clip, [handmap[s] for s in hands if handmap[s] is not None])
+    arms = handmap.sides if cfg.segment_cost.features is not None else [handmap[s] for s in hands]  # other_ keys
+    world = world_xforms_for(clip, [h for h in arms if h is not None])
     out = clip
     results, mapping, scales = {}, {}, {}
-    dw = weight_features(db.features, segment_weights(cfg))
+    dw = db_weighted_features(db, cfg)
     for side in hands:
         hand = handmap[side]
         if hand is None or not hand.finger_joints:
@@ -382,12 +428,14 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
         scale = db.reach_cm / reach_cm(clip.skeleton, hand)
         scales[side] = scale
         feats = wrist_features(clip, hand, scale, world)
+        qw = query_features(clip, handmap, side, feats, db.reach_cm, cfg, world)
         resampled = not same_rate(clip.fps, db.fps)
         if resampled:
             n = int(np.floor(clip.duration * db.fps + 1e-6)) + 1
             feats = resample_rows(feats, clip.fps, db.fps, n)
+            qw = None if qw is None else resample_rows(qw, clip.fps, db.fps, n)
         hooks = interaction(side, hand, rig) if interaction is not None else None
-        res = synthesize_hand(feats, db, side, cfg, exclude_clips, dw, hooks=hooks)
+        res = synthesize_hand(feats, db, side, cfg, exclude_clips, dw, hooks=hooks, query_weighted=qw)
         curves = res.curves
         if resampled:
             curves = resample_rows(curves, db.fps, clip.fps, clip.num_frames)
