@@ -237,9 +237,8 @@ def test_played_segments_compiled_twin_matches_numpy():
     from usdhands.algorithms.synthesis.output_warp import play_segments, play_segments_fast
 
     args = _play_case()
-    want = play_segments(*args, 30.0, 0.2)
-    np.testing.assert_allclose(play_segments_fast(*args, 30.0, 0.2), want, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(play_segments_fast(*args, 30.0, 0.0), play_segments(*args, 30.0, 0.0), atol=1e-9)
+    for smoothing_s in (0.2, 0.1, 0.0):  # windows of 6, 3 and no frames
+        assert (play_segments_fast(*args, 30.0, smoothing_s) == play_segments(*args, 30.0, smoothing_s)).all()
     # one segment with weight 1: exactly its fingers sampled along the smoothed DTW warp
     qf, df, fingers, seg, qb, cand, weights, bands = args
     one = np.zeros_like(weights)
@@ -288,3 +287,35 @@ def test_mixing_the_candidates_beats_the_chosen_one_alone_on_held_out_takes():
     a, m = alone["methods"]["synthesis"], mixed["methods"]["synthesis"]
     assert m["error_deg"] < 0.97 * a["error_deg"]
     assert 0.8 < m["speed_ratio"] < 1.2 and m["largest_jump_deg"] <= mixed["truth"]["largest_jump_deg"]
+
+
+def test_stitching_compiled_twin_matches_numpy():
+    from usdhands.algorithms.synthesis.stitching import stitch_fragments, stitch_fragments_fast
+
+    rng = np.random.default_rng(0)
+    lens = [1, 5, 2, 30, 1, 1, 40, 3]
+    bounds = np.concatenate([[0], np.cumsum(lens)])
+    jumps = np.repeat(rng.normal(size=(len(lens), 6)) * 30 * (np.arange(len(lens)) % 3 == 2)[:, None], lens, axis=0)
+    x = np.cumsum(rng.normal(size=(bounds[-1], 6)), axis=0) * 0.5 + jumps  # some seams blend, some not
+    mask = np.array([1, 1, 0, 1, 1, 1], dtype=bool)
+    for m in (mask, None, np.zeros(6, dtype=bool)):
+        want, seams = stitch_fragments([x[a:b] for a, b in zip(bounds[:-1], bounds[1:])], 30.0, 5, 20, 0.5, m)
+        got, fast = stitch_fragments_fast(x, bounds, 30.0, 5, 20, 0.5, m)
+        assert (got == want).all() and (fast.frame == seams.frame).all() and (fast.blended == seams.blended).all()
+        np.testing.assert_allclose(fast.mean_deg, seams.mean_deg, rtol=1e-12)
+        assert (fast.max_deg == seams.max_deg).all()
+    assert stitch_fragments([x[a:b] for a, b in zip(bounds[:-1], bounds[1:])], 30.0, 5, 20, 0.5,
+                            mask)[1].blended.sum() not in (0, len(lens) - 1)
+    with pytest.raises(ValueError, match="increasing bounds from 0 to T"):
+        stitch_fragments_fast(x, bounds[1:], 30.0)
+
+
+def test_transitions_of_all_layers_at_once_equal_layer_by_layer():
+    from usdhands.algorithms.synthesis.motion_graph import transition_costs_between
+
+    rng = np.random.default_rng(4)
+    ends, vend, starts, vstart = (rng.normal(size=(6, 5, 9)) * 10 for _ in range(4))
+    mask = rng.uniform(size=9) > 0.3
+    got = transition_costs_between(ends, vend, starts, vstart, 1.0, 0.5, mask)
+    for i in range(6):
+        assert (got[i] == transition_costs(ends[i], vend[i], starts[i], vstart[i], 1.0, 0.5, mask)).all()

@@ -35,12 +35,15 @@ def smooth_path(path, m, w, linear_share, out):
             out[i] = run
         return
     size = min(w, n)
-    half = size // 2  # scipy's uniform_filter1d: window i - size // 2 .. i - size // 2 + size - 1
-    for i in range(n):
-        s = 0.0
-        for t in range(i - half, i - half + size):
-            s += float(path[min(max(t, 0), n - 1)])
-        out[i] = s / size
+    half = size // 2  # scipy's uniform_filter1d: window i - size // 2 .. i - size // 2 + size - 1,
+    # as scipy computes it (a running sum: equal to the bit)
+    total = 0.0
+    for t in range(-half, size - half):
+        total += float(path[min(max(t, 0), n - 1)])
+    out[0] = total / size
+    for i in range(1, n):
+        total += float(path[min(i - half + size - 1, n - 1)]) - float(path[max(i - 1 - half, 0)])
+        out[i] = total / size
     y0 = out[0]
     y1 = out[n - 1]
     step = (y1 - y0) / (n - 1)
@@ -52,9 +55,8 @@ def smooth_path(path, m, w, linear_share, out):
     a = out[0]
     b = out[n - 1]
     if b > a:
-        scale = (hi - lo) / (b - a)
         for i in range(n):
-            out[i] = lo + (out[i] - a) * scale
+            out[i] = lo + (out[i] - a) * (hi - lo) / (b - a)
     else:
         step = (hi - lo) / (n - 1)
         for i in range(n):
@@ -139,3 +141,49 @@ def limit(x, lim, out):
             elif d < -lim[c]:
                 d = -lim[c]
             out[t, c] = out[t - 1, c] + d
+
+
+@njit(cache=True)
+def stitch(x, bounds, mask, blend_mean, blend_max, blend_n, out, means, maxes, blended):
+    """:func:`~usdhands.algorithms.synthesis.stitching.stitch_fragments` of the fragments
+    ``x[bounds[i]:bounds[i + 1]]`` into ``out``; per seam the mean and largest difference
+    over the ``mask`` DOFs and whether it was blended out."""
+    C = x.shape[1]
+    nm = 0
+    for c in range(C):
+        if mask[c]:
+            nm += 1
+    for t in range(bounds[0], bounds[1]):
+        for c in range(C):
+            out[t, c] = x[t, c]
+    delta = np.empty(C)
+    for i in range(1, bounds.shape[0] - 1):
+        a = bounds[i]
+        b = bounds[i + 1]
+        pa = bounds[i - 1]
+        n = b - a
+        s = 0.0
+        mx = 0.0
+        for c in range(C):
+            step_prev = out[a - 1, c] - out[a - 2, c] if a - pa >= 2 else 0.0
+            step_new = x[a + 1, c] - x[a, c] if n >= 2 else 0.0
+            target = out[a - 1, c] + 0.5 * (step_prev + step_new)
+            delta[c] = target - x[a, c]
+            if mask[c]:
+                d = abs(delta[c])
+                s += d
+                mx = max(mx, d)
+        mean = s / nm if nm else 0.0
+        blend = mean > blend_mean or mx > blend_max
+        means[i - 1] = mean
+        maxes[i - 1] = mx
+        blended[i - 1] = blend
+        L = min(blend_n, n)
+        for t in range(n):
+            if blend:
+                ramp = 1.0 - t / L if t < L else 0.0
+                for c in range(C):
+                    out[a + t, c] = x[a + t, c] + ramp * delta[c]
+            else:
+                for c in range(C):
+                    out[a + t, c] = x[a + t, c] + delta[c]

@@ -42,7 +42,8 @@ from usdhands.model.skeleton import Skeleton
 
 __all__ = [
     "SLOTS_PER_FINGER", "NUM_SLOTS", "NUM_DOFS", "slot_names", "dof_names", "HandRig",
-    "hand_rig", "canonical_curves", "apply_canonical_curves", "mirror_curves", "MIRROR_SIGNS",
+    "hand_rig", "canonical_curves", "apply_canonical_curves", "canonical_local_rotations", "mirror_curves",
+    "MIRROR_SIGNS",
 ]
 
 SLOTS_PER_FINGER = 4
@@ -224,19 +225,29 @@ def canonical_curves(clip: Clip, rig: HandRig) -> np.ndarray:
 
 def apply_canonical_curves(clip: Clip, rig: HandRig, curves: np.ndarray) -> Clip:
     """A copy of ``clip`` whose finger joints follow canonical curves ``(T, NUM_DOFS)`` degrees."""
+    joints, local = canonical_local_rotations(clip, rig, curves)
+    return clip.with_joint_rotations(joints, local) if joints else clip
+
+
+def canonical_local_rotations(clip: Clip, rig: HandRig, curves: np.ndarray) -> tuple[list[int], np.ndarray]:
+    """The finger joints of ``rig`` and their local rotations ``(T, n, 4)`` for canonical curves ``(T, NUM_DOFS)``.
+
+    What :func:`apply_canonical_curves` writes into the clip (a caller with both hands
+    writes them at once: one copy of the clip's arrays instead of two).
+    """
     curves = np.asarray(curves, dtype=np.float64)
     T = clip.num_frames
     if curves.shape != (T, NUM_DOFS):
         raise ValueError(f"Expected curves to have shape ({T}, {NUM_DOFS}), got {curves.shape}")
     slots = np.nonzero(rig.present)[0]
     if not len(slots):
-        return clip
+        return [], np.zeros((T, 0, 4))
     joints = rig.slot_joint[slots]
     can = euler_xyz_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots])
     C = rig.frame[slots]
     rel = quat_multiply(quat_multiply(quat_conjugate(C)[None], can), C[None])
     local = quat_multiply(rig.reference_rotations(clip.skeleton, slots)[None], rel)
-    return clip.with_joint_rotations([int(j) for j in joints], local)
+    return [int(j) for j in joints], local
 
 
 def euler_xyz_deg_to_quat(e: np.ndarray) -> np.ndarray:

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["transition_costs", "least_cost_path", "term_scale"]
+__all__ = ["transition_costs", "transition_costs_between", "least_cost_path", "term_scale"]
 
 
 def term_scale(values) -> float:
@@ -75,6 +75,25 @@ def transition_costs(end_pose: np.ndarray, end_velocity: np.ndarray, start_pose:
         return np.zeros((len(ea), len(sb)))
     dj = ((ea[:, None, :] - sb[None, :, :]) ** 2).sum(axis=2)
     dw = ((va[:, None, :] - vb[None, :, :]) ** 2).sum(axis=2)
+    return (w_joint * dj + w_velocity * dw) / m
+
+
+def transition_costs_between(end_pose: np.ndarray, end_velocity: np.ndarray, start_pose: np.ndarray,
+                             start_velocity: np.ndarray, w_joint: float = 1.0, w_velocity: float = 0.5,
+                             mask: np.ndarray | None = None) -> np.ndarray:
+    """:func:`transition_costs` of every layer at once: ``(L, Ka, C)`` and ``(L, Kb, C)`` in, ``(L, Ka, Kb)`` out."""
+    arrays = [np.asarray(a, dtype=np.float64) for a in (end_pose, end_velocity, start_pose, start_velocity)]
+    ea, va, sb, vb = arrays
+    if ea.shape != va.shape or sb.shape != vb.shape or ea.ndim != 3 or sb.ndim != 3 or ea.shape[::2] != sb.shape[::2]:
+        raise ValueError(f"Expected (L, Ka, C) and (L, Kb, C) arrays, got {[a.shape for a in arrays]}")
+    if mask is not None:
+        mask = np.asarray(mask, dtype=bool)
+        ea, va, sb, vb = ea[..., mask], va[..., mask], sb[..., mask], vb[..., mask]
+    m = ea.shape[2]
+    if m == 0:
+        return np.zeros((len(ea), ea.shape[1], sb.shape[1]))
+    dj = ((ea[:, :, None, :] - sb[:, None, :, :]) ** 2).sum(axis=3)
+    dw = ((va[:, :, None, :] - vb[:, None, :, :]) ** 2).sum(axis=3)
     return (w_joint * dj + w_velocity * dw) / m
 
 

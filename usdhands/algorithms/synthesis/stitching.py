@@ -10,6 +10,9 @@ the fragment returns to its own values and offsets do not pile up.
 The seam target continues the motion: the new first frame is placed one average
 step (of the previous fragment's last step and the new fragment's first step) after
 the previous last frame, so velocity, not only position, stays continuous.
+
+:func:`stitch_fragments_fast` is the compiled twin (numba) that synthesis runs once
+numba is loaded; :func:`stitch_fragments` is the reference the tests hold it to.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["SeamReport", "stitch_fragments"]
+__all__ = ["SeamReport", "stitch_fragments", "stitch_fragments_fast"]
 
 
 @dataclass(frozen=True)
@@ -92,3 +95,26 @@ def stitch_fragments(fragments: list[np.ndarray], fps: float, blend_mean_deg: fl
     report = SeamReport(np.array(frames, dtype=np.int64), np.array(means), np.array(maxes),
                         np.array(blended, dtype=bool))
     return np.concatenate(out, axis=0), report
+
+
+def stitch_fragments_fast(curves: np.ndarray, bounds: np.ndarray, fps: float, blend_mean_deg: float = 5.0,
+                          blend_max_deg: float = 20.0, blend_duration_s: float = 0.5,
+                          mask: np.ndarray | None = None) -> tuple[np.ndarray, SeamReport]:
+    """:func:`stitch_fragments` of the fragments ``curves[bounds[i]:bounds[i + 1]]`` ``(T, C)``, compiled.
+
+    Same result (the seam means are summed in another order: equal to rounding).
+    """
+    from usdhands.algorithms.synthesis import _play_kernel as kern
+
+    x = np.ascontiguousarray(curves, dtype=np.float64)
+    b = np.ascontiguousarray(bounds, dtype=np.int64)
+    if x.ndim != 2 or b.ndim != 1 or len(b) < 2 or b[0] != 0 or b[-1] != len(x) or (np.diff(b) <= 0).any():
+        raise ValueError(f"Expected curves (T, C) and increasing bounds from 0 to T, got {x.shape} and {b.tolist()}")
+    C = x.shape[1]
+    m = np.ones(C, dtype=bool) if mask is None else np.ascontiguousarray(mask, dtype=bool)
+    out = np.empty_like(x)
+    S = len(b) - 2
+    means, maxes, blended = np.zeros(S), np.zeros(S), np.zeros(S, dtype=bool)
+    kern.stitch(x, b, m, float(blend_mean_deg), float(blend_max_deg), max(1, int(round(blend_duration_s * fps))),
+                out, means, maxes, blended)
+    return out, SeamReport(b[1:-1].copy(), means, maxes, blended)

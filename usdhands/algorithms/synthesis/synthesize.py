@@ -26,14 +26,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from usdhands.algorithms.synthesis.database import FingerDatabase, same_rate, segment_track
-from usdhands.algorithms.synthesis.finger_transfer import NUM_DOFS, HandRig, apply_canonical_curves, hand_rig, slot_names
-from usdhands.algorithms.synthesis.motion_graph import least_cost_path, transition_costs
+from usdhands.algorithms.synthesis.finger_transfer import (
+    NUM_DOFS, HandRig, canonical_local_rotations, hand_rig, slot_names,
+)
+from usdhands.algorithms.synthesis.motion_graph import least_cost_path, transition_costs_between
 from usdhands.algorithms.synthesis.output_warp import (
     compiled_kernels_loaded, limit_steps, limit_steps_fast, play_segments, play_segments_fast,
 )
 from usdhands.algorithms.synthesis.segmentation import wrist_speed
 from usdhands.algorithms.synthesis.segment_cost import SearchResult, knn_segments, weight_features
-from usdhands.algorithms.synthesis.stitching import SeamReport, stitch_fragments
+from usdhands.algorithms.synthesis.stitching import SeamReport, stitch_fragments, stitch_fragments_fast
 from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.algorithms.synthesis.feature_sets import extra_keys, feature_terms, hand_columns, weighted_columns
 from usdhands.algorithms.synthesis.wrist_features import NUM_WRIST_FEATURES, reach_cm, world_xforms_for, wrist_features
@@ -244,8 +246,8 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     starts, ends, vstart, vend = _candidate_ends(db, cand)
     tc = cfg.transition
     moving = db.moving_dofs(usable)
-    transitions = [transition_costs(ends[i], vend[i], starts[i + 1], vstart[i + 1], tc.w_joint, tc.w_velocity,
-                                    moving) for i in range(N - 1)]
+    transitions = list(transition_costs_between(ends[:-1], vend[:-1], starts[1:], vstart[1:], tc.w_joint,
+                                                tc.w_velocity, moving))
     path, _ = least_cost_path(costs, transitions, cfg.path.w_segment, cfg.path.w_transition,
                               cfg.path.normalize_terms)
     chosen = cand[np.arange(N), path]
@@ -257,11 +259,14 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     compiled = compiled_kernels_loaded()  # numba only where the search loaded it anyway
     play = play_segments_fast if compiled else play_segments
     out = play(qw, dw, db.fingers, db.segments[:, :2], qb, cand, played, bands, db.fps, st.warp_smoothing_s)
-    fragments = [out[q0:q1] for q0, q1 in qb]
     _log.info("%s hand: %d segment(s) of the wrist motion; chose database segments %s (path cost %.3g)", side, N,
               " ".join(str(int(c)) for c in chosen), float(sum(costs[i, path[i]] for i in range(N))))
-    compact, seams = stitch_fragments(fragments, db.fps, st.blend_mean_deg, st.blend_max_deg, st.blend_duration_s,
-                                      moving)
+    if compiled:
+        compact, seams = stitch_fragments_fast(out, bounds, db.fps, st.blend_mean_deg, st.blend_max_deg,
+                                               st.blend_duration_s, moving)
+    else:
+        compact, seams = stitch_fragments([out[q0:q1] for q0, q1 in qb], db.fps, st.blend_mean_deg,
+                                          st.blend_max_deg, st.blend_duration_s, moving)
     compact = (limit_steps_fast if compiled else limit_steps)(compact, db.step_limits(st.step_percentile, usable))
     curves = np.zeros((len(feats), NUM_DOFS))
     curves[:, db.dof_index] = compact
@@ -296,10 +301,15 @@ def played_weights(costs: np.ndarray, cand: np.ndarray, path: np.ndarray, mix: f
     ``(1 − mix)`` for the path's candidate plus ``mix`` times :func:`candidate_weights`
     of the row (``costs (N, k)``, ``cand (N, k)`` with -1 for none, ``path (N,)``).
     """
-    w = np.zeros(np.shape(costs))
-    for i in range(len(w)):
-        w[i] = mix * candidate_weights(np.where(cand[i] >= 0, costs[i], np.inf))
-        w[i, path[i]] += 1.0 - mix
+    c = np.where(np.asarray(cand) >= 0, np.asarray(costs, dtype=np.float64), np.inf)
+    ok = np.isfinite(c)
+    zero = ok & (c <= 0)
+    best = np.where(ok, c, np.inf).min(axis=1, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(zero.any(axis=1, keepdims=True), zero.astype(float), np.where(ok, (best / c) ** 2, 0.0))
+    total = w.sum(axis=1, keepdims=True)
+    w = mix * np.divide(w, total, out=np.zeros_like(w), where=total > 0)  # each row as candidate_weights
+    w[np.arange(len(w)), path] += 1.0 - mix
     return w
 
 
@@ -418,6 +428,7 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
     world = world_xforms_for(clip, [h for h in arms if h is not None])
     out = clip
     results, mapping, scales = {}, {}, {}
+    joints, locals_ = [], []
     dw = db_weighted_features(db, cfg)
     for side in hands:
         hand = handmap[side]
@@ -440,5 +451,9 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
         if resampled:
             curves = resample_rows(curves, db.fps, clip.fps, clip.num_frames)
         results[side] = res
-        out = apply_canonical_curves(out, rig, curves)
+        j, local = canonical_local_rotations(clip, rig, curves)
+        joints += j
+        locals_.append(local)
+    if joints:  # both hands written at once: one copy of the clip's arrays
+        out = clip.with_joint_rotations(joints, np.concatenate(locals_, axis=1))
     return ClipSynthesis(out, results, mapping, scales)
