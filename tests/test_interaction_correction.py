@@ -79,6 +79,42 @@ def test_smoothing_lowers_jitter_without_penetrating(closing):
     assert exact_capsule_depth_mm(rough, [prop], chain_posers(rough, hm, InteractionConfig())).max() <= 0.5
 
 
+def test_smoother_than_a_clean_input_too_and_clear_by_exact_measure():
+    """Without capture noise the input is as smooth as it gets, and the correction still ends smoother
+    (the whole curve of each corrected finger is smoothed, the contact as a bound)."""
+    clip = closing_hand_clip(frames=60, noise_deg=0.0)
+    prop = cylinder_under_palm()
+    hm = humanoid_handmap(clip.skeleton)
+    out, report = correct_clip(clip, hm, colliders_for(clip, prop))
+    assert report.chains_corrected and report.jitter_after < report.jitter_before
+    assert exact_capsule_depth_mm(clip, [prop], chain_posers(clip, hm, InteractionConfig())).max() > 15.0
+    assert exact_capsule_depth_mm(out, [prop], chain_posers(out, hm, InteractionConfig())).max() <= 0.5
+
+
+def test_the_whole_curve_of_a_corrected_finger_is_smoothed():
+    """Frames far from any contact are smoothed too (the capture noise there goes), while the
+    fingers that never touched keep their noise bit for bit."""
+    clip = closing_hand_clip(frames=60, noise_deg=1.5)
+    cyl = cylinder_under_palm()
+    low = PropMesh("low", np.asarray(cyl.vertices) - [0.0, 1.5, 0.0], cyl.faces)  # touched only when well curled
+    hm = humanoid_handmap(clip.skeleton)
+    out, report = correct_clip(clip, hm, colliders_for(clip, low))
+    posers = chain_posers(clip, hm, InteractionConfig())
+    gaps = exact_capsule_gaps_mm(clip, [low], posers)
+    i = [p.chain.name for p in posers].index("left index")
+    assert "left index" in report.chains_corrected and gaps[i].min() < -5.0
+    calm = np.nonzero(gaps[i] > 5.0)[0]  # the index well clear of the cylinder (the hand open)
+    calm = calm[(calm > 1) & (calm < clip.num_frames - 2)]
+    assert len(calm) >= 6
+    index = list(posers[i].chain.joints)
+    before = np.abs(np.diff(finger_curves(clip, index).values, 2, axis=0))[calm - 1].mean()
+    after = np.abs(np.diff(finger_curves(out, index).values, 2, axis=0))[calm - 1].mean()
+    assert after < 0.5 * before
+    thumb = list(posers[[p.chain.name for p in posers].index("left thumb")].chain.joints)
+    assert "left thumb" not in report.chains_corrected
+    assert out.rotations[:, thumb].tobytes() == clip.rotations[:, thumb].tobytes()
+
+
 def test_clear_fingers_are_bit_for_bit_unchanged(closing):
     clip, prop, hm, cols, out, report, gaps_before, gaps_after = closing
     untouched = [j for p in chain_posers(clip, hm, InteractionConfig()) if p.chain.name not in report.chains_corrected

@@ -37,7 +37,8 @@ from usdhands.model.finger_dofs import finger_curves
 from usdhands.model.handmap import HandMap
 from usdhands.model.rotations import quat_angle_deg
 
-__all__ = ["CorrectionReport", "correct_clip", "chain_posers", "penetration_depth_mm", "finger_jitter"]
+__all__ = ["CorrectionReport", "correct_clip", "chain_posers", "penetration_depth_mm", "finger_jitter",
+           "finger_angles"]
 
 
 @dataclass
@@ -115,9 +116,30 @@ def _near_frames(poser: ChainPoser, colliders, reach: float) -> np.ndarray:
     return frames[colliders.bbox_gap(frames, lo, hi) <= 0]
 
 
+def finger_angles(clip: Clip, joints) -> np.ndarray:
+    """Euler angles of ``joints`` relative to rest, ``(T, n, 3)`` degrees in ``[-180, 180)``, on the
+    branch nearest the rest pose.
+
+    A rotation has two Tait-Bryan triples, ``(a, b, c)`` and ``(a + 180, 180 - b, c + 180)``;
+    the conversion returns the one with ``|b| <= 90``, so a finger flexed past 90 degrees about
+    the middle axis (a captured rig whose flexion is the order's middle angle) flips between
+    them from frame to frame. Each frame takes the triple with the smaller ``sum(|angle|)``.
+    Finger joints stay within about 130 degrees of rest on every axis, so angles are kept in
+    ``[-180, 180)`` rather than unwrapped over time (a capture glitch that crosses 180 would
+    otherwise shift every later frame by 360 and out of the joint limits).
+    """
+    T, n = clip.num_frames, len(joints)
+    e = finger_curves(clip, joints).values.reshape(T, n, 3)
+    e = (e + 180.0) % 360.0 - 180.0
+    alt = e + np.array([180.0, 0.0, 180.0])
+    alt[..., 1] = 180.0 - e[..., 1]
+    alt = (alt + 180.0) % 360.0 - 180.0
+    flip = np.abs(alt).sum(axis=-1) < np.abs(e).sum(axis=-1)
+    return np.where(flip[..., None], alt, e)
+
+
 def _chain_angles(clip: Clip, chain: FingerChain) -> np.ndarray:
-    T, n = clip.num_frames, len(chain.joints)
-    return finger_curves(clip, chain.joints).values.reshape(T, n, 3)
+    return finger_angles(clip, chain.joints)
 
 
 def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolution_mm: float = 0.05) -> np.ndarray:
@@ -143,34 +165,48 @@ def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolu
 
 
 def finger_jitter(clip: Clip, joints: list[int]) -> float:
-    """Mean absolute angular acceleration of the finger curves of ``joints``, deg/s²."""
+    """Mean absolute angular acceleration of the finger curves of ``joints``, deg/s² (Euler
+    curves as :func:`finger_angles` reads them)."""
     if clip.num_frames < 3 or not joints:
         return 0.0
-    v = finger_curves(clip, joints).values
+    v = finger_angles(clip, joints)
     return float(np.abs(np.diff(v, 2, axis=0)).mean() * clip.fps ** 2)
 
 
-def _runs(frames: np.ndarray) -> list[np.ndarray]:
-    """Split sorted frame indices into runs of consecutive frames."""
-    if len(frames) == 0:
-        return []
-    cuts = np.nonzero(np.diff(frames) > 1)[0] + 1
-    return np.split(frames, cuts)
+#: How much more the opening is held to its bound where the input penetrates than where it is clear
+#: (the fingers that penetrated end touching; the smoothing's anticipation goes before the contact).
+FIT_IN_CONTACT = 10.0
 
 
-def _window(hit: np.ndarray, core: int, ramp: int) -> np.ndarray:
-    """Weights ``(T,)``: 1 within ``core`` frames of a hit, falling linearly to 0 over ``ramp`` more."""
-    T = len(hit)
-    idx = np.nonzero(hit)[0]
-    dist = np.full(T, np.inf)
-    if len(idx):
-        pos = np.searchsorted(idx, np.arange(T))
-        left = idx[np.clip(pos - 1, 0, len(idx) - 1)]
-        right = idx[np.clip(pos, 0, len(idx) - 1)]
-        dist = np.minimum(np.abs(np.arange(T) - left), np.abs(right - np.arange(T))).astype(float)
-    w = np.clip(1.0 - (dist - core) / max(ramp, 1), 0.0, 1.0)
-    w[dist <= core] = 1.0
-    return w
+def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.ndarray, bound: np.ndarray,
+                    weight: float, margin: float, resolution: float, rounds: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """The smoothed opening ``u`` ``(K,)`` above ``bound`` and its poses ``(K, n, 3)``, every frame clear.
+
+    Opening further than the bound can touch something else (clearance along the path need
+    not be monotone): each frame whose smoothed pose fails the test gets an upper bound, the
+    clear opening nearest below it, and the curve is smoothed again between the bounds; a
+    frame still failing after ``rounds`` takes its bound, which was tested.
+    """
+    upper = np.ones(len(frames))
+    u = np.array(bound)
+    for _ in range(rounds if weight > 0 else 0):
+        u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0))
+        changed = np.nonzero(u > bound)[0]
+        if len(changed) == 0:
+            break
+        ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed]), margin, resolution)
+        bad = changed[~ok]
+        if len(bad) == 0:
+            break
+        upper[bad] = poser.clear_below(colliders, frames[bad], base[bad], bound[bad], u[bad], margin, resolution)
+    new = poser.angles(base, u)
+    changed = np.nonzero(u > bound)[0]
+    if len(changed):
+        ok = poser.clear(colliders, frames[changed], new[changed], margin, resolution)
+        back = changed[~ok]
+        u[back] = bound[back]
+        new[back] = poser.angles(base[back], bound[back])
+    return u, new
 
 
 def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 0.0,
@@ -207,8 +243,7 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     T = clip.num_frames
     rotations = np.array(clip.rotations)
     unresolved, corrected = [], []
-    core = int(round(2 * cfg.smoothing_s * clip.fps)) if smooth else 0
-    ramp = int(round(2 * cfg.smoothing_s * clip.fps)) if smooth else 0
+    opened = np.zeros(T, dtype=bool)
     weight = smoothness_weight(clip.fps, cfg.smoothing_s) if smooth else 0.0
     for poser in posers:
         near = _near_frames(poser, colliders, margin)
@@ -216,39 +251,27 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
             continue
         angles = _chain_angles(clip, poser.chain)
         ok = poser.clear(colliders, near, angles[near], margin, resolution)
-        hit = np.zeros(T, dtype=bool)
-        hit[near[~ok]] = True
-        if not hit.any():
+        if ok.all():
             continue
         corrected.append(poser.chain.name)
         n = len(poser.chain.joints)
-        w = _window(hit, core, ramp) if smooth else hit.astype(float)
-        frames = np.nonzero(w > 0)[0]
-        base = np.array(angles)
-        if smooth and cfg.smoothing_s > 0:
-            for run in _runs(frames):  # the smoother runs over each window only
-                sm = rts_smooth(angles[run].reshape(len(run), -1), clip.fps, cfg.smoothing_s).reshape(-1, n, 3)
-                base[run] = angles[run] + w[run, None, None] * (sm - angles[run])
-        bound, resolved = poser.least_opening(colliders, frames, base[frames], margin, resolution, iterations)
+        if smooth:
+            # the whole curve: the input's own noise is smoothed too, within the joint limits
+            frames = np.arange(T)
+            base = angles
+            if cfg.smoothing_s > 0 and T >= 3:
+                base = rts_smooth(angles.reshape(T, -1), clip.fps, cfg.smoothing_s).reshape(T, n, 3)
+            base = np.clip(base, poser.chain.limits[..., 0], poser.chain.limits[..., 1])
+        else:
+            frames = near[~ok]
+            base = angles[frames]
+        bound, resolved = poser.least_opening(colliders, frames, base, margin, resolution, iterations)
         for f in frames[~resolved]:
             unresolved.append((poser.chain.name, int(f)))
-        u = np.array(bound)
-        if weight > 0:
-            pos = 0
-            for run in _runs(frames):
-                sl = slice(pos, pos + len(run))
-                u[sl] = bounded_smooth(bound[sl], np.ones(len(run)), weight)
-                pos += len(run)
-        new = poser.angles(base[frames], u)
-        changed = u > bound
-        if changed.any():
-            still = poser.clear(colliders, frames[changed], new[changed], margin, resolution)
-            back = np.nonzero(changed)[0][~still]
-            new[back] = poser.angles(base[frames[back]], bound[back])
+        u, new = _smooth_opening(poser, colliders, frames, base, bound, weight, margin, resolution)
+        opened[frames[bound > 0]] = True
         q = poser.local_rotations(new)
-        same = (u <= 0) & np.all(new == angles[frames], axis=(1, 2))
-        write = frames[~same]
-        rotations[np.ix_(write, list(poser.chain.joints))] = q[~same]
+        rotations[np.ix_(frames, list(poser.chain.joints))] = q
     out = clip.replace(rotations=rotations)
     finger_joints = sorted({j for p in posers for j in p.chain.joints})
     changed_frames = np.any(rotations[:, finger_joints] != np.asarray(clip.rotations)[:, finger_joints], axis=(1, 2))

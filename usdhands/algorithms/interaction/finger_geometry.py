@@ -73,7 +73,7 @@ class InteractionConfig:
     limits_deg: dict = field(default_factory=lambda: json.loads(json.dumps(DEFAULT_LIMITS_DEG)))
     tip_fraction: float = 0.8
     tolerance_mm: float = 0.5
-    smoothing_s: float = 0.05
+    smoothing_s: float = 0.15
 
     @classmethod
     def from_dict(cls, d: dict) -> "InteractionConfig":

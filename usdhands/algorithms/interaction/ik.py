@@ -152,3 +152,16 @@ class ChainPoser:
             lo = np.where(ok, lo, mid)
         u[idx] = hi
         return u, resolved
+
+    def clear_below(self, colliders, frames: np.ndarray, base: np.ndarray, clear_u: np.ndarray,
+                    blocked_u: np.ndarray, margin: float, resolution: float, iterations: int = 6) -> np.ndarray:
+        """A clear path parameter between ``clear_u`` (clear) and ``blocked_u`` (not), as near ``blocked_u``
+        as ``iterations`` bisection steps find, ``(K,)`` (clear by the test; ``clear_u`` at worst)."""
+        lo = np.array(clear_u, dtype=np.float64)
+        hi = np.array(blocked_u, dtype=np.float64)
+        for _ in range(iterations):
+            mid = 0.5 * (lo + hi)
+            ok = self.clear(colliders, frames, self.angles(base, mid), margin, resolution)
+            lo = np.where(ok, mid, lo)
+            hi = np.where(ok, hi, mid)
+        return lo

@@ -110,13 +110,15 @@ def _banded_solve(H: sparse.csr_matrix, rhs: np.ndarray) -> np.ndarray:
     return solveh_banded(ab, rhs)
 
 
-def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iterations: int = 100) -> np.ndarray:
-    """The smooth curve closest to ``lower`` that never goes below it.
+def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iterations: int = 100,
+                   fit: np.ndarray | None = None) -> np.ndarray:
+    """The smooth curve closest to ``lower`` that stays between ``lower`` and ``upper``.
 
-    Minimises ``sum((x - lower)**2) + weight * sum((x[t-1] - 2 x[t] + x[t+1])**2)``
-    subject to ``x >= lower`` (then ``x <= upper`` by clipping), by block principal
-    pivoting on the active set: each step one banded Cholesky solve on the free
-    frames (a principal submatrix of a pentadiagonal matrix is pentadiagonal again).
+    Minimises ``sum(fit * (x - lower)**2) + weight * sum((x[t-1] - 2 x[t] + x[t+1])**2)``
+    subject to ``lower <= x <= upper``, by block principal pivoting on the two active
+    sets: each step one banded Cholesky solve on the free frames (a principal submatrix
+    of a pentadiagonal matrix is pentadiagonal again), the frames held at a bound
+    entering through the right-hand side.
 
     Parameters
     ----------
@@ -124,32 +126,41 @@ def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iter
         Bounds, ``lower <= upper``.
     weight : float
         Second-difference penalty (:func:`smoothness_weight`); 0 returns ``lower``.
+    fit : (T,) float, optional
+        Weight of each frame's distance to ``lower`` (default 1 everywhere).
 
     Returns
     -------
     (T,) float
-        Within the bounds exactly.
+        Within the bounds exactly (clipped into them should the pivoting not settle).
     """
     lower = np.asarray(lower, dtype=np.float64)
-    upper = np.asarray(upper, dtype=np.float64)
+    upper = np.maximum(np.asarray(upper, dtype=np.float64), lower)
     T = len(lower)
     if T < 3 or weight <= 0 or np.all(lower == lower[0]):
         return lower.copy()
     G = _second_difference_gram(T)
-    H = (sparse.identity(T, format="csr") + weight * G).tocsr()
-    c = weight * (G @ lower)  # x = lower + y, minimise y.H.y/2 + c.y with y >= 0
-    active = np.zeros(T, dtype=bool)
+    a = np.ones(T) if fit is None else np.asarray(fit, dtype=np.float64)
+    H = (sparse.diags(a, format="csr") + weight * G).tocsr()
+    c = weight * (G @ lower)  # x = lower + y, minimise y.H.y/2 + c.y with 0 <= y <= room
+    room = upper - lower
+    at_lo = np.zeros(T, dtype=bool)
+    at_hi = np.zeros(T, dtype=bool)
     y = np.zeros(T)
     for _ in range(max_iterations):
-        free = ~active
-        y = np.zeros(T)
+        free = ~(at_lo | at_hi)
+        y = np.where(at_hi, room, 0.0)
         if free.any():
             idx = np.nonzero(free)[0]
-            y[idx] = _banded_solve(H[idx][:, idx], -c[idx])
+            rhs = -c[idx] - (H @ y)[idx]
+            y[idx] = _banded_solve(H[idx][:, idx], rhs)
         grad = H @ y + c
-        newly_active = free & (y < -1e-12)
-        released = active & (grad < -1e-12)
-        if not newly_active.any() and not released.any():
+        to_lo = free & (y < -1e-12)
+        to_hi = free & (y > room + 1e-12)
+        off_lo = at_lo & (grad < -1e-12)
+        off_hi = at_hi & (grad > 1e-12)
+        if not (to_lo.any() or to_hi.any() or off_lo.any() or off_hi.any()):
             break
-        active = (active | newly_active) & ~released
-    return np.clip(lower + np.maximum(y, 0.0), lower, upper)
+        at_lo = (at_lo | to_lo) & ~off_lo
+        at_hi = (at_hi | to_hi) & ~off_hi
+    return np.clip(lower + y, lower, upper)
