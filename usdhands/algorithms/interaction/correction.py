@@ -51,7 +51,8 @@ class CorrectionReport:
         Deepest finger penetration into any collider per frame, mm (0 where clear),
         measured along the capsule axes to 0.05 mm (an upper bound).
     frames_corrected : int
-        Frames where some finger rotation changed.
+        Frames where the IK pushed some finger out (the smoothing also changes the other
+        frames of a corrected finger, by less).
     jitter_before, jitter_after : float
         Mean absolute angular acceleration of the finger curves, deg/s².
     max_change_deg : float
@@ -274,13 +275,12 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         rotations[np.ix_(frames, list(poser.chain.joints))] = q
     out = clip.replace(rotations=rotations)
     finger_joints = sorted({j for p in posers for j in p.chain.joints})
-    changed_frames = np.any(rotations[:, finger_joints] != np.asarray(clip.rotations)[:, finger_joints], axis=(1, 2))
     change = quat_angle_deg(np.asarray(clip.rotations)[:, finger_joints], rotations[:, finger_joints])
     report = CorrectionReport(
         penetration_before_mm=penetration_depth_mm(clip, posers, colliders) if measure else np.zeros(T),
         penetration_after_mm=(penetration_depth_mm(out, chain_posers(out, handmap, cfg), colliders)
                               if measure else np.zeros(T)),
-        frames_corrected=int(changed_frames.sum()),
+        frames_corrected=int(opened.sum()),
         jitter_before=finger_jitter(clip, finger_joints),
         jitter_after=finger_jitter(out, finger_joints),
         max_change_deg=float(change.max(initial=0.0)),
