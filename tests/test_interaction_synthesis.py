@@ -9,7 +9,9 @@ import trimesh
 from interaction_data import closing_hand_clip, colliders_for, cylinder_under_palm
 
 from usdhands.algorithms.interaction.synthesis_terms import InteractionTerms, proximity_cuts
-from usdhands.algorithms.synthesis.finger_transfer import apply_canonical_curves, canonical_curves, hand_rig
+from usdhands.algorithms.synthesis.finger_transfer import (
+    canonical_curves, canonical_to_local, hand_rig, local_to_canonical,
+)
 from usdhands.cli import main
 from usdhands.formats.io import write_asset
 from usdhands.model.asset import Asset
@@ -31,12 +33,14 @@ def test_collision_term_charges_a_curled_candidate_and_not_an_open_one():
     rig = hand_rig(clip.skeleton, hand)
     curled = canonical_curves(clip, rig)[15]  # the fingers at full curl, through the cylinder
     segments = {0: np.zeros((20, 60)), 1: np.tile(curled, (20, 1))}
-    terms = InteractionTerms(clip, hand, rig, apply_canonical_curves, canonical_curves, lambda s: segments[s],
+    to_local = lambda c: canonical_to_local(clip.skeleton, rig, c)  # noqa: E731
+    to_curves = lambda q: local_to_canonical(clip.skeleton, rig, q)  # noqa: E731
+    terms = InteractionTerms(clip, hand, rig, to_local, to_curves, lambda s: segments[s],
                              colliders_for(clip, cylinder_under_palm()), weight=1.0, reach=15.0, min_frames=5)
     assert terms.near.all()  # the wrist is within 15 cm of the cylinder throughout
     cost = terms.penalty(np.array([0, 30]), np.array([[0, 1]]))
     assert cost[0, 0] == 0.0 and cost[0, 1] > 10.0  # deg^2 per frame and DOF
-    far = InteractionTerms(clip, hand, rig, apply_canonical_curves, canonical_curves, lambda s: segments[s],
+    far = InteractionTerms(clip, hand, rig, to_local, to_curves, lambda s: segments[s],
                            colliders_for(clip, cylinder_under_palm()), weight=1.0, reach=0.1, min_frames=5)
     assert far.penalty(np.array([0, 30]), np.array([[0, 1]])).tolist() == [[0.0, 0.0]]
 

@@ -148,7 +148,7 @@ def synthesis_interaction(options, clip, handmap, db, cfg, props, config, path=N
     colliders at the clip's own rate for the correction run on the result."""
     from usdhands.algorithms.interaction.synthesis_terms import InteractionTerms
     from usdhands.algorithms.synthesis.database import same_rate
-    from usdhands.algorithms.synthesis.finger_transfer import apply_canonical_curves, canonical_curves
+    from usdhands.algorithms.synthesis.finger_transfer import canonical_to_local, local_to_canonical
 
     colliders, _ = build_colliders(options, clip, handmap, props, path=path)
     at_db = clip if same_rate(clip.fps, db.fps) else clip.resample(db.fps)
@@ -163,7 +163,8 @@ def synthesis_interaction(options, clip, handmap, db, cfg, props, config, path=N
         wrist = rest[clip.skeleton.index(hand.wrist)]
         tips = rest[[clip.skeleton.index(j) for j in hand.finger_joints]]
         reach = 1.5 * float(np.linalg.norm(tips - wrist, axis=1).max(initial=0.0)) + 0.05 / clip.skeleton.meters_per_unit
-        return InteractionTerms(at_db, hand, rig, apply_canonical_curves, canonical_curves, fingers, db_colliders,
+        return InteractionTerms(at_db, hand, rig, lambda c: canonical_to_local(at_db.skeleton, rig, c),
+                                lambda q: local_to_canonical(at_db.skeleton, rig, q), fingers, db_colliders,
                                 weight=options.collision_weight, reach=reach,
                                 min_frames=max(int(round(cfg.segmentation.min_segment_s * db.fps)), 1),
                                 margin_mm=options.margin, config=config)

@@ -38,7 +38,7 @@ from usdhands.model.handmap import HandMap
 from usdhands.model.rotations import quat_angle_deg
 
 __all__ = ["CorrectionReport", "correct_clip", "chain_posers", "penetration_depth_mm", "finger_jitter",
-           "finger_angles"]
+           "finger_angles", "rest_branch"]
 
 
 @dataclass
@@ -117,26 +117,32 @@ def _near_frames(poser: ChainPoser, colliders, reach: float) -> np.ndarray:
     return frames[colliders.bbox_gap(frames, lo, hi) <= 0]
 
 
-def finger_angles(clip: Clip, joints) -> np.ndarray:
-    """Euler angles of ``joints`` relative to rest, ``(T, n, 3)`` degrees in ``[-180, 180)``, on the
-    branch nearest the rest pose.
+def rest_branch(angles: np.ndarray) -> np.ndarray:
+    """Euler triples ``(..., 3)`` degrees on the branch nearest the rest pose, in ``[-180, 180)``.
 
     A rotation has two Tait-Bryan triples, ``(a, b, c)`` and ``(a + 180, 180 - b, c + 180)``;
     the conversion returns the one with ``|b| <= 90``, so a finger flexed past 90 degrees about
     the middle axis (a captured rig whose flexion is the order's middle angle) flips between
-    them from frame to frame. Each frame takes the triple with the smaller ``sum(|angle|)``.
-    Finger joints stay within about 130 degrees of rest on every axis, so angles are kept in
-    ``[-180, 180)`` rather than unwrapped over time (a capture glitch that crosses 180 would
-    otherwise shift every later frame by 360 and out of the joint limits).
+    them from frame to frame. Each triple becomes the one with the smaller ``sum(|angle|)``.
     """
-    T, n = clip.num_frames, len(joints)
-    e = finger_curves(clip, joints).values.reshape(T, n, 3)
-    e = (e + 180.0) % 360.0 - 180.0
+    e = (np.asarray(angles, dtype=np.float64) + 180.0) % 360.0 - 180.0
     alt = e + np.array([180.0, 0.0, 180.0])
     alt[..., 1] = 180.0 - e[..., 1]
     alt = (alt + 180.0) % 360.0 - 180.0
     flip = np.abs(alt).sum(axis=-1) < np.abs(e).sum(axis=-1)
     return np.where(flip[..., None], alt, e)
+
+
+def finger_angles(clip: Clip, joints) -> np.ndarray:
+    """Euler angles of ``joints`` relative to rest, ``(T, n, 3)`` degrees in ``[-180, 180)``, on the
+    branch nearest the rest pose (:func:`rest_branch`).
+
+    Finger joints stay within about 130 degrees of rest on every axis, so angles are kept in
+    ``[-180, 180)`` rather than unwrapped over time (a capture glitch that crosses 180 would
+    otherwise shift every later frame by 360 and out of the joint limits).
+    """
+    T, n = clip.num_frames, len(joints)
+    return rest_branch(finger_curves(clip, joints).values.reshape(T, n, 3))
 
 
 def _chain_angles(clip: Clip, chain: FingerChain) -> np.ndarray:
@@ -180,7 +186,7 @@ FIT_IN_CONTACT = 10.0
 
 
 def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.ndarray, bound: np.ndarray,
-                    weight: float, margin: float, resolution: float, rounds: int = 12) -> tuple[np.ndarray, np.ndarray]:
+                    weight: float, margin: float, resolution: float, rounds: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """The smoothed opening ``u`` ``(K,)`` above ``bound`` and its poses ``(K, n, 3)``, every frame clear.
 
     Opening further than the bound can touch something else (clearance along the path need
@@ -190,23 +196,17 @@ def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.n
     """
     upper = np.ones(len(frames))
     u = np.array(bound)
-    for _ in range(rounds if weight > 0 else 0):
+    bad = np.zeros(0, dtype=np.int64)
+    for r in range(rounds if weight > 0 else 0):
         u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0))
         changed = np.nonzero(u > bound)[0]
-        if len(changed) == 0:
-            break
         ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed]), margin, resolution)
         bad = changed[~ok]
-        if len(bad) == 0:
+        if len(bad) == 0 or r == rounds - 1:
             break
         upper[bad] = poser.clear_below(colliders, frames[bad], base[bad], bound[bad], u[bad], margin, resolution)
+    u[bad] = bound[bad]  # every other frame passed the last test
     new = poser.angles(base, u)
-    changed = np.nonzero(u > bound)[0]
-    if len(changed):
-        ok = poser.clear(colliders, frames[changed], new[changed], margin, resolution)
-        back = changed[~ok]
-        u[back] = bound[back]
-        new[back] = poser.angles(base[back], bound[back])
     return u, new
 
 

@@ -20,10 +20,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from usdhands.algorithms.interaction.correction import correct_clip
+from usdhands.algorithms.interaction.correction import chain_posers, rest_branch
 from usdhands.algorithms.interaction.finger_geometry import InteractionConfig
+from usdhands.algorithms.interaction.ik import ChainPoser
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import HandMap, HandSide
+from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_euler_deg
 
 __all__ = ["InteractionTerms", "wrist_proximity", "proximity_cuts"]
 
@@ -58,9 +60,10 @@ class InteractionTerms:
     hand : HandSide
     rig : object
         The hand's :class:`~usdhands.algorithms.synthesis.finger_transfer.HandRig`.
-    apply_curves, read_curves : callable
-        ``apply_curves(clip, rig, curves (T, 60)) -> Clip`` and ``read_curves(clip, rig) -> (T, 60)``
-        (synthesis's canonical finger curves; passed in so this room does not import synthesis).
+    to_local, to_curves : callable
+        ``to_local(curves (K, 60)) -> (K, S, 4)``: local rotations of the rig's slot joints
+        ``rig.slot_joint[rig.present]`` from synthesis's canonical finger curves, and
+        ``to_curves`` the inverse (passed in so this room does not import synthesis).
     fingers : callable
         ``fingers(segment) -> (n, 60)`` canonical finger curves of a database segment.
     colliders : Colliders
@@ -71,13 +74,28 @@ class InteractionTerms:
         Wrist distance under which a frame is near a collider, clip units.
     min_frames : int
         Shortest segment a proximity cut may leave.
+    margin_mm : float
+    config : InteractionConfig, optional
+    stride : int
+        The term is a mean over the segment's frames: every ``stride``-th frame is corrected
+        (from the first; at least one per segment).
+
+    Notes
+    -----
+    The collision term needs only the size of each candidate's correction, so the
+    candidates are corrected chain by chain on arrays: the input's hand (every chain's
+    parent transform at each input frame) is posed once, each candidate frame's finger
+    curves become the chain's Euler angles, and only the candidate frames whose chain can
+    reach a collider's box (the parent joint plus the chain's length and radius) are
+    searched, with a 2 mm clearance and 5 bisection steps (the result is corrected again
+    with the full guarantee). No clip is built per candidate.
     """
 
     clip: Clip
     hand: HandSide
     rig: object
-    apply_curves: object
-    read_curves: object
+    to_local: object
+    to_curves: object
     fingers: object
     colliders: object
     weight: float = 1.0
@@ -85,13 +103,30 @@ class InteractionTerms:
     min_frames: int = 10
     margin_mm: float = 0.0
     config: InteractionConfig | None = None
+    stride: int = 3
 
     def __post_init__(self) -> None:
         self.near = wrist_proximity(self.clip, self.hand, self.colliders) < self.reach
+        self._posers = None
 
     def cuts(self, bounds: np.ndarray) -> np.ndarray:
         """Segment boundaries with the proximity cuts added."""
         return proximity_cuts(bounds, self.near, self.min_frames)
+
+    def _chains(self) -> list[tuple[ChainPoser, np.ndarray, float]]:
+        """Each finger chain's poser on the input, its joints' columns among the slot joints and its reach."""
+        if self._posers is None:
+            cfg = replace(self.config or InteractionConfig(), tolerance_mm=2.0)
+            slot_joints = list(np.asarray(self.rig.slot_joint)[np.asarray(self.rig.present)])
+            self._posers = []
+            for poser in chain_posers(self.clip, HandMap(**{self.hand.side: self.hand}), cfg):
+                if not all(j in slot_joints for j in poser.chain.joints):
+                    continue
+                cols = np.array([slot_joints.index(j) for j in poser.chain.joints])
+                bones = np.linalg.norm(self.clip.skeleton.rest_translations[list(poser.chain.joints)], axis=1)
+                length = float(bones.sum() + np.linalg.norm(poser.chain.tip_offset))
+                self._posers.append((poser, cols, length + float(poser.chain.radii.max())))
+        return self._posers
 
     def penalty(self, bounds: np.ndarray, candidates: np.ndarray) -> np.ndarray:
         """Collision term ``(N, k)`` for the candidates of each segment (0 for segments far from colliders)."""
@@ -106,25 +141,15 @@ class InteractionTerms:
                 if candidates[i, j] < 0:
                     continue
                 seg = self.fingers(int(candidates[i, j]))
-                pick = np.round(np.linspace(0, len(seg) - 1, q1 - q0)).astype(np.int64)
+                pick = np.round(np.linspace(0, len(seg) - 1, q1 - q0)).astype(np.int64)[::self.stride]
                 rows.append((i, j))
-                frames.append(np.arange(q0, q1))
+                frames.append(np.arange(q0, q1)[::self.stride])
                 fragments.append(seg[pick])
         if not rows:
             return out
         frames_all = np.concatenate(frames)
         D = np.concatenate(fragments)
-        base = self.clip.replace(rotations=self.clip.rotations[frames_all],
-                                 translations=self.clip.translations[frames_all],
-                                 scales=self.clip.scales[frames_all], start_time=0.0)
-        stacked = self.apply_curves(base, self.rig, D)
-        handmap = HandMap(**{self.hand.side: self.hand})
-        # an estimate for ranking candidates: a 2 mm clearance search and 5 bisection steps
-        # (the result is corrected again with the full guarantee)
-        coarse = replace(self.config or InteractionConfig(), tolerance_mm=2.0)
-        corrected, _ = correct_clip(stacked, handmap, self.colliders.take(frames_all), margin_mm=self.margin_mm,
-                                    config=coarse, smooth=False, measure=False, iterations=5)
-        D_star = self.read_curves(corrected, self.rig)
+        D_star = self.corrected(frames_all, D)
         m = max(int(np.count_nonzero(np.any(D != 0, axis=0))), 1)
         pos = 0
         for (i, j), f in zip(rows, frames):
@@ -132,4 +157,33 @@ class InteractionTerms:
             diff = (D[pos:pos + n] - D_star[pos:pos + n] + 180.0) % 360.0 - 180.0
             out[i, j] = self.weight * float((diff ** 2).sum()) / (n * m)
             pos += n
+        return out
+
+    def corrected(self, frames: np.ndarray, curves: np.ndarray) -> np.ndarray:
+        """Canonical curves ``(K, 60)`` placed on the input's hand at ``frames`` ``(K,)``, corrected
+        against the colliders per frame (the least opening, coarse search, no smoothing): D*."""
+        mm = 0.001 / self.clip.skeleton.meters_per_unit
+        margin = self.margin_mm * mm
+        resolution = 2.0 * mm
+        local = np.array(self.to_local(curves))
+        fixed = np.zeros(len(frames), dtype=bool)
+        for poser, cols, reach in self._chains():
+            centre = poser.parent_world[frames, :3, 3]
+            r = reach + margin
+            near = np.nonzero(self.colliders.bbox_gap(frames, centre - r, centre + r) <= 0)[0]
+            if len(near) == 0:
+                continue
+            rel = quat_multiply(quat_conjugate(poser.rest_rotations)[None], local[near][:, cols])
+            base = rest_branch(quat_to_euler_deg(rel, poser.order))
+            u, _ = poser.least_opening(self.colliders, frames[near], base, margin, resolution, iterations=5)
+            moved = u > 0
+            if not moved.any():
+                continue
+            rows = near[moved]
+            q = poser.local_rotations(poser.angles(base[moved], u[moved]))
+            local[rows[:, None], cols[None, :]] = q
+            fixed[rows] = True
+        out = np.array(curves, dtype=np.float64)
+        if fixed.any():
+            out[fixed] = self.to_curves(local[fixed])
         return out

@@ -43,7 +43,7 @@ from usdhands.model.skeleton import Skeleton
 __all__ = [
     "SLOTS_PER_FINGER", "NUM_SLOTS", "NUM_DOFS", "slot_names", "dof_names", "HandRig",
     "hand_rig", "canonical_curves", "apply_canonical_curves", "canonical_local_rotations", "mirror_curves",
-    "MIRROR_SIGNS",
+    "MIRROR_SIGNS", "canonical_to_local", "local_to_canonical",
 ]
 
 SLOTS_PER_FINGER = 4
@@ -210,17 +210,36 @@ def canonical_curves(clip: Clip, rig: HandRig) -> np.ndarray:
     (T, NUM_DOFS) float
         Degrees; columns of slots the rig lacks are zero.
     """
-    T = clip.num_frames
+    slots = np.nonzero(rig.present)[0]
+    return local_to_canonical(clip.skeleton, rig, clip.rotations[:, rig.slot_joint[slots]])
+
+
+def local_to_canonical(skeleton: Skeleton, rig: HandRig, local: np.ndarray) -> np.ndarray:
+    """Canonical curves ``(T, NUM_DOFS)`` degrees from the local rotations ``(T, S, 4)`` xyzw of the
+    rig's present slots (in slot order: the joints ``rig.slot_joint[rig.present]``)."""
+    local = np.asarray(local, dtype=np.float64)
+    T = local.shape[0]
     out = np.zeros((T, NUM_SLOTS, 3))
     slots = np.nonzero(rig.present)[0]
     if len(slots):
-        joints = rig.slot_joint[slots]
-        rest = rig.reference_rotations(clip.skeleton, slots)
-        rel = quat_multiply(quat_conjugate(rest)[None], clip.rotations[:, joints])
+        rest = rig.reference_rotations(skeleton, slots)
+        rel = quat_multiply(quat_conjugate(rest)[None], local)
         C = rig.frame[slots]
         can = quat_multiply(quat_multiply(C[None], rel), quat_conjugate(C)[None])
         out[:, slots] = unwrap_deg(quat_to_euler_deg(can, ORDER), axis=0)
     return out.reshape(T, NUM_DOFS)
+
+
+def canonical_to_local(skeleton: Skeleton, rig: HandRig, curves: np.ndarray) -> np.ndarray:
+    """Local rotations ``(T, S, 4)`` xyzw of the rig's present slots from canonical curves
+    ``(T, NUM_DOFS)`` degrees (the inverse of :func:`local_to_canonical`)."""
+    curves = np.asarray(curves, dtype=np.float64)
+    T = curves.shape[0]
+    slots = np.nonzero(rig.present)[0]
+    can = euler_xyz_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots])
+    C = rig.frame[slots]
+    rel = quat_multiply(quat_multiply(quat_conjugate(C)[None], can), C[None])
+    return quat_multiply(rig.reference_rotations(skeleton, slots)[None], rel)
 
 
 def apply_canonical_curves(clip: Clip, rig: HandRig, curves: np.ndarray) -> Clip:
@@ -243,11 +262,7 @@ def canonical_local_rotations(clip: Clip, rig: HandRig, curves: np.ndarray) -> t
     if not len(slots):
         return [], np.zeros((T, 0, 4))
     joints = rig.slot_joint[slots]
-    can = euler_xyz_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots])
-    C = rig.frame[slots]
-    rel = quat_multiply(quat_multiply(quat_conjugate(C)[None], can), C[None])
-    local = quat_multiply(rig.reference_rotations(clip.skeleton, slots)[None], rel)
-    return [int(j) for j in joints], local
+    return [int(j) for j in joints], canonical_to_local(clip.skeleton, rig, curves)
 
 
 def euler_xyz_deg_to_quat(e: np.ndarray) -> np.ndarray:
