@@ -97,6 +97,7 @@ def scratch_head_clip(seed: int = 0) -> Clip:
                     {"Index": 3, "Ring": 3, "Pinky": 6}, (10, 0, 10, 10, 10))
     keys = [rest_key(0.0, "right", relaxed), rest_key(0.3, "right", relaxed),
             _k(1.1, at, fd, palm, scratch), _k(2.9, at + [0.0, 1.0, 0.0], fd, palm, scratch),
+            _k(3.3, at + [-9.0, -3.0, 2.0], fd, palm, relaxed),  # away from the head before dropping
             rest_key(4.0, "right", relaxed)]
 
     def scratching(times: np.ndarray) -> np.ndarray:

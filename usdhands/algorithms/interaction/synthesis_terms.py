@@ -30,11 +30,12 @@ from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_eule
 __all__ = ["InteractionTerms", "wrist_proximity", "proximity_cuts"]
 
 
-def wrist_proximity(clip: Clip, hand: HandSide, colliders) -> np.ndarray:
-    """Signed distance from the wrist to the nearest collider per frame, ``(T,)`` clip units."""
+def wrist_proximity(clip: Clip, hand: HandSide, colliders, cutoff: float = np.inf) -> np.ndarray:
+    """Signed distance from the wrist to the nearest collider per frame, ``(T,)`` clip units (a lower
+    bound, the distance to the collider's box, where that exceeds ``cutoff``)."""
     j = clip.skeleton.index(hand.wrist)
     pos = clip.world_positions()[:, j]
-    return colliders.signed_distance(np.arange(clip.num_frames), pos)
+    return colliders.signed_distance(np.arange(clip.num_frames), pos, cutoff)
 
 
 def proximity_cuts(bounds: np.ndarray, near: np.ndarray, min_frames: int) -> np.ndarray:
@@ -106,7 +107,7 @@ class InteractionTerms:
     stride: int = 3
 
     def __post_init__(self) -> None:
-        self.near = wrist_proximity(self.clip, self.hand, self.colliders) < self.reach
+        self.near = wrist_proximity(self.clip, self.hand, self.colliders, self.reach) < self.reach
         self._posers = None
 
     def cuts(self, bounds: np.ndarray) -> np.ndarray:
