@@ -124,9 +124,11 @@ def main() -> None:
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--smoothing-s", type=float, default=None, help="InteractionConfig.smoothing_s (default its own)")
     ap.add_argument("--tolerance-mm", type=float, default=None, help="InteractionConfig.tolerance_mm (default its own)")
+    ap.add_argument("--ik", choices=("opening", "ccd"), default="opening", help="InteractionConfig.ik")
     args = ap.parse_args()
     config = InteractionConfig(**({} if args.smoothing_s is None else {"smoothing_s": args.smoothing_s}),
-                               **({} if args.tolerance_mm is None else {"tolerance_mm": args.tolerance_mm}))
+                               **({} if args.tolerance_mm is None else {"tolerance_mm": args.tolerance_mm}),
+                               ik=args.ik)
     print(f"{'case':14s} {'frames':>6s} {'pen before':>10s} {'pen after':>9s} {'jitter before':>13s} "
           f"{'jitter after':>12s} {'corrected':>9s} {'unresolved':>10s} {'max chg':>7s} {'s':>6s}")
     for name in args.cases.split(","):

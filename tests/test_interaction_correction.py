@@ -16,6 +16,7 @@ from usdhands.algorithms.interaction.finger_geometry import InteractionConfig
 from usdhands.algorithms.interaction.smoothing import bounded_smooth, rts_smooth, smoothness_weight
 from usdhands.model.finger_dofs import finger_curves
 from usdhands.model.prop import PropMesh
+from usdhands.model.rotations import quat_angle_deg
 from usdhands.samples.humanoid import humanoid_handmap
 
 
@@ -208,3 +209,51 @@ def test_rts_smoother_matches_a_per_curve_kalman_loop():
             G = Ps[t] @ F.T @ np.linalg.inv(Pp[t + 1])
             out.insert(0, xs[t] + G @ (out[0] - xp[t + 1]))
         np.testing.assert_allclose(fast[:, c], np.array(out)[:, 0], atol=1e-8)
+
+
+def test_ccd_turns_the_distal_joint_first_by_the_least_flexion_that_clears():
+    """The curled index's tip 4 mm into the cup wall: CCD turns only the distal joint, only about its
+    flexion axis, toward extension, within its limits, and no further than clears it (within 2 mm)."""
+    clip = curled_index_clip()
+    hm = humanoid_handmap(clip.skeleton)
+    index = next(p for p in chain_posers(clip, hm, InteractionConfig()) if p.chain.name == "left index")
+    angles = finger_curves(clip, index.chain.joints).values.reshape(clip.num_frames, 3, 3)
+    _, b = index.capsules(np.array([0]), angles[:1])
+    cup = cup_against_tip(b[0, -1], 0.4, index.chain.radii[-1])
+    cols = colliders_for(clip, cup)
+    frames = np.arange(clip.num_frames)
+    mm = 0.1  # cm
+    pose, done = index.ccd(cols, frames, angles, 0.0, 0.5 * mm)
+    assert done.all() and index.clear(cols, frames, pose, 0.0, 0.5 * mm).all()
+    moved = pose != angles
+    flex = index.chain.axes[2, 0]
+    assert moved[:, :2].sum() == 0 and moved[:, 2].sum() == moved[:, 2, flex].sum() == clip.num_frames
+    extension = index.chain.flexion_sign[2] * (pose[:, 2, flex] - angles[:, 2, flex])
+    assert np.all(extension < 0)  # toward extension
+    assert np.all(pose >= index.chain.limits[..., 0]) and np.all(pose <= index.chain.limits[..., 1])
+    rotations = np.array(clip.rotations)
+    rotations[:, list(index.chain.joints)] = index.local_rotations(pose)
+    out = clip.replace(rotations=rotations)
+    i = [p.chain.name for p in chain_posers(clip, hm, InteractionConfig())].index("left index")
+    gaps = exact_capsule_gaps_mm(out, [cup], chain_posers(out, hm, InteractionConfig()))[i]
+    assert np.all(gaps >= -0.5) and np.all(gaps <= 2.0)
+
+
+def test_ccd_correction_keeps_the_guarantee_and_changes_less_than_opening(closing):
+    """``ik: ccd`` (least change) within the limits and the 0.5 mm guarantee, smoother than the noisy
+    input, changing the fingers less on average than the default opening path."""
+    clip, prop, hm, cols, out, report, gaps_before, gaps_after = closing
+    cfg = InteractionConfig(ik="ccd")
+    fixed, ccd_report = correct_clip(clip, hm, cols, config=cfg)
+    posers = chain_posers(fixed, hm, cfg)
+    gaps = exact_capsule_gaps_mm(fixed, [prop], posers)
+    assert _depth(gaps).max() <= 0.5 and not ccd_report.unresolved
+    for poser in posers:
+        e = finger_curves(fixed, list(poser.chain.joints)).values.reshape(fixed.num_frames, -1, 3)
+        e = (e + 180.0) % 360.0 - 180.0
+        assert np.all(e >= poser.chain.limits[..., 0] - 1e-6) and np.all(e <= poser.chain.limits[..., 1] + 1e-6)
+    touched = [j for p in posers if p.chain.name in ccd_report.chains_corrected for j in p.chain.joints]
+    change = quat_angle_deg(clip.rotations[:, touched], fixed.rotations[:, touched]).mean()
+    opening_change = quat_angle_deg(clip.rotations[:, touched], out.rotations[:, touched]).mean()
+    assert change < opening_change
+    assert ccd_report.jitter_after < ccd_report.jitter_before

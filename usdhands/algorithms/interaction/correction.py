@@ -186,7 +186,8 @@ FIT_IN_CONTACT = 10.0
 
 
 def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.ndarray, bound: np.ndarray,
-                    weight: float, margin: float, resolution: float, rounds: int = 6) -> tuple[np.ndarray, np.ndarray]:
+                    weight: float, margin: float, resolution: float, via: np.ndarray | None = None,
+                    rounds: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """The smoothed opening ``u`` ``(K,)`` above ``bound`` and its poses ``(K, n, 3)``, every frame clear.
 
     Opening further than the bound can touch something else (clearance along the path need
@@ -200,13 +201,15 @@ def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.n
     for r in range(rounds if weight > 0 else 0):
         u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0))
         changed = np.nonzero(u > bound)[0]
-        ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed]), margin, resolution)
+        v = None if via is None else via[changed]
+        ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed], v), margin, resolution)
         bad = changed[~ok]
         if len(bad) == 0 or r == rounds - 1:
             break
-        upper[bad] = poser.clear_below(colliders, frames[bad], base[bad], bound[bad], u[bad], margin, resolution)
+        upper[bad] = poser.clear_below(colliders, frames[bad], base[bad], bound[bad], u[bad], margin, resolution,
+                                       via=None if via is None else via[bad])
     u[bad] = bound[bad]  # every other frame passed the last test
-    new = poser.angles(base, u)
+    new = poser.angles(base, u, via)
     return u, new
 
 
@@ -256,20 +259,32 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
             continue
         corrected.append(poser.chain.name)
         n = len(poser.chain.joints)
+        lo, hi = poser.chain.limits[..., 0], poser.chain.limits[..., 1]
+        smoothing = smooth and cfg.smoothing_s > 0 and T >= 3
         if smooth:
             # the whole curve: the input's own noise is smoothed too, within the joint limits
             frames = np.arange(T)
             base = angles
-            if cfg.smoothing_s > 0 and T >= 3:
+            if smoothing:
                 base = rts_smooth(angles.reshape(T, -1), clip.fps, cfg.smoothing_s).reshape(T, n, 3)
-            base = np.clip(base, poser.chain.limits[..., 0], poser.chain.limits[..., 1])
+            base = np.clip(base, lo, hi)
         else:
             frames = near[~ok]
             base = angles[frames]
-        bound, resolved = poser.least_opening(colliders, frames, base, margin, resolution, iterations)
+        via = None
+        if cfg.ik == "ccd":
+            # cyclic coordinate descent where the pose penetrates, smoothed over twice the time scale
+            # (its choice of joint can change from one frame to the next); the path goes through it
+            touching = np.nonzero(~poser.clear(colliders, frames, base, margin, resolution))[0]
+            via = np.clip(base, lo, hi)
+            via[touching], _ = poser.ccd(colliders, frames[touching], via[touching], margin, resolution)
+            if smoothing:
+                via = rts_smooth(via.reshape(T, -1), clip.fps, 2 * cfg.smoothing_s).reshape(T, n, 3)
+                via = np.clip(via, lo, hi)
+        bound, resolved = poser.least_opening(colliders, frames, base, margin, resolution, iterations, via=via)
         for f in frames[~resolved]:
             unresolved.append((poser.chain.name, int(f)))
-        u, new = _smooth_opening(poser, colliders, frames, base, bound, weight, margin, resolution)
+        u, new = _smooth_opening(poser, colliders, frames, base, bound, weight, margin, resolution, via=via)
         opened[frames[bound > 0]] = True
         q = poser.local_rotations(new)
         rotations[np.ix_(frames, list(poser.chain.joints))] = q

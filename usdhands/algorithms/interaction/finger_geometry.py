@@ -66,7 +66,13 @@ class InteractionConfig:
     tolerance_mm : float
         Half the deepest penetration the clearance test lets through (the search's resolution).
     smoothing_s : float
-        Time scale of the smoother on the correction, seconds.
+        Time scale of the smoothers on a corrected finger, seconds.
+    ik : str
+        ``"opening"``: each chain opens along one path toward its rest pose, distal joints
+        first in overlapping ramps, and the least clear opening is the bound (continuous in
+        time, so the smoothest result). ``"ccd"``: cyclic coordinate descent first turns each
+        joint, tip to root, about its flexion axis by the least angle that clears its segment
+        and the ones after it (the least change), and the path goes through that pose.
     """
 
     radii_mm: dict = field(default_factory=lambda: {k: tuple(v) for k, v in DEFAULT_RADII_MM.items()})
@@ -74,6 +80,7 @@ class InteractionConfig:
     tip_fraction: float = 0.8
     tolerance_mm: float = 0.5
     smoothing_s: float = 0.15
+    ik: str = "opening"
 
     @classmethod
     def from_dict(cls, d: dict) -> "InteractionConfig":
@@ -84,7 +91,7 @@ class InteractionConfig:
         limits = json.loads(json.dumps(base.limits_deg))
         for finger, roles in d.get("limits_deg", {}).items():
             limits[finger].update(roles)
-        rest = {k: d[k] for k in ("tip_fraction", "tolerance_mm", "smoothing_s") if k in d}
+        rest = {k: d[k] for k in ("tip_fraction", "tolerance_mm", "smoothing_s", "ik") if k in d}
         return cls(radii_mm=radii, limits_deg=limits, **rest)
 
 

@@ -62,20 +62,94 @@ class ChainPoser:
     order: str = DEFAULT_EULER_ORDER
     given_points: np.ndarray | None = None
 
-    def angles(self, base: np.ndarray, u: np.ndarray) -> np.ndarray:
+    def angles(self, base: np.ndarray, u: np.ndarray, via: np.ndarray | None = None) -> np.ndarray:
         """Euler angles ``(K, n, 3)`` degrees at path parameters ``u`` ``(K,)`` from ``base`` ``(K, n, 3)``.
 
+        Without ``via`` the path opens ``base`` toward the rest pose (:func:`opening_weights`).
+        With ``via`` ``(K, n, 3)`` (an IK pose within the limits, :meth:`ccd`) the first half
+        of the path goes straight from ``base`` to ``via`` and the second half opens ``via``.
         ``u == 0`` returns ``base`` itself (not clamped); otherwise the path is clamped into the limits.
         """
         base = np.asarray(base, dtype=np.float64)
+        u = np.asarray(u, dtype=np.float64)
         lo, hi = self.chain.limits[..., 0], self.chain.limits[..., 1]
         start = np.clip(base, lo, hi)
-        target = np.clip(np.zeros_like(base[:1]), lo, hi)
-        w = opening_weights(u, base.shape[1])[..., None]
-        out = np.clip(start + w * (target - start), lo, hi)
-        same = np.asarray(u) <= 0
+        if via is not None:
+            via = np.clip(np.asarray(via, dtype=np.float64), lo, hi)
+            first = np.clip(2.0 * u, 0.0, 1.0)[:, None, None]
+            near = start + first * (via - start)
+            far = self._open(via, np.clip(2.0 * u - 1.0, 0.0, 1.0))
+            out = np.where((u <= 0.5)[:, None, None], near, far)
+        else:
+            out = self._open(start, u)
+        same = u <= 0
         out[same] = base[same]
         return out
+
+    def _open(self, start: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """``start`` (within the limits) opened toward the rest pose by ``u``, distal joints first."""
+        lo, hi = self.chain.limits[..., 0], self.chain.limits[..., 1]
+        target = np.clip(np.zeros_like(start[:1]), lo, hi)
+        w = opening_weights(u, start.shape[1])[..., None]
+        return np.clip(start + w * (target - start), lo, hi)
+
+    def ccd(self, colliders, frames: np.ndarray, base: np.ndarray, margin: float, resolution: float,
+            passes: int = 2, iterations: int = 7) -> tuple[np.ndarray, np.ndarray]:
+        """Cyclic coordinate descent: each joint, tip to root, turned about its flexion axis
+        toward extension by the least angle (bisection to ``2**-iterations`` of the way to its
+        limit) that brings its segment and the ones after it clear of the colliders; a joint
+        that cannot clear them even at its limit is left for the joints before it; ``passes``
+        sweeps.
+
+        Parameters
+        ----------
+        frames : (K,) int
+        base : (K, n, 3) float
+            Poses within the limits, Euler degrees.
+
+        Returns
+        -------
+        pose : (K, n, 3) float
+            Within the limits; only flexion angles differ from ``base``.
+        clear : (K,) bool
+            Whether ``pose`` passed the clearance test.
+        """
+        frames = np.asarray(frames, dtype=np.int64)
+        pose = np.array(base, dtype=np.float64)
+        n = pose.shape[1]
+        todo = np.nonzero(~self.clear(colliders, frames, pose, margin, resolution))[0]
+        for _ in range(passes):
+            if len(todo) == 0:
+                break
+            for k in range(n - 1, -1, -1):
+                work = todo[~self.clear(colliders, frames[todo], pose[todo], margin, resolution, first=k)]
+                if len(work) == 0:
+                    continue
+                ax = int(self.chain.axes[k, 0])
+                limit = self.chain.limits[k, ax, 0 if self.chain.flexion_sign[k] > 0 else 1]
+                start = pose[work, k, ax].copy()
+
+                def turned(sel, t, work=work, start=start, k=k, ax=ax, limit=limit):
+                    p = pose[work[sel]].copy()
+                    p[:, k, ax] = start[sel] + t * (limit - start[sel])
+                    return p
+
+                sel = np.arange(len(work))
+                sel = sel[self.clear(colliders, frames[work], turned(sel, 1.0), margin, resolution, first=k)]
+                if len(sel) == 0:
+                    continue
+                lo_t, hi_t = np.zeros(len(sel)), np.ones(len(sel))
+                for _ in range(iterations):
+                    mid = 0.5 * (lo_t + hi_t)
+                    ok = self.clear(colliders, frames[work[sel]], turned(sel, mid), margin, resolution,
+                                    first=k)
+                    hi_t = np.where(ok, mid, hi_t)
+                    lo_t = np.where(ok, lo_t, mid)
+                pose[work[sel]] = turned(sel, hi_t)
+            todo = todo[~self.clear(colliders, frames[todo], pose[todo], margin, resolution)]
+        done = np.ones(len(frames), dtype=bool)
+        done[todo] = False
+        return pose, done
 
     def local_rotations(self, angles: np.ndarray) -> np.ndarray:
         """Local rotations ``(K, n, 4)`` xyzw from Euler angles relative to rest ``(K, n, 3)``."""
@@ -97,23 +171,24 @@ class ChainPoser:
         return pts[:, :-1], pts[:, 1:]
 
     def clear(self, colliders, frames: np.ndarray, angles: np.ndarray, margin: float,
-              resolution: float) -> np.ndarray:
-        """Whether every capsule of the chain clears the colliders by ``margin`` (up to
-        ``resolution / 2``), ``(K,)`` bool."""
+              resolution: float, first: int = 0) -> np.ndarray:
+        """Whether every capsule of the chain (from segment ``first`` on) clears the colliders by
+        ``margin`` (up to ``resolution / 2``), ``(K,)`` bool."""
         frames = np.asarray(frames, dtype=np.int64)
         K = len(frames)
         if K == 0:
             return np.zeros(0, dtype=bool)
         a, b = self.capsules(frames, angles)
+        a, b = a[:, first:], b[:, first:]
         n = a.shape[1]
-        need = np.tile(self.chain.radii + margin, K)
+        need = np.tile(self.chain.radii[first:] + margin, K)
         f = np.repeat(frames, n)
         lower, upper = axis_clearance(colliders, f, a.reshape(-1, 3), b.reshape(-1, 3), need, resolution)
         ok = (lower >= need - 0.5 * resolution) & (upper >= need)
         return ok.reshape(K, n).all(axis=1)
 
     def least_opening(self, colliders, frames: np.ndarray, base: np.ndarray, margin: float, resolution: float,
-                      iterations: int = 9) -> tuple[np.ndarray, np.ndarray]:
+                      iterations: int = 9, via: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The least path parameter clear of the colliders at each frame, by bisection.
 
         Parameters
@@ -121,6 +196,8 @@ class ChainPoser:
         frames : (K,) int
         base : (K, n, 3) float
             The poses to open, Euler degrees.
+        via : (K, n, 3) float, optional
+            IK poses the path passes through (:meth:`angles`).
 
         Returns
         -------
@@ -139,29 +216,32 @@ class ChainPoser:
             return u, resolved
         idx = np.nonzero(bad)[0]
         ones = np.ones(len(idx))
-        open_ok = self.clear(colliders, frames[idx], self.angles(base[idx], ones), margin, resolution)
+        v = None if via is None else via[idx]
+        open_ok = self.clear(colliders, frames[idx], self.angles(base[idx], ones, v), margin, resolution)
         u[idx] = 1.0
         resolved[idx[~open_ok]] = False
         idx = idx[open_ok]
+        v = None if via is None else via[idx]
         lo = np.zeros(len(idx))
         hi = np.ones(len(idx))
         for _ in range(iterations):
             mid = 0.5 * (lo + hi)
-            ok = self.clear(colliders, frames[idx], self.angles(base[idx], mid), margin, resolution)
+            ok = self.clear(colliders, frames[idx], self.angles(base[idx], mid, v), margin, resolution)
             hi = np.where(ok, mid, hi)
             lo = np.where(ok, lo, mid)
         u[idx] = hi
         return u, resolved
 
     def clear_below(self, colliders, frames: np.ndarray, base: np.ndarray, clear_u: np.ndarray,
-                    blocked_u: np.ndarray, margin: float, resolution: float, iterations: int = 6) -> np.ndarray:
+                    blocked_u: np.ndarray, margin: float, resolution: float, iterations: int = 6,
+                    via: np.ndarray | None = None) -> np.ndarray:
         """A clear path parameter between ``clear_u`` (clear) and ``blocked_u`` (not), as near ``blocked_u``
         as ``iterations`` bisection steps find, ``(K,)`` (clear by the test; ``clear_u`` at worst)."""
         lo = np.array(clear_u, dtype=np.float64)
         hi = np.array(blocked_u, dtype=np.float64)
         for _ in range(iterations):
             mid = 0.5 * (lo + hi)
-            ok = self.clear(colliders, frames, self.angles(base, mid), margin, resolution)
+            ok = self.clear(colliders, frames, self.angles(base, mid, via), margin, resolution)
             lo = np.where(ok, mid, lo)
             hi = np.where(ok, hi, mid)
         return lo
