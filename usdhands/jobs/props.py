@@ -154,6 +154,7 @@ def synthesis_interaction(options, clip, handmap, db, cfg, props, config, path=N
     at_db = clip if same_rate(clip.fps, db.fps) else clip.resample(db.fps)
     db_colliders = colliders if at_db is clip else build_colliders(options, at_db, handmap, props, path=path)[0]
     rest = clip.skeleton.rest_world_positions()
+    world = at_db.world_xforms()  # posed once for both hands
 
     def fingers(segment: int):
         a, b = int(db.segments[segment, 0]), int(db.segments[segment, 1])
@@ -167,6 +168,6 @@ def synthesis_interaction(options, clip, handmap, db, cfg, props, config, path=N
                                 lambda q: local_to_canonical(at_db.skeleton, rig, q), fingers, db_colliders,
                                 weight=options.collision_weight, reach=reach,
                                 min_frames=max(int(round(cfg.segmentation.min_segment_s * db.fps)), 1),
-                                margin_mm=options.margin, config=config)
+                                margin_mm=options.margin, config=config, world=world)
 
     return factory, colliders

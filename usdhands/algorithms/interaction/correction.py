@@ -89,9 +89,11 @@ class CorrectionReport:
         }
 
 
-def chain_posers(clip: Clip, handmap: HandMap, config: InteractionConfig) -> list[ChainPoser]:
-    """A :class:`ChainPoser` for every finger chain of every hand of ``clip``."""
-    world = clip.world_xforms()
+def chain_posers(clip: Clip, handmap: HandMap, config: InteractionConfig,
+                 world: np.ndarray | None = None) -> list[ChainPoser]:
+    """A :class:`ChainPoser` for every finger chain of every hand of ``clip`` (``world``: the clip's
+    world transforms ``(T, J, 4, 4)`` when the caller has them)."""
+    world = clip.world_xforms() if world is None else world
     out = []
     for hand in handmap.sides:
         for chain in finger_chains(clip.skeleton, hand, config):
@@ -180,9 +182,12 @@ def finger_jitter(clip: Clip, joints: list[int]) -> float:
     return float(np.abs(np.diff(v, 2, axis=0)).mean() * clip.fps ** 2)
 
 
-#: How much more the opening is held to its bound where the input penetrates than where it is clear
+#: How much more the opening is held to its target where the input penetrates than where it is clear
 #: (the fingers that penetrated end touching; the smoothing's anticipation goes before the contact).
 FIT_IN_CONTACT = 10.0
+#: The target is the bound smoothed over a third of the time scale (above the bound, without the
+#: bisection's frame-to-frame noise), so holding the opening to it does not bring that noise back.
+PRE_SMOOTH = 3.0
 
 
 def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.ndarray, bound: np.ndarray,
@@ -199,7 +204,8 @@ def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.n
     u = np.array(bound)
     bad = np.zeros(0, dtype=np.int64)
     for r in range(rounds if weight > 0 else 0):
-        u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0))
+        floor = bounded_smooth(bound, upper, weight / PRE_SMOOTH ** 4)
+        u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0), target=floor)
         changed = np.nonzero(u > bound)[0]
         v = None if via is None else via[changed]
         ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed], v), margin, resolution)

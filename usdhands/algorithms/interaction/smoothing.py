@@ -111,10 +111,10 @@ def _banded_solve(H: sparse.csr_matrix, rhs: np.ndarray) -> np.ndarray:
 
 
 def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iterations: int = 100,
-                   fit: np.ndarray | None = None) -> np.ndarray:
+                   fit: np.ndarray | None = None, target: np.ndarray | None = None) -> np.ndarray:
     """The smooth curve closest to ``lower`` that stays between ``lower`` and ``upper``.
 
-    Minimises ``sum(fit * (x - lower)**2) + weight * sum((x[t-1] - 2 x[t] + x[t+1])**2)``
+    Minimises ``sum(fit * (x - target)**2) + weight * sum((x[t-1] - 2 x[t] + x[t+1])**2)``
     subject to ``lower <= x <= upper``, by block principal pivoting on the two active
     sets: each step one banded Cholesky solve on the free frames (a principal submatrix
     of a pentadiagonal matrix is pentadiagonal again), the frames held at a bound
@@ -127,7 +127,9 @@ def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iter
     weight : float
         Second-difference penalty (:func:`smoothness_weight`); 0 returns ``lower``.
     fit : (T,) float, optional
-        Weight of each frame's distance to ``lower`` (default 1 everywhere).
+        Weight of each frame's distance to the target (default 1 everywhere).
+    target : (T,) float, optional
+        The curve to stay near (default ``lower``).
 
     Returns
     -------
@@ -143,6 +145,8 @@ def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iter
     a = np.ones(T) if fit is None else np.asarray(fit, dtype=np.float64)
     H = (sparse.diags(a, format="csr") + weight * G).tocsr()
     c = weight * (G @ lower)  # x = lower + y, minimise y.H.y/2 + c.y with 0 <= y <= room
+    if target is not None:
+        c = c + a * (lower - np.asarray(target, dtype=np.float64))
     room = upper - lower
     at_lo = np.zeros(T, dtype=bool)
     at_hi = np.zeros(T, dtype=bool)

@@ -30,11 +30,13 @@ from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_eule
 __all__ = ["InteractionTerms", "wrist_proximity", "proximity_cuts"]
 
 
-def wrist_proximity(clip: Clip, hand: HandSide, colliders, cutoff: float = np.inf) -> np.ndarray:
+def wrist_proximity(clip: Clip, hand: HandSide, colliders, cutoff: float = np.inf,
+                    world: np.ndarray | None = None) -> np.ndarray:
     """Signed distance from the wrist to the nearest collider per frame, ``(T,)`` clip units (a lower
-    bound, the distance to the collider's box, where that exceeds ``cutoff``)."""
+    bound, the distance to the collider's box, where that exceeds ``cutoff``; ``world``: the clip's
+    world transforms when the caller has them)."""
     j = clip.skeleton.index(hand.wrist)
-    pos = clip.world_positions()[:, j]
+    pos = (clip.world_xforms() if world is None else world)[:, j, :3, 3]
     return colliders.signed_distance(np.arange(clip.num_frames), pos, cutoff)
 
 
@@ -80,6 +82,8 @@ class InteractionTerms:
     stride : int
         The term is a mean over the segment's frames: every ``stride``-th frame is corrected
         (from the first; at least one per segment).
+    world : (T, J, 4, 4) float, optional
+        ``clip.world_xforms()``, when the caller has it (both hands share it).
 
     Notes
     -----
@@ -105,9 +109,10 @@ class InteractionTerms:
     margin_mm: float = 0.0
     config: InteractionConfig | None = None
     stride: int = 3
+    world: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        self.near = wrist_proximity(self.clip, self.hand, self.colliders, self.reach) < self.reach
+        self.near = wrist_proximity(self.clip, self.hand, self.colliders, self.reach, self.world) < self.reach
         self._posers = None
 
     def cuts(self, bounds: np.ndarray) -> np.ndarray:
@@ -120,7 +125,7 @@ class InteractionTerms:
             cfg = replace(self.config or InteractionConfig(), tolerance_mm=2.0)
             slot_joints = list(np.asarray(self.rig.slot_joint)[np.asarray(self.rig.present)])
             self._posers = []
-            for poser in chain_posers(self.clip, HandMap(**{self.hand.side: self.hand}), cfg):
+            for poser in chain_posers(self.clip, HandMap(**{self.hand.side: self.hand}), cfg, self.world):
                 if not all(j in slot_joints for j in poser.chain.joints):
                     continue
                 cols = np.array([slot_joints.index(j) for j in poser.chain.joints])
