@@ -257,3 +257,24 @@ def test_ccd_correction_keeps_the_guarantee_and_changes_less_than_opening(closin
     opening_change = quat_angle_deg(clip.rotations[:, touched], out.rotations[:, touched]).mean()
     assert change < opening_change
     assert ccd_report.jitter_after < ccd_report.jitter_before
+
+
+def test_bounded_smoother_between_two_bounds_matches_a_general_solver():
+    """The active-set solve on both bounds, with per-frame fit weights and a target, against
+    scipy's bounded least squares on the same problem (small enough for the general solver)."""
+    from scipy.optimize import lsq_linear
+
+    rng = np.random.default_rng(3)
+    T = 80
+    lower = np.clip(np.convolve(rng.normal(size=T), np.ones(5) / 5, mode="same"), 0.0, None)
+    upper = lower + np.where(rng.random(T) < 0.2, 0.01, 1.0)  # some frames barely above their floor
+    target = lower + 0.3 * rng.random(T)
+    fit = np.where(lower > 0, 10.0, 1.0)
+    weight = smoothness_weight(30.0, 0.15)
+    x = bounded_smooth(lower, upper, weight, fit=fit, target=target)
+    assert np.all(x >= lower) and np.all(x <= upper)
+    D = np.diff(np.eye(T), 2, axis=0)
+    A = np.vstack([np.sqrt(fit)[:, None] * np.eye(T), np.sqrt(weight) * D])
+    b = np.concatenate([np.sqrt(fit) * target, np.zeros(T - 2)])
+    ref = lsq_linear(A, b, bounds=(lower, upper), tol=1e-12, max_iter=10000).x
+    np.testing.assert_allclose(x, ref, atol=1e-6)

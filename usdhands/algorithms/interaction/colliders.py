@@ -135,17 +135,6 @@ class Colliders:
             out = np.minimum(out, c.signed_distance(frames, points, cutoff))
         return out
 
-    def take(self, frames: np.ndarray) -> "Colliders":
-        """The same colliders at the given frames only (frame ``i`` of the result is ``frames[i]``)."""
-        frames = np.asarray(frames, dtype=np.int64)
-        items = []
-        for c in self.items:
-            if isinstance(c, MeshCollider):
-                items.append(MeshCollider(c.name, c.proximity, c.world[frames]))
-            else:
-                items.append(CapsuleCollider(c.name, c.a[frames], c.b[frames], c.radii))
-        return Colliders(items)
-
     def bbox_gap(self, frames: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Distance ``(N,)`` from boxes ``lo``-``hi`` ``(N, 3)`` at ``frames`` ``(N,)`` to the nearest collider's box."""
         out = np.full(len(lo), np.inf)

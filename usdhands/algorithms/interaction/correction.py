@@ -7,16 +7,19 @@ For each finger chain of each hand:
 2. Detection: the clearance search along each capsule axis
    (:func:`~usdhands.algorithms.interaction.clearance.axis_clearance`) finds the frames
    where the chain penetrates. A chain that never does is left bit-for-bit unchanged.
-3. Around those frames (a window of a few smoothing time scales, ramped at its ends) the
-   chain's curves are smoothed by the RTS Kalman smoother (the paper's smoothing step,
-   against capture noise and the correction's own jitter).
-4. IK: per frame, the least opening of the chain along its path that clears every
-   collider (:meth:`~usdhands.algorithms.interaction.ik.ChainPoser.least_opening`),
-   by bisection with the clearance test: the bound.
+3. The chain's whole curve (every frame, not only around the contacts) is smoothed by
+   the RTS Kalman smoother (the paper's smoothing step, against capture noise and the
+   correction's own jitter) and clamped into the joint limits.
+4. IK: per frame, the least opening of that smoothed pose along the chain's path that
+   clears every collider (:meth:`~usdhands.algorithms.interaction.ik.ChainPoser.least_opening`),
+   by bisection with the clearance test: the bound. With ``ik: ccd`` the path first goes to
+   the pose cyclic coordinate descent finds (:meth:`~usdhands.algorithms.interaction.ik.ChainPoser.ccd`).
 5. The opening is smoothed with the bound as a constraint
    (:func:`~usdhands.algorithms.interaction.smoothing.bounded_smooth`), so it never
-   falls below what clears; every frame is tested again and any frame that fails
-   (where opening further touches something else) takes its bound, which was tested.
+   falls below what clears; every frame opened past its bound is tested again, one that
+   fails (where opening further touches something else) gets an upper bound (the clear
+   opening below) and the opening is smoothed again; one still failing takes its bound,
+   which was tested.
 
 So every changed frame passed the clearance test, whose resolution bounds what can slip
 through: nothing penetrates deeper than half of ``tolerance_mm`` minus the margin.
