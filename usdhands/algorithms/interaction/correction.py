@@ -191,23 +191,39 @@ FIT_IN_CONTACT = 10.0
 #: The target is the bound smoothed over a third of the time scale (above the bound, without the
 #: bisection's frame-to-frame noise), so holding the opening to it does not bring that noise back.
 PRE_SMOOTH = 3.0
+#: Before that, the bound is held at its largest over a quarter of the time scale either side: where
+#: the path's clearance is not monotone the least opening can drop to 0 for a frame or two between
+#: frames that need the finger open (a curled finger clear of a rim), and the smoothed opening would
+#: curl into that gap and out again.
+HOLD_OF_TIME_SCALE = 0.25
+
+
+def _running_max(x: np.ndarray, h: int) -> np.ndarray:
+    """The largest of ``x`` within ``h`` samples either side, ``(T,)``."""
+    if h <= 0 or len(x) == 0:
+        return np.array(x)
+    pad = np.concatenate([np.full(h, -np.inf), x, np.full(h, -np.inf)])
+    windows = np.lib.stride_tricks.sliding_window_view(pad, 2 * h + 1)
+    return windows.max(axis=1)
 
 
 def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.ndarray, bound: np.ndarray,
                     weight: float, margin: float, resolution: float, via: np.ndarray | None = None,
-                    rounds: int = 6) -> tuple[np.ndarray, np.ndarray]:
+                    hold: int = 0, rounds: int = 6) -> tuple[np.ndarray, np.ndarray]:
     """The smoothed opening ``u`` ``(K,)`` above ``bound`` and its poses ``(K, n, 3)``, every frame clear.
 
     Opening further than the bound can touch something else (clearance along the path need
     not be monotone): each frame whose smoothed pose fails the test gets an upper bound, the
     clear opening nearest below it, and the curve is smoothed again between the bounds; a
-    frame still failing after ``rounds`` takes its bound, which was tested.
+    frame still failing after ``rounds`` takes its bound, which was tested. The opening is held
+    near a target: the bound's running maximum over ``hold`` frames either side, smoothed
+    (:data:`HOLD_OF_TIME_SCALE`, :data:`PRE_SMOOTH`, :data:`FIT_IN_CONTACT`).
     """
     upper = np.ones(len(frames))
     u = np.array(bound)
     bad = np.zeros(0, dtype=np.int64)
     for r in range(rounds if weight > 0 else 0):
-        floor = bounded_smooth(bound, upper, weight / PRE_SMOOTH ** 4)
+        floor = bounded_smooth(_running_max(bound, hold), upper, weight / PRE_SMOOTH ** 4)
         u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0), target=floor)
         changed = np.nonzero(u > bound)[0]
         v = None if via is None else via[changed]
@@ -293,7 +309,8 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         bound, resolved = poser.least_opening(colliders, frames, base, margin, resolution, iterations, via=via)
         for f in frames[~resolved]:
             unresolved.append((poser.chain.name, int(f)))
-        u, new = _smooth_opening(poser, colliders, frames, base, bound, weight, margin, resolution, via=via)
+        u, new = _smooth_opening(poser, colliders, frames, base, bound, weight, margin, resolution, via=via,
+                                 hold=int(round(HOLD_OF_TIME_SCALE * cfg.smoothing_s * clip.fps)))
         opened[frames[bound > 0]] = True
         q = poser.local_rotations(new)
         rotations[np.ix_(frames, list(poser.chain.joints))] = q
