@@ -258,6 +258,7 @@ def test_remote_scheduler_runs_the_batch_and_a_killer_clip_fails_alone(clips, tm
     from distributed import Client
 
     with Client(dask_cluster, timeout="60s") as client:
+        client.wait_for_workers(2, timeout=180)  # the nanny restarts the killer's worker: it may still be joining
         flags = client.run(lambda: __import__("usdhands.jobs.batch").jobs.batch._own_worker_process)
     assert sorted(flags.values()) == [True, True]
     # and through the command line, with --scheduler ADDRESS
