@@ -18,7 +18,7 @@ separate environment, giving it files converted by usdhands::
 
 ``--fps`` is the animation's frame rate (default 24, RobotExpressive's and CesiumMan's).
 
-Without bpy it says so and exits 0. Figures: see the lead's notes for issue 12.
+Without bpy it says so and exits 0. Figures: docs/format-usd.md, "In Blender".
 """
 
 from __future__ import annotations
@@ -34,6 +34,12 @@ except ImportError:  # not in the project's environment: see the module docs
     sys.exit(0)
 
 FRAMES = (1, 10, 20)
+#: glTF-IO's bone orientation. Its default, ``BLENDER``, turns each bone toward its child and
+#: misplaces meshes parented to a bone when the skin is bound in another pose than the nodes'
+#: rest (RobotExpressive's head, torso and limbs 52-65 cm from where the glTF's own node
+#: transforms put them, at every frame); ``TEMPERANCE`` keeps them there, and the bones'
+#: heads (what is compared) are the joints' positions under every heuristic (0.0004 cm).
+BONE_HEURISTIC = "TEMPERANCE"
 
 
 def load(path: Path, fps: int) -> None:
@@ -47,7 +53,7 @@ def load(path: Path, fps: int) -> None:
     bpy.context.scene.render.fps = fps
     bpy.context.scene.render.fps_base = 1.0
     if path.suffix.lower() in (".glb", ".gltf"):
-        bpy.ops.import_scene.gltf(filepath=str(path))
+        bpy.ops.import_scene.gltf(filepath=str(path), bone_heuristic=BONE_HEURISTIC)
     else:
         bpy.ops.wm.usd_import(filepath=str(path))
 
@@ -63,8 +69,8 @@ def bone_positions() -> dict[str, Vector]:
 
 
 def _key(name: str) -> str:
-    """Names as USD prims hold them (``Hand.R_0`` and ``Hand_R_0`` match)."""
-    return name.replace(":", "_").replace(".", "_")
+    """Names as USD prims hold them (``Hand.R_0`` and ``Hand_R_0``, ``thumb-tip`` and ``thumb_tip`` match)."""
+    return "".join(c if c.isalnum() else "_" for c in name)
 
 
 def _file_meshes() -> list:

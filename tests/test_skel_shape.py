@@ -10,6 +10,7 @@ from pxr import Gf, Usd, UsdGeom, UsdSkel
 from scipy.spatial.transform import Rotation
 
 from tests.cli_helpers import run
+from usdhands.jobs.conversion import convert
 from usdhands.formats.io import read_asset
 from usdhands.formats.usd_common import matrices_to_numpy
 from usdhands.formats.usd_validate import usd_compliance_errors
@@ -192,3 +193,108 @@ def test_mixamo_like_gltf_converts_to_conventional_usdskel_shape(tmp_path, capsy
     got = clip.world_positions()[:, cols]
     assert got.shape[0] == KEYS
     assert np.abs(got - world_joints).max() * 100 < 1e-4
+
+
+def _gltf_scene_points(g: pygltflib.GLTF2, animation: str, t: float) -> dict[str, np.ndarray]:
+    """Every mesh node's world points at time ``t`` (s) of ``animation``, straight from the glTF:
+    node TRS with the animation's LINEAR/STEP samplers applied, world = product of locals down the
+    node tree, skinned nodes by linear blend skinning with the skin's inverse bind matrices and
+    the weights normalized (as three.js and Blender do).
+    Returns node name -> (V, 3), the primitives stacked."""
+    blob = g.binary_blob()
+
+    def acc(i):
+        a = g.accessors[i]
+        bv = g.bufferViews[a.bufferView]
+        n = {"SCALAR": 1, "VEC3": 3, "VEC4": 4, "MAT4": 16}[a.type]
+        dt = {pygltflib.FLOAT: np.float32, pygltflib.UNSIGNED_SHORT: np.uint16,
+              pygltflib.UNSIGNED_BYTE: np.uint8}[a.componentType]
+        raw = np.frombuffer(blob, dt, a.count * n, (bv.byteOffset or 0) + (a.byteOffset or 0))
+        return raw.reshape(a.count, n).astype(np.float64)
+
+    trs = {i: [np.array(n.translation or [0.0] * 3), np.array(n.rotation or [0.0, 0, 0, 1]),
+               np.array(n.scale or [1.0] * 3)] for i, n in enumerate(g.nodes)}
+    anim = next(a for a in g.animations if a.name == animation)
+    for ch in anim.channels:
+        if ch.target.path == "weights":        # morph weights: the bounding boxes hold without them
+            continue
+        s = anim.samplers[ch.sampler]
+        times, values = acc(s.input)[:, 0], acc(s.output)
+        k = int(np.clip(np.searchsorted(times, t), 1, len(times) - 1))
+        u = 0.0 if s.interpolation == "STEP" else float(np.clip((t - times[k - 1]) / (times[k] - times[k - 1]), 0, 1))
+        slot = ["translation", "rotation", "scale"].index(ch.target.path)
+        if slot == 1:
+            v = Rotation.from_quat(values[k - 1:k + 1])
+            trs[ch.target.node][1] = (v[0] * Rotation.from_rotvec(u * (v[0].inv() * v[1]).as_rotvec())).as_quat()
+        else:
+            trs[ch.target.node][slot] = (1 - u) * values[k - 1] + u * values[k]
+    parent = {c: i for i, n in enumerate(g.nodes) for c in (n.children or [])}
+    world: dict[int, np.ndarray] = {}
+
+    def world_of(i):
+        if i not in world:
+            local = trs_to_xform(*trs[i])
+            world[i] = world_of(parent[i]) @ local if i in parent else local
+        return world[i]
+
+    out = {}
+    for i, n in enumerate(g.nodes):
+        if n.mesh is None:
+            continue
+        pts = []
+        for prim in g.meshes[n.mesh].primitives:
+            p = np.c_[acc(prim.attributes.POSITION), np.ones(g.accessors[prim.attributes.POSITION].count)]
+            if n.skin is None:
+                pts.append((p @ world_of(i).T)[:, :3])
+                continue
+            skin = g.skins[n.skin]
+            ibm = np.swapaxes(acc(skin.inverseBindMatrices).reshape(-1, 4, 4), 1, 2)
+            m = np.array([world_of(j) for j in skin.joints]) @ ibm
+            ji, jw = acc(prim.attributes.JOINTS_0).astype(int), acc(prim.attributes.WEIGHTS_0)
+            jw /= jw.sum(axis=1, keepdims=True)    # RobotExpressive's hands' weights sum to up to 1.75
+            pts.append(sum(jw[:, c, None] * np.einsum("vij,vj->vi", m[ji[:, c]], p) for c in range(4))[:, :3])
+        out[n.name] = np.concatenate(pts)
+    return out
+
+
+def test_robot_expressive_binds_at_unit_scale_and_every_mesh_where_the_gltf_puts_it(shared_assets, tmp_path):
+    """RobotExpressive's skin is bound at 1/100 of the scale of the ``RobotArmature`` node above it
+    (the node scales by 100, the inverse bind matrices do not). Blender's USD importer builds its
+    bones from the bind transforms without their scale, so such binds put the robot 48 m off there:
+    the writer moves the uniform scale from that Xform into the root joints, every bind transform
+    has scale 1, and UsdSkel's BakeSkinning still puts each of the 19 meshes (skinned hands, rigid
+    head, torso and limbs) where the glTF node tree does (0.01 cm). The reader gives the node its
+    source scale back (customData ``usdhands:nodeScale``)."""
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    usd = tmp_path / "robot.usda"
+    convert(src, usd)
+    assert usd_compliance_errors(usd) == []
+    stage = Usd.Stage.Open(str(usd))
+    skel_prim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton))
+    skel = UsdSkel.Skeleton(skel_prim)
+    bind = matrices_to_numpy(skel.GetBindTransformsAttr().Get())
+    np.testing.assert_allclose(np.linalg.norm(bind[:, :3, :3], axis=1), 1.0, atol=2e-5)   # float32 inverse binds
+    armature = skel_prim.GetParent().GetParent()
+    assert armature.GetName() == "RobotArmature" and armature.GetCustomDataByKey("usdhands:nodeScale") == 100.0
+    assert read_asset(usd).root_nodes[0][-1][0] == "RobotArmature"
+    np.testing.assert_allclose(np.linalg.norm(read_asset(usd).root_nodes[0][-1][1][:3, :3], axis=0), 100, rtol=1e-6)
+
+    g = pygltflib.GLTF2().load(str(src))
+    anim = next(p for p in stage.Traverse() if p.IsA(UsdSkel.Animation) and p.GetName() == "Wave")
+    UsdSkel.BindingAPI(skel_prim).GetAnimationSourceRel().SetTargets([anim.GetPath()])
+    assert UsdSkel.BakeSkinning(stage.Traverse())
+    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    tcps = stage.GetTimeCodesPerSecond()
+    for code in (0.0, 17.0, 40.0):
+        truth = _gltf_scene_points(g, "Wave", code / tcps)
+        got: dict[str, list] = {}
+        for m in meshes:
+            x = matrices_to_numpy([UsdGeom.Xformable(m).ComputeLocalToWorldTransform(code)])[0]
+            p = np.asarray(UsdGeom.Mesh(m).GetPointsAttr().Get(code), dtype=np.float64)
+            got.setdefault(m.GetCustomDataByKey("usdhands:sourceNode"), []).append(p @ x[:3, :3].T + x[:3, 3])
+        assert sorted(got) == sorted(truth)
+        for name, parts in got.items():
+            p = np.concatenate(parts)
+            assert p.shape == truth[name].shape
+            assert np.abs(p.min(0) - truth[name].min(0)).max() * 100 < 0.01, (name, code)   # cm
+            assert np.abs(p.max(0) - truth[name].max(0)).max() * 100 < 0.01, (name, code)

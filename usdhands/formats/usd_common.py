@@ -21,7 +21,7 @@ from usdhands.model.rotations import quat_canonical, quat_multiply, trs_to_xform
 
 __all__ = [
     "SOURCE_JOINT_NAMES_KEY", "SOURCE_SKELETON_KEY", "SOURCE_NAME_KEY", "SOURCE_MESH_KEY", "SOURCE_NODE_KEY",
-    "DEFAULT_WEIGHT_KEY", "INTERPOLATION_KEY", "NODE_KEY", "KEY_TIMES_KEY", "quiet_diagnostics", "open_stage",
+    "DEFAULT_WEIGHT_KEY", "INTERPOLATION_KEY", "NODE_KEY", "NODE_SCALE_KEY", "KEY_TIMES_KEY", "quiet_diagnostics", "open_stage",
     "tf_error_reason", "matrices_to_numpy", "numpy_to_matrices", "valid_identifier",
     "unique_name", "joint_tokens_for", "skeleton_tokens_and_names", "bound_animation_path",
     "skeleton_world_xforms", "fold_into_roots",
@@ -44,6 +44,9 @@ DEFAULT_WEIGHT_KEY = "usdhands:defaultWeight"
 KEY_TIMES_KEY = "usdhands:keyTimes"
 #: customData of an Xform usdhands wrote for a source node above the skeleton (glTF ``RobotArmature``)
 NODE_KEY = "usdhands:node"
+#: customData of such an Xform: the uniform scale moved from it into the root joints (the source
+#: node's scale is the authored one times this), so that the bind transforms have scale 1
+NODE_SCALE_KEY = "usdhands:nodeScale"
 #: customData of a SkelAnimation: the source's sampler interpolation (``STEP``, ``CUBICSPLINE``)
 INTERPOLATION_KEY = "usdhands:interpolation"
 

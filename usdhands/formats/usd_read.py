@@ -25,6 +25,7 @@ from usdhands.formats.usd_common import (
     INTERPOLATION_KEY,
     KEY_TIMES_KEY,
     NODE_KEY,
+    NODE_SCALE_KEY,
     SOURCE_MESH_KEY,
     SOURCE_NAME_KEY,
     SOURCE_NODE_KEY,
@@ -260,8 +261,10 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
 def _node_chain_above(skel_prim: Usd.Prim, world: np.ndarray) -> tuple[tuple[str, np.ndarray], ...]:
     """The Xforms usdhands wrote for source nodes above a skeleton (customData ``usdhands:node``),
     top first, as ``(name, local (4, 4))``, when they alone make the Skeleton's ``world`` transform
-    and none moves over time; else ``()``."""
+    and none moves over time; else ``()``. A node's local transform is the source's: its scale
+    times the ``usdhands:nodeScale`` the writer moved into the root joints."""
     chain = []
+    total = np.eye(4)
     p = skel_prim.GetParent()
     if p and p.IsA(UsdSkel.Root):
         p = p.GetParent()
@@ -270,15 +273,16 @@ def _node_chain_above(skel_prim: Usd.Prim, world: np.ndarray) -> tuple[tuple[str
         if x.TransformMightBeTimeVarying():
             return ()
         local = matrices_to_numpy([x.GetLocalTransformation(Usd.TimeCode.EarliestTime())])[0]
+        total = local @ total
+        moved = p.GetCustomDataByKey(NODE_SCALE_KEY)
+        if isinstance(moved, float) and np.isfinite(moved) and moved > 0:
+            local = local @ np.diag([moved, moved, moved, 1.0])
         name = p.GetCustomDataByKey(SOURCE_NAME_KEY)
         chain.append((name if isinstance(name, str) and name else p.GetName(), local))
         p = p.GetParent()
     if not chain:
         return ()
     chain.reverse()
-    total = np.eye(4)
-    for _, m in chain:
-        total = total @ m
     scale = max(1.0, float(np.abs(world).max()))
     return tuple(chain) if np.allclose(total, world, rtol=0, atol=1e-9 * scale) else ()
 

@@ -22,6 +22,7 @@ from usdhands.formats.usd_common import (
     INTERPOLATION_KEY,
     KEY_TIMES_KEY,
     NODE_KEY,
+    NODE_SCALE_KEY,
     SOURCE_JOINT_NAMES_KEY,
     SOURCE_MESH_KEY,
     SOURCE_NAME_KEY,
@@ -234,18 +235,19 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
         used_roots: set[str] = set()
         for k, sk in enumerate(asset.skeletons):
             chain, keep = chains[k]
+            lifted, unit = sk, 1.0
+            if chain:
+                sk, to_skel, unit = _without_chain(sk, chain, keep)
             if single:
                 parent = root_path
             else:
                 above = root_path
                 for j in chain:
-                    above = _define_node_xform(stage, above, sk, j, used_roots if above == root_path else set())
+                    above = _define_node_xform(stage, above, lifted, j, used_roots if above == root_path else set(),
+                                               unit if j == chain[-1] else 1.0)
                 leaf = valid_identifier(sk.name.rsplit("/", 1)[-1]) + "Root"
                 parent = above.AppendChild(unique_name(leaf, used_roots if above == root_path else set()))
                 UsdSkel.Root.Define(stage, parent)
-            lifted = sk
-            if chain:
-                sk, to_skel = _without_chain(sk, chain, keep)
             used: set[str] = set()
             skel_path = parent.AppendChild(unique_name(valid_identifier(sk.name.rsplit("/", 1)[-1] or "Skeleton"),
                                                        used))
@@ -265,8 +267,10 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                 if o != k:
                     continue
                 if chain:
+                    roots = (np.asarray(sk.parents) < 0)[None, :, None]
                     clip = clip.replace(skeleton=sk, rotations=clip.rotations[:, keep],
-                                        translations=clip.translations[:, keep], scales=clip.scales[:, keep])
+                                        translations=np.where(roots, unit, 1.0) * clip.translations[:, keep],
+                                        scales=np.where(roots, unit, 1.0) * clip.scales[:, keep])
                 if abs(clip.skeleton.meters_per_unit - mpu) > 1e-12:
                     clip = clip.with_meters_per_unit(mpu)
                 original = asset.source_names.get(clip.name) or clip.name.rsplit("/", 1)[-1] or "Animation"
@@ -348,29 +352,60 @@ def _node_chain(sk: Skeleton, non_skin: Sequence[str], clips: Sequence[Clip],
     return chain, keep
 
 
-def _define_node_xform(stage: Usd.Stage, above: Sdf.Path, sk: Skeleton, j: int, used: set[str]) -> Sdf.Path:
-    """An ``Xform`` prim under ``above`` with joint ``j``'s rest transform (translate, orient, scale)."""
+def _define_node_xform(stage: Usd.Stage, above: Sdf.Path, sk: Skeleton, j: int, used: set[str],
+                       moved: float = 1.0) -> Sdf.Path:
+    """An ``Xform`` prim under ``above`` with joint ``j``'s rest transform (translate, orient, scale),
+    its scale divided by ``moved``, the uniform scale :func:`_without_chain` moves into the root
+    joints (recorded in customData ``usdhands:nodeScale`` when it is not 1)."""
     original = sk.joint_names[j].rsplit("/", 1)[-1]
     path = above.AppendChild(unique_name(valid_identifier(original), used))
     xf = UsdGeom.Xform.Define(stage, path)
-    t, q, s = sk.rest_translations[j], sk.rest_rotations[j], sk.rest_scales[j]
+    t, q, s = sk.rest_translations[j], sk.rest_rotations[j], sk.rest_scales[j] / moved
     xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, t)))
     xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(float(q[3]), *map(float, q[:3])))
     xf.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, s)))
     if path.name != original:
         xf.GetPrim().SetCustomDataByKey(SOURCE_NAME_KEY, original)
     xf.GetPrim().SetCustomDataByKey(NODE_KEY, True)
+    if moved != 1.0:
+        xf.GetPrim().SetCustomDataByKey(NODE_SCALE_KEY, float(moved))
     return path
 
 
-def _without_chain(sk: Skeleton, chain: list[int], keep: np.ndarray) -> tuple[Skeleton, np.ndarray]:
-    """The skeleton of the ``keep`` joints in the space below ``chain``, and the (4, 4)
-    transform from the model's world space into that space."""
+def _without_chain(sk: Skeleton, chain: list[int], keep: np.ndarray) -> tuple[Skeleton, np.ndarray, float]:
+    """The skeleton of the ``keep`` joints in the space below ``chain``, the (4, 4) transform
+    from the model's world space into that space, and the uniform scale ``unit`` moved from
+    the chain's last node into the root joints.
+
+    A skin bound at another scale than its nodes' rest (RobotExpressive: ``RobotArmature``
+    scales by 100, the inverse bind matrices do not) has bind transforms of scale 1/100 in
+    the space below the chain. UsdSkel evaluates that correctly, but Blender's USD importer
+    makes its bones from the bind transforms without their scale and then poses them by
+    ``inverse(local bind) · local`` against those unscaled bones: the robot came out 48 m
+    away. When every bind has one uniform scale ``c`` there, the root joints take
+    ``unit = 1/c`` (their rest and animated translations and scales) and the last node's
+    Xform keeps its scale divided by ``unit``, so the binds have scale 1 and every world
+    transform and skinned point is unchanged. ``unit`` is that node's own scale when it is
+    within 1e-4 of ``1/c`` (the Xform's scale is then exactly 1), 1 when ``c`` is 1 or the
+    binds' scales differ.
+    """
     to_skel = np.linalg.inv(sk.rest_world_xforms()[chain[-1]])
     sub = sk.subset(list(keep))
+    unit = 1.0
+    if sub.bind_xforms is not None:
+        lengths = np.linalg.norm((to_skel @ sub.bind_xforms)[:, :3, :3], axis=1)  # (J, 3) column lengths
+        c = float(np.median(lengths))
+        if c > 0 and abs(c - 1.0) > 1e-6 and np.allclose(lengths, c, rtol=1e-4):
+            unit = 1.0 / c
+            node_scale = sk.rest_scales[chain[-1]]
+            if np.allclose(node_scale, node_scale[0], rtol=1e-9) and abs(node_scale[0] * c - 1.0) < 1e-4:
+                unit = float(node_scale[0])
+    to_skel = np.diag([unit, unit, unit, 1.0]) @ to_skel
+    roots = (np.asarray(sub.parents) < 0)[:, None]
     bind = None if sub.bind_xforms is None else to_skel @ sub.bind_xforms
-    return Skeleton(sub.joint_names, sub.parents, sub.rest_translations, sub.rest_rotations, sub.rest_scales,
-                    bind, sub.meters_per_unit, sub.up_axis, sub.name), to_skel
+    return Skeleton(sub.joint_names, sub.parents, np.where(roots, unit, 1.0) * sub.rest_translations,
+                    sub.rest_rotations, np.where(roots, unit, 1.0) * sub.rest_scales,
+                    bind, sub.meters_per_unit, sub.up_axis, sub.name), to_skel, unit
 
 
 def _mesh_without_chain(m: SkinnedMesh, num_joints: int, keep: np.ndarray, to_skel: np.ndarray) -> SkinnedMesh:
