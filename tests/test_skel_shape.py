@@ -4,14 +4,18 @@ joints are the skin's, and the world joints and skinned mesh are where the glTF 
 
 from __future__ import annotations
 
+import dataclasses
+import shutil
+
 import numpy as np
 import pygltflib
+import pytest
 from pxr import Gf, Usd, UsdGeom, UsdSkel
 from scipy.spatial.transform import Rotation
 
 from tests.cli_helpers import run
 from usdhands.jobs.conversion import convert
-from usdhands.formats.io import read_asset
+from usdhands.formats.io import read_asset, write_asset
 from usdhands.formats.usd_common import matrices_to_numpy
 from usdhands.formats.usd_validate import usd_compliance_errors
 from usdhands.model.rotations import trs_to_xform
@@ -21,9 +25,11 @@ FPS = 30.0
 KEYS = 11
 
 
-def _mixamo_like(path):
+def _mixamo_like(path, nodes_move=False):
     """Character (scale 0.1, turned 30° about y) > Armature (scale 0.01, 90° about x) > Hips >
-    Spine > LeftArm, RightArm; a skinned box per joint; Hips moves and Spine turns.
+    Spine > LeftArm, RightArm; a skinned box per joint; Hips moves and Spine turns; with
+    ``nodes_move``, the animation also moves Character (x 5 -> 7) and turns Armature (0 -> 45°
+    about its z after its 90° about x).
 
     Returns (rest TRS per node, animated TRS per node per key, inverse bind matrices,
     mesh points, joint indices, weights) for the independent skinning below."""
@@ -70,6 +76,8 @@ def _mixamo_like(path):
     times = np.arange(KEYS) / FPS
     hips_t = np.array([[0.0, 100 + 10 * np.sin(f / 3), 5.0 * f] for f in range(KEYS)])
     spine_q = Rotation.from_euler("z", np.linspace(0, 60, KEYS)[:, None], degrees=True).as_quat()
+    char_t = np.c_[np.linspace(5, 7, KEYS), np.zeros(KEYS), np.zeros(KEYS)]
+    arm_q = (Rotation.from_quat(rx) * Rotation.from_euler("z", np.linspace(0, 45, KEYS)[:, None], degrees=True)).as_quat()
 
     g = pygltflib.GLTF2(asset=pygltflib.Asset(version="2.0"))
     data = bytearray()
@@ -107,6 +115,11 @@ def _mixamo_like(path):
     g.animations = [pygltflib.Animation(name="Take 001", samplers=smp, channels=[
         pygltflib.AnimationChannel(sampler=0, target=tgt(node=2, path="translation")),
         pygltflib.AnimationChannel(sampler=1, target=tgt(node=3, path="rotation"))])]
+    if nodes_move:
+        smp += [pygltflib.AnimationSampler(input=tin, output=accessor(char_t.astype(np.float32), "VEC3")),
+                pygltflib.AnimationSampler(input=tin, output=accessor(arm_q.astype(np.float32), "VEC4"))]
+        g.animations[0].channels += [pygltflib.AnimationChannel(sampler=2, target=tgt(node=0, path="translation")),
+                                     pygltflib.AnimationChannel(sampler=3, target=tgt(node=1, path="rotation"))]
     g.scenes = [pygltflib.Scene(nodes=[0, 6])]
     g.scene = 0
     g.buffers = [pygltflib.Buffer(byteLength=len(data))]
@@ -119,6 +132,9 @@ def _mixamo_like(path):
         local = list(rest)
         local[2] = trs_to_xform(hips_t[f].astype(np.float32).astype(np.float64), one, np.ones(3))
         local[3] = trs_to_xform(np.array(nodes[3][1]), spine_q[f].astype(np.float32).astype(np.float64), np.ones(3))
+        if nodes_move:
+            local[0] = trs_to_xform(char_t[f].astype(np.float32).astype(np.float64), ry, np.full(3, 0.1))
+            local[1] = trs_to_xform(np.zeros(3), arm_q[f].astype(np.float32).astype(np.float64), np.full(3, 0.01))
         w = world(local)
         wj = np.array([w[n] for n in joints])
         worlds.append(wj[:, :3, 3])
@@ -131,9 +147,14 @@ def _mixamo_like(path):
     return np.array(worlds), np.array(skinned)
 
 
-def test_mixamo_like_gltf_converts_to_conventional_usdskel_shape(tmp_path, capsys):
+@pytest.mark.parametrize("nodes_move", [False, True])
+def test_mixamo_like_gltf_converts_to_conventional_usdskel_shape(tmp_path, capsys, gltf_validator, nodes_move):
+    """With ``nodes_move`` the animation also moves Character and turns Armature: they are still
+    Xforms above the SkelRoot, their xformOps time-sampled (the skeleton's only animation), and
+    come back as animated glTF nodes. (They used to stay joints, with bind transforms at scale
+    0.001: Blender showed that character 6.6-53 m off; benchmarks/blender_check.py.)"""
     src = tmp_path / "char.glb"
-    world_joints, skinned = _mixamo_like(src)
+    world_joints, skinned = _mixamo_like(src, nodes_move)
     usd = tmp_path / "char.usda"
     assert run(capsys, "convert", str(src), str(usd))[0] == 0
     assert usd_compliance_errors(usd) == []
@@ -154,6 +175,8 @@ def test_mixamo_like_gltf_converts_to_conventional_usdskel_shape(tmp_path, capsy
     names = [p.GetName() for p in (root.GetParent(), root.GetParent().GetParent())]
     assert names == ["Armature", "Character"]
     assert root.GetParent().IsA(UsdGeom.Xform) and root.GetParent().GetParent().IsA(UsdGeom.Xform)
+    for p in (root.GetParent(), root.GetParent().GetParent()):
+        assert UsdGeom.Xformable(p).TransformMightBeTimeVarying() == nodes_move
 
     # UsdSkel's own world joints equal the glTF's
     cache = UsdSkel.Cache()
@@ -171,7 +194,8 @@ def test_mixamo_like_gltf_converts_to_conventional_usdskel_shape(tmp_path, capsy
 
     # UsdSkel's skinning of the mesh agrees with the glTF's
     mesh_prim = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
-    stage_bake = Usd.Stage.Open(str(usd))
+    shutil.copy(usd, tmp_path / "bake.usda")     # baking edits the layer, which stays open for the convert below
+    stage_bake = Usd.Stage.Open(str(tmp_path / "bake.usda"))
     assert UsdSkel.BakeSkinning(stage_bake.Traverse(), Gf.Interval(0, KEYS - 1))
     baked = UsdGeom.Mesh(stage_bake.GetPrimAtPath(mesh_prim.GetPath()))
     bcache = UsdGeom.XformCache()
@@ -193,6 +217,17 @@ def test_mixamo_like_gltf_converts_to_conventional_usdskel_shape(tmp_path, capsy
     got = clip.world_positions()[:, cols]
     assert got.shape[0] == KEYS
     assert np.abs(got - world_joints).max() * 100 < 1e-4
+    # ... and the source's node tree: Character > Armature > the skin's joints, the nodes' channels
+    assert gltf_validator(back)[0]["numErrors"] == 0
+    g = pygltflib.GLTF2().load(str(back))
+    assert [g.nodes[n].name for n in g.skins[0].joints] == SKIN
+    char = next(i for i, n in enumerate(g.nodes) if n.name == "Character")
+    assert g.scenes[0].nodes[0] == char and [g.nodes[c].name for c in g.nodes[char].children] == ["Armature"]
+    arm = g.nodes[char].children[0]
+    assert [g.nodes[c].name for c in g.nodes[arm].children] == ["mixamorig:Hips"]
+    targets = {(c.target.node, c.target.path) for c in g.animations[0].channels}
+    assert ({(char, "translation"), (arm, "rotation")} <= targets) == nodes_move
+    assert not {(char, "rotation"), (char, "scale"), (arm, "translation"), (arm, "scale")} & targets
 
 
 def _gltf_scene_points(g: pygltflib.GLTF2, animation: str, t: float) -> dict[str, np.ndarray]:
@@ -298,3 +333,27 @@ def test_robot_expressive_binds_at_unit_scale_and_every_mesh_where_the_gltf_puts
             assert p.shape == truth[name].shape
             assert np.abs(p.min(0) - truth[name].min(0)).max() * 100 < 0.01, (name, code)   # cm
             assert np.abs(p.max(0) - truth[name].max(0)).max() * 100 < 0.01, (name, code)
+
+
+def test_nodes_that_move_in_one_of_several_animations_stay_joints(tmp_path):
+    """An Xform holds one set of time samples, which would play under every SkelAnimation: with two
+    animations, Character and Armature (moving in the first) stay joints, and each animation's world
+    joints are still the glTF's."""
+    src = tmp_path / "char.glb"
+    world_joints, _ = _mixamo_like(src, nodes_move=True)
+    asset = read_asset(src)
+    (clip,) = asset.clips
+    still = clip.replace(name="Still", rotations=np.broadcast_to(clip.skeleton.rest_rotations, clip.rotations.shape),
+                         translations=np.broadcast_to(clip.skeleton.rest_translations, clip.translations.shape))
+    usd = tmp_path / "two.usda"
+    write_asset(dataclasses.replace(asset, clips=(clip, still)), usd)
+    assert usd_compliance_errors(usd) == []
+    stage = Usd.Stage.Open(str(usd))
+    skel = UsdSkel.Skeleton(next(p for p in stage.Traverse() if p.IsA(UsdSkel.Skeleton)))
+    assert [str(t).rsplit("/", 1)[-1] for t in skel.GetJointsAttr().Get()][:2] == ["Character", "Armature"]
+    assert not any(p.GetCustomDataByKey("usdhands:node") for p in stage.Traverse())
+    back = read_asset(usd)
+    names = [n.rsplit("/", 1)[-1] for n in back.clips[0].skeleton.joint_names]
+    got = back.clips[0].world_positions()[:, [names.index(n) for n in SKIN]]
+    assert np.abs(got - world_joints).max() * 100 < 1e-3   # cm: float3 translations, 0.001 scale below them
+    np.testing.assert_allclose(back.clips[1].world_positions(), still.world_positions(), atol=1e-5)

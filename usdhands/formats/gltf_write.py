@@ -27,7 +27,7 @@ from usdhands.formats.gltf_read import (
     EXTRAS_KEY, GltfScene, SkeletonBinding, animation_channels, channel_keys, malformed_as_read_error, sample_channel,
     scan_scene, snap_time,
 )
-from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.model.asset import Asset, RootNode, SkinnedMesh
 from usdhands.model.clip import Clip
 from usdhands.model.provenance import provenance_record
 from usdhands.formats.gltf_materials import write_materials
@@ -235,6 +235,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
     skel_nodes: list[list[int]] = []
     skel_skins: list[int] = []
     skin_slot: list[np.ndarray] = []
+    chain_nodes: list[tuple[int, int, RootNode]] = []  # skeleton index, node index, the node above it
     index_of = {id(s): i for i, s in enumerate(asset.skeletons)}
     for k, sk in enumerate(asset.skeletons):
         base = len(gltf.nodes)
@@ -246,10 +247,11 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
                 rotation=[float(v) for v in _unit(sk.rest_rotations[j])],
                 scale=[float(v) for v in sk.rest_scales[j]]))
         above = None
-        for name, local in chains.get(k, ()):
-            t, q, sc = xform_to_trs(local)
-            gltf.nodes.append(pygltflib.Node(name=name, translation=[float(v) for v in t],
+        for node in chains.get(k, ()):
+            t, q, sc = xform_to_trs(node.local if node.rest is None else node.rest)
+            gltf.nodes.append(pygltflib.Node(name=node.name, translation=[float(v) for v in t],
                                              rotation=[float(v) for v in _unit(q)], scale=[float(v) for v in sc]))
+            chain_nodes.append((k, len(gltf.nodes) - 1, node))
             if above is None:
                 scene_nodes.append(len(gltf.nodes) - 1)
             else:
@@ -302,6 +304,7 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
                                          ("scale", c.scales, sk.rest_scales, SCALE_TOLERANCE)):
             moving = [j for j in np.nonzero(_differs_from_rest(values, rest, tol))[0]]
             w.add(path_, moving, [nodes[j] for j in moving], values[sel])
+        _add_node_motion(w, [(n, node) for k, n, node in chain_nodes if k == si], clip, sel)
         shapes = asset.blend_shape_weights.get(clip.name)
         for node, (k, names, defaults) in morph_nodes.items():
             if k != si or shapes is None or not set(names) & set(shapes.names):
@@ -320,6 +323,25 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
         gltf.buffers = []
         buffers = []
     save_gltf(gltf, buffers, path, glb=path.suffix.lower() == ".glb")
+
+
+def _add_node_motion(w: _AnimationWriter, nodes: Sequence[tuple[int, RootNode]], clip: Clip,
+                     sel: slice | np.ndarray) -> None:
+    """Translation, rotation and scale channels for each node above the skeleton that moves in
+    ``clip`` (the components that leave the node's rest), at the frames ``sel``."""
+    for index, node in nodes:
+        m = _node_motion(node, clip)
+        if m is None:
+            continue
+        rest = xform_to_trs(node.local if node.rest is None else node.rest)
+        t, q, sc = xform_to_trs(m)
+        q = _continuous(q[:, None])[:, 0]
+        if quat_angle_deg(q, rest[1]).max(initial=0.0) > 1e-4:
+            w.add("rotation", [0], [index], q[sel][:, None])
+        for path_, values, r, tol in (("translation", t, rest[0], TRANSLATION_TOLERANCE_M),
+                                      ("scale", sc, rest[2], SCALE_TOLERANCE)):
+            if _differs_from_rest(values[:, None], r[None], tol)[0]:
+                w.add(path_, [0], [index], values[sel][:, None])
 
 
 def _triangulate(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
@@ -393,8 +415,9 @@ def _key_frames(clip: Clip, key_times: np.ndarray | None) -> slice | np.ndarray:
 
 
 def _unfold_root_nodes(asset: Asset) -> tuple[Asset, dict]:
-    """``asset`` with the transforms of ``asset.root_nodes`` taken back out of the root joints (rest
-    and every frame), and those nodes per skeleton index, for the writer to put above the roots."""
+    """``asset`` with the transforms of ``asset.root_nodes`` taken back out of the root joints (rest,
+    and every frame: a moving node's transform at that frame), and those nodes per skeleton index,
+    for the writer to put above the roots."""
     if not asset.root_nodes:
         return asset, {}
     new_sk, chains = {}, {}
@@ -404,27 +427,46 @@ def _unfold_root_nodes(asset: Asset) -> tuple[Asset, dict]:
             continue
         sk = skeletons[k]
         world = np.eye(4)
-        for _, local in chain:
-            world = world @ np.asarray(local, dtype=np.float64)
+        for node in chain:
+            world = world @ np.asarray(node.local, dtype=np.float64)
         inv = np.linalg.inv(world)
         roots = np.flatnonzero(sk.parents < 0)
         t, q, sc = (np.array(sk.rest_translations), np.array(sk.rest_rotations), np.array(sk.rest_scales))
         t[roots], q[roots], sc[roots] = xform_to_trs(inv @ trs_to_xform(t[roots], q[roots], sc[roots]))
         skeletons[k] = Skeleton(sk.joint_names, sk.parents, t, q, sc, sk.bind_xforms, sk.meters_per_unit,
                                 sk.up_axis, sk.name)
-        new_sk[id(sk)] = (skeletons[k], inv, roots)
+        new_sk[id(sk)] = (skeletons[k], inv, roots, chain)
         chains[k] = chain
     clips = []
     for c in asset.clips:
         if id(c.skeleton) not in new_sk:
             clips.append(c)
             continue
-        sk, inv, roots = new_sk[id(c.skeleton)]
+        sk, inv, roots, chain = new_sk[id(c.skeleton)]
+        inv = _chain_inverse_per_frame(chain, c, inv)
         t, q, sc = np.array(c.translations), np.array(c.rotations), np.array(c.scales)
         t[:, roots], q[:, roots], sc[:, roots] = xform_to_trs(inv @ trs_to_xform(t[:, roots], q[:, roots],
                                                                                   sc[:, roots]))
         clips.append(c.replace(skeleton=sk, translations=t, rotations=q, scales=sc))
     return replace(asset, skeletons=tuple(skeletons), clips=tuple(clips)), chains
+
+
+def _node_motion(node: RootNode, clip: Clip) -> np.ndarray | None:
+    """(F, 4, 4) ``node``'s local transform at each frame of ``clip``, None where it does not move in it."""
+    m = None if node.motion is None else node.motion.get(clip.name)
+    return m if m is not None and len(m) == clip.num_frames else None
+
+
+def _chain_inverse_per_frame(chain: Sequence[RootNode], clip: Clip, inv: np.ndarray) -> np.ndarray:
+    """The inverse of the chain's world transform: ``inv`` (4, 4) when no node moves in ``clip``,
+    else (F, 1, 4, 4), one per frame, to take out of the root joints."""
+    if all(_node_motion(n, clip) is None for n in chain):
+        return inv
+    world = np.broadcast_to(np.eye(4), (clip.num_frames, 4, 4))
+    for n in chain:
+        m = _node_motion(n, clip)
+        world = world @ (np.asarray(n.local, dtype=np.float64) if m is None else m)
+    return np.linalg.inv(world)[:, None]
 
 
 def _skin_joints(sk: Skeleton, non_skin: Sequence[str], meshes: Sequence[SkinnedMesh]) -> list[int]:

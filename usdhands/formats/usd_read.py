@@ -14,6 +14,7 @@ import dataclasses
 import logging
 import os
 import re
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +42,7 @@ from usdhands.formats.usd_common import (
 )
 from usdhands.formats.usd_schema_data import read_finger_motion
 from usdhands.formats.usd_materials import MaterialReader
-from usdhands.model.asset import Asset, BlendShape, BlendShapeWeights, SkinnedMesh
+from usdhands.model.asset import Asset, BlendShape, BlendShapeWeights, RootNode, SkinnedMesh
 from usdhands.model.clip import Clip
 from usdhands.model.rotations import xform_to_trs
 from usdhands.model.skeleton import Skeleton
@@ -252,17 +253,23 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
         w = _blend_shape_weights(cache.GetAnimQuery(UsdSkel.Animation(prim)), clip, tcps)
         if w is not None:
             weights[clip.name] = w
+    root_nodes = {k: _with_motion(chain, [c for c in clips if c.skeleton is skeletons[k]], tcps)
+                  for k, chain in root_nodes.items()}
     return Asset(path=str(path), skeletons=tuple(skeletons), clips=tuple(clips), meshes=tuple(meshes),
                  provenance=provenance, source_names=source_names, left_out=left_out,
                  materials=tuple(materials.materials), images=tuple(materials.images), blend_shape_weights=weights,
                  interpolation=interpolation, root_nodes=root_nodes, key_times=key_times)
 
 
-def _node_chain_above(skel_prim: Usd.Prim, world: np.ndarray) -> tuple[tuple[str, np.ndarray], ...]:
+def _node_chain_above(skel_prim: Usd.Prim, world: np.ndarray) -> tuple[tuple[Usd.Prim, RootNode], ...]:
     """The Xforms usdhands wrote for source nodes above a skeleton (customData ``usdhands:node``),
-    top first, as ``(name, local (4, 4))``, when they alone make the Skeleton's ``world`` transform
-    and none moves over time; else ``()``. A node's local transform is the source's: its scale
-    times the ``usdhands:nodeScale`` the writer moved into the root joints."""
+    top first, each with its :class:`RootNode` (no motion yet: :func:`_with_motion` samples it),
+    when they alone make the Skeleton's ``world`` transform at the earliest time; else ``()``.
+
+    A node's transforms are the source's: its scale times the ``usdhands:nodeScale`` the writer
+    moved into the root joints. ``local`` is the earliest time's (what the rest fold used);
+    an Xform that moves also gets its default value as ``rest``.
+    """
     chain = []
     total = np.eye(4)
     p = skel_prim.GetParent()
@@ -270,21 +277,49 @@ def _node_chain_above(skel_prim: Usd.Prim, world: np.ndarray) -> tuple[tuple[str
         p = p.GetParent()
     while p and not p.IsPseudoRoot() and p.GetCustomDataByKey(NODE_KEY):
         x = UsdGeom.Xformable(p)
-        if x.TransformMightBeTimeVarying():
-            return ()
         local = matrices_to_numpy([x.GetLocalTransformation(Usd.TimeCode.EarliestTime())])[0]
         total = local @ total
-        moved = p.GetCustomDataByKey(NODE_SCALE_KEY)
-        if isinstance(moved, float) and np.isfinite(moved) and moved > 0:
-            local = local @ np.diag([moved, moved, moved, 1.0])
+        moved = _moved_scale(p)
+        rest = None
+        if x.TransformMightBeTimeVarying() and all(op.GetAttr().Get(Usd.TimeCode.Default()) is not None
+                                                   for op in x.GetOrderedXformOps()):
+            rest = matrices_to_numpy([x.GetLocalTransformation(Usd.TimeCode.Default())])[0] @ moved
         name = p.GetCustomDataByKey(SOURCE_NAME_KEY)
-        chain.append((name if isinstance(name, str) and name else p.GetName(), local))
+        chain.append((p, RootNode(name if isinstance(name, str) and name else p.GetName(), local @ moved,
+                                  rest=rest)))
         p = p.GetParent()
     if not chain:
         return ()
     chain.reverse()
     scale = max(1.0, float(np.abs(world).max()))
     return tuple(chain) if np.allclose(total, world, rtol=0, atol=1e-9 * scale) else ()
+
+
+def _moved_scale(prim: Usd.Prim) -> np.ndarray:
+    """(4, 4) the uniform scale the writer moved from ``prim`` into the root joints (customData
+    ``usdhands:nodeScale``), the identity when there is none."""
+    moved = prim.GetCustomDataByKey(NODE_SCALE_KEY)
+    ok = isinstance(moved, float) and np.isfinite(moved) and moved > 0
+    return np.diag([moved, moved, moved, 1.0]) if ok else np.eye(4)
+
+
+def _with_motion(chain: tuple[tuple[Usd.Prim, RootNode], ...], clips: Sequence[Clip],
+                 tcps: float) -> tuple[RootNode, ...]:
+    """The chain's nodes, each that moves with its local transform at every frame of ``clips``
+    (the clips of its skeleton: frame ``f`` at time code ``(start_time + f / fps) · tcps``)."""
+    out = []
+    for prim, node in chain:
+        x = UsdGeom.Xformable(prim)
+        if not x.TransformMightBeTimeVarying() or not clips:
+            out.append(node)
+            continue
+        moved = _moved_scale(prim)
+        motion = {}
+        for c in clips:
+            codes = (c.start_time + np.arange(c.num_frames) / c.fps) * tcps
+            motion[c.name] = matrices_to_numpy([x.GetLocalTransformation(Usd.TimeCode(float(t))) for t in codes]) @ moved
+        out.append(node._replace(motion=motion))
+    return tuple(out)
 
 
 def _blend_shape_weights(anim_query, clip: Clip, tcps: float) -> BlendShapeWeights | None:

@@ -242,9 +242,11 @@ def write_usd(asset: Asset, path: str | os.PathLike, *, provenance: dict | None 
                 parent = root_path
             else:
                 above = root_path
+                own = [c for c, o in zip(asset.clips, owner) if o == k]
                 for j in chain:
                     above = _define_node_xform(stage, above, lifted, j, used_roots if above == root_path else set(),
-                                               unit if j == chain[-1] else 1.0)
+                                               unit if j == chain[-1] else 1.0,
+                                               (own[0], frame_time_codes(own[0], tcps)) if len(own) == 1 else None)
                 leaf = valid_identifier(sk.name.rsplit("/", 1)[-1]) + "Root"
                 parent = above.AppendChild(unique_name(leaf, used_roots if above == root_path else set()))
                 UsdSkel.Root.Define(stage, parent)
@@ -319,9 +321,12 @@ def _node_chain(sk: Skeleton, non_skin: Sequence[str], clips: Sequence[Clip],
     """The joints to author as ``Xform`` prims above the SkelRoot, and the joints kept.
 
     The chain starts at the single root joint and goes down while each joint is one that
-    no skin lists (``non_skin``), does not move in any of ``clips``, carries no mesh weight,
-    and (but for the last) has one child. Returns ``(chain, keep)``: joint indices root
-    first (empty when nothing can be lifted) and the sorted indices of the other joints.
+    no skin lists (``non_skin``), carries no mesh weight, and (but for the last) has one
+    child, and either does not move in any of ``clips`` or ``clips`` is one clip: an Xform
+    holds one set of time samples, which the skeleton's only animation can have (with
+    several, a moving node stays a joint, which every SkelAnimation moves). Returns
+    ``(chain, keep)``: joint indices root first (empty when nothing can be lifted) and the
+    sorted indices of the other joints.
     """
     names = set(non_skin)
     parents = np.asarray(sk.parents)
@@ -342,7 +347,7 @@ def _node_chain(sk: Skeleton, non_skin: Sequence[str], clips: Sequence[Clip],
     chain: list[int] = []
     roots = np.flatnonzero(parents < 0)
     j = int(roots[0]) if len(roots) == 1 else -1
-    while j >= 0 and sk.joint_names[j] in names and j not in weighted and still(j):
+    while j >= 0 and sk.joint_names[j] in names and j not in weighted and (len(clips) == 1 or still(j)):
         chain.append(j)
         kids = np.flatnonzero(parents == j)
         j = int(kids[0]) if len(kids) == 1 else -1
@@ -353,17 +358,36 @@ def _node_chain(sk: Skeleton, non_skin: Sequence[str], clips: Sequence[Clip],
 
 
 def _define_node_xform(stage: Usd.Stage, above: Sdf.Path, sk: Skeleton, j: int, used: set[str],
-                       moved: float = 1.0) -> Sdf.Path:
+                       moved: float = 1.0, motion: tuple[Clip, np.ndarray] | None = None) -> Sdf.Path:
     """An ``Xform`` prim under ``above`` with joint ``j``'s rest transform (translate, orient, scale),
     its scale divided by ``moved``, the uniform scale :func:`_without_chain` moves into the root
-    joints (recorded in customData ``usdhands:nodeScale`` when it is not 1)."""
+    joints (recorded in customData ``usdhands:nodeScale`` when it is not 1).
+
+    ``motion`` is the skeleton's only clip and its frames' time codes: each xformOp the clip
+    changes also gets a time sample per frame (the rest stays the op's default value).
+    """
     original = sk.joint_names[j].rsplit("/", 1)[-1]
     path = above.AppendChild(unique_name(valid_identifier(original), used))
     xf = UsdGeom.Xform.Define(stage, path)
+    ops = (xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble), xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble),
+           xf.AddScaleOp(UsdGeom.XformOp.PrecisionDouble))
     t, q, s = sk.rest_translations[j], sk.rest_rotations[j], sk.rest_scales[j] / moved
-    xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, t)))
-    xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(float(q[3]), *map(float, q[:3])))
-    xf.AddScaleOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, s)))
+    ops[0].Set(Gf.Vec3d(*map(float, t)))
+    ops[1].Set(Gf.Quatd(float(q[3]), *map(float, q[:3])))
+    ops[2].Set(Gf.Vec3d(*map(float, s)))
+    if motion is not None:
+        clip, codes = motion
+        rot = clip.rotations[:, j]
+        moving = (not np.allclose(clip.translations[:, j], sk.rest_translations[j], rtol=1e-6, atol=_LIN_TOL),
+                  quat_angle_deg(clip.rotations[:, j], sk.rest_rotations[j]).max(initial=0.0) > _ROT_TOL_DEG,
+                  not np.allclose(clip.scales[:, j], sk.rest_scales[j], rtol=1e-6, atol=_LIN_TOL))
+        for f, code in enumerate(codes):
+            if moving[0]:
+                ops[0].Set(Gf.Vec3d(*map(float, clip.translations[f, j])), float(code))
+            if moving[1]:
+                ops[1].Set(Gf.Quatd(float(rot[f, 3]), *map(float, rot[f, :3])), float(code))
+            if moving[2]:
+                ops[2].Set(Gf.Vec3d(*map(float, clip.scales[f, j] / moved)), float(code))
     if path.name != original:
         xf.GetPrim().SetCustomDataByKey(SOURCE_NAME_KEY, original)
     xf.GetPrim().SetCustomDataByKey(NODE_KEY, True)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -10,7 +11,31 @@ from usdhands.model.clip import Clip
 from usdhands.model.material import Image, Material
 from usdhands.model.skeleton import Skeleton
 
-__all__ = ["BlendShape", "SkinnedMesh", "Asset", "BlendShapeWeights"]
+__all__ = ["BlendShape", "SkinnedMesh", "Asset", "BlendShapeWeights", "RootNode"]
+
+
+class RootNode(NamedTuple):
+    """A transform node above a skeleton's root joints that the source held as a node of its own
+    (a USD ``Xform`` usdhands wrote from glTF's ``RobotArmature`` or Mixamo's ``Armature``).
+
+    Parameters
+    ----------
+    name : str
+        The node's name in the source.
+    local : (4, 4) float
+        Its local transform (column vectors) as folded into the root joints' rest transforms.
+    motion : dict str -> (F, 4, 4) float, optional
+        Clip name -> its local transform at each of the clip's frames, for a node that moves
+        (folded into the root joints frame by frame); None for a static node.
+    rest : (4, 4) float, optional
+        The node's own rest transform where it differs from ``local`` (an animated USD
+        ``Xform``'s default value, ``local`` being its earliest time sample).
+    """
+
+    name: str
+    local: np.ndarray
+    motion: dict[str, np.ndarray] | None = None
+    rest: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,11 +178,11 @@ class Asset:
         Clip name -> the seconds the source keyed, where it keyed fewer times than the clip
         has frames (a hand-keyed glTF animation); each is one of the clip's frames, so a
         writer that can key at will (glTF) keys there only, and the key count is the source's.
-    root_nodes : dict int -> tuple of (str, (4, 4) array)
-        Skeleton index -> the static transform nodes above it (top first: name, local
-        transform), already folded into its root joints, that the source held as nodes of
-        their own (a USD file usdhands wrote from glTF: ``RobotArmature``); the glTF writer
-        makes them plain nodes above the skin's joints again.
+    root_nodes : dict int -> tuple of RootNode
+        Skeleton index -> the transform nodes above it (top first), already folded into its
+        root joints, that the source held as nodes of their own (a USD file usdhands wrote
+        from glTF: ``RobotArmature``); the glTF writer makes them plain nodes above the skin's
+        joints again, animated where they move.
     """
 
     path: str
