@@ -36,7 +36,7 @@ except ImportError:  # not in the project's environment: see the module docs
 FRAMES = (1, 10, 20)
 #: glTF-IO's bone orientation. Its default, ``BLENDER``, turns each bone toward its child and
 #: misplaces meshes parented to a bone when the skin is bound in another pose than the nodes'
-#: rest (RobotExpressive's head, torso and limbs 52-65 cm from where the glTF's own node
+#: rest (RobotExpressive's head, torso and limbs 51-65 cm from where the glTF's own node
 #: transforms put them, at every frame); ``TEMPERANCE`` keeps them there, and the bones'
 #: heads (what is compared) are the joints' positions under every heuristic (0.0004 cm).
 BONE_HEURISTIC = "TEMPERANCE"
