@@ -357,3 +357,26 @@ def test_nodes_that_move_in_one_of_several_animations_stay_joints(tmp_path):
     got = back.clips[0].world_positions()[:, [names.index(n) for n in SKIN]]
     assert np.abs(got - world_joints).max() * 100 < 1e-3   # cm: float3 translations, 0.001 scale below them
     np.testing.assert_allclose(back.clips[1].world_positions(), still.world_positions(), atol=1e-5)
+
+
+@pytest.mark.parametrize("value", ["100", -100.0, float("nan"), 0.0])
+def test_a_node_scale_that_is_no_positive_number_is_ignored(shared_assets, tmp_path, value):
+    """``usdhands:nodeScale`` only says how the source split the scale between the Xform and the
+    root joints: a value that is no positive finite number is ignored, and the joints are still
+    where UsdSkel puts them (the Xform's own transform folded into the roots)."""
+    src = shared_assets / "robot_expressive" / "RobotExpressive.glb"
+    usd = tmp_path / "robot.usda"
+    convert(src, usd)
+    good = read_asset(usd)
+    stage = Usd.Stage.Open(str(usd))
+    arm = next(p for p in stage.Traverse() if p.GetName() == "RobotArmature")
+    arm.SetCustomDataByKey("usdhands:nodeScale", value)
+    stage.GetRootLayer().Export(str(tmp_path / "edited.usda"))
+    bad = read_asset(tmp_path / "edited.usda")
+    np.testing.assert_allclose(np.linalg.norm(bad.root_nodes[0][0].local[:3, :3], axis=0), 1.0, rtol=1e-9)
+    for a, b in zip(good.clips[:3], bad.clips[:3]):
+        np.testing.assert_allclose(b.world_positions(), a.world_positions(), atol=1e-9)
+    back = tmp_path / "back.glb"
+    convert(tmp_path / "edited.usda", back)
+    for a, b in zip(read_asset(src).clips[:3], read_asset(back).clips[:3]):   # glTF again: RobotArmature a joint
+        np.testing.assert_allclose(b.world_positions(), a.world_positions(), atol=1e-5)
