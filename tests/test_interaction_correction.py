@@ -4,6 +4,8 @@ fingers that are clear left bit-for-bit alone."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from interaction_data import (
@@ -18,6 +20,8 @@ from usdhands.model.finger_dofs import finger_curves
 from usdhands.model.prop import PropMesh
 from usdhands.model.rotations import quat_angle_deg
 from usdhands.samples.humanoid import humanoid_handmap
+
+MUG = Path(__file__).resolve().parent.parent.parent / "shared" / "assets" / "mujoco_mug" / "mug.obj"
 
 
 @pytest.fixture(scope="module")
@@ -181,9 +185,11 @@ def test_bounded_smoother_never_dips_below_its_bound_and_is_smoother():
     assert np.all(x[:60] < 1e-6) and np.all(x[-60:] < 1e-6)  # nothing far from the bound's bump
 
 
-def test_rts_smoother_matches_a_per_curve_kalman_loop():
+@pytest.mark.parametrize("T", [50, 400])
+def test_rts_smoother_matches_a_per_curve_kalman_loop(T):
+    """400 frames: the gains settle and both passes run as second-order recursions (lfilter)."""
     rng = np.random.default_rng(1)
-    z = np.cumsum(rng.normal(size=(50, 3)), axis=0) + rng.normal(size=(50, 3))
+    z = np.cumsum(rng.normal(size=(T, 3)), axis=0) + rng.normal(size=(T, 3))
     fast = rts_smooth(z, 30.0, 0.2)
     # the textbook filter and RTS pass, one curve at a time
     dt = 1 / 30.0
@@ -194,7 +200,7 @@ def test_rts_smoother_matches_a_per_curve_kalman_loop():
         xs, Ps, xp, Pp = [], [], [], []
         x = np.array([z[0, c], 0.0])
         P = np.diag([1.0, 1e6])
-        for t in range(50):
+        for t in range(T):
             if t:
                 x, P = F @ x, F @ P @ F.T + Q
             xp.append(x)
@@ -205,10 +211,10 @@ def test_rts_smoother_matches_a_per_curve_kalman_loop():
             xs.append(x)
             Ps.append(P)
         out = [xs[-1]]
-        for t in range(48, -1, -1):
+        for t in range(T - 2, -1, -1):
             G = Ps[t] @ F.T @ np.linalg.inv(Pp[t + 1])
             out.insert(0, xs[t] + G @ (out[0] - xp[t + 1]))
-        np.testing.assert_allclose(fast[:, c], np.array(out)[:, 0], atol=1e-8)
+        np.testing.assert_allclose(fast[:, c], np.array(out)[:, 0], rtol=0, atol=1e-8 * (1 + np.abs(z).max()))
 
 
 def test_ccd_turns_the_distal_joint_first_by_the_least_flexion_that_clears():
@@ -278,3 +284,28 @@ def test_bounded_smoother_between_two_bounds_matches_a_general_solver():
     b = np.concatenate([np.sqrt(fit) * target, np.zeros(T - 2)])
     ref = lsq_linear(A, b, bounds=(lower, upper), tol=1e-12, max_iter=10000).x
     np.testing.assert_allclose(x, ref, atol=1e-6)
+
+
+def test_correction_of_a_clip_differing_in_its_fingers_reuses_the_inputs_world_transforms():
+    """synthesize --props hands the input's world transforms to the correction of the result: only the
+    fingers are posed again, and the correction and its report are those of full forward kinematics."""
+    from interaction_data import grasping_clip, grasping_mug_position
+
+    from usdhands.algorithms.interaction.correction import with_fingers_posed
+    from usdhands.formats.props import read_props
+
+    source = grasping_clip(4.0)
+    hm = humanoid_handmap(source.skeleton)
+    fingers = [source.skeleton.index(j) for h in hm.sides for j in h.finger_joints]
+    rotations = np.array(source.rotations)
+    rotations[:, fingers] = np.roll(rotations[:, fingers], 9, axis=0)  # other fingers, the same body
+    clip = source.replace(rotations=rotations)
+    world = source.world_xforms()
+    np.testing.assert_array_equal(with_fingers_posed(clip, hm, world), clip.world_xforms())
+    (mug,) = read_props(MUG, meters_per_unit=0.01, up_axis="Y", prop_meters_per_unit=0.01)
+    cols = colliders_for(clip, PropMesh(mug.name, np.asarray(mug.vertices) + grasping_mug_position(), mug.faces))
+    out, report = correct_clip(clip, hm, cols)
+    reused, reused_report = correct_clip(clip, hm, cols, world=world)
+    assert report.chains_corrected and report.to_dict()["penetration_before_mm"]["max"] > 1.0
+    np.testing.assert_array_equal(reused.rotations, out.rotations)
+    assert reused_report.to_dict() == report.to_dict()

@@ -63,12 +63,15 @@ def check_prop_options(options) -> None:
     parse_attachments(options.attach)
 
 
-def read_scene_props(options, clip):
-    """Every prop of ``--props`` in the clip's units, checked for unit slips: list of (path, PropMesh)."""
+def read_scene_props(options, clip, world=None):
+    """Every prop of ``--props`` in the clip's units, checked for unit slips: list of (path, PropMesh).
+
+    ``world``: the clip's world transforms ``(T, J, 4, 4)`` when the caller has them.
+    """
     from usdhands.formats.props import USD_SUFFIXES, check_prop_units, read_props
 
     sk = clip.skeleton
-    positions = clip.world_positions()
+    positions = clip.world_positions() if world is None else world[..., :3, 3]
     bounds = np.array([positions.reshape(-1, 3).min(axis=0), positions.reshape(-1, 3).max(axis=0)])
     out = []
     for path in options.props:
@@ -88,9 +91,10 @@ def read_scene_props(options, clip):
     return out
 
 
-def build_colliders(options, clip, handmap, props, path=None):
+def build_colliders(options, clip, handmap, props, path=None, world=None):
     """The colliders of the scene: the props (static, animated or attached) and, with ``--self``, the body.
 
+    ``world``: the clip's world transforms ``(T, J, 4, 4)`` when the caller has them.
     Returns ``(Colliders, attachments)``.
     """
     from usdhands.algorithms.interaction.body import body_collider
@@ -115,7 +119,8 @@ def build_colliders(options, clip, handmap, props, path=None):
         for i in hits:
             by_prop[i] = att
     items = []
-    world = clip.world_xforms() if by_prop else None
+    if by_prop and world is None:
+        world = clip.world_xforms()
     for i, (path, prop) in enumerate(props):
         att = by_prop.get(i)
         if att is None:
@@ -143,18 +148,20 @@ def corrected_for_props(options, path, clip, handmap):
     return fixed, report.to_dict()
 
 
-def synthesis_interaction(options, clip, handmap, db, cfg, props, config, path=None):
+def synthesis_interaction(options, clip, handmap, db, cfg, props, config, path=None, world=None):
     """The ``interaction`` factory for ``synthesize_clip`` (proximity cuts, collision term) and the
-    colliders at the clip's own rate for the correction run on the result."""
+    colliders at the clip's own rate for the correction run on the result (``world``: the clip's
+    world transforms ``(T, J, 4, 4)`` when the caller has them)."""
     from usdhands.algorithms.interaction.synthesis_terms import InteractionTerms
     from usdhands.algorithms.synthesis.database import same_rate
     from usdhands.algorithms.synthesis.finger_transfer import canonical_to_local, local_to_canonical
 
-    colliders, _ = build_colliders(options, clip, handmap, props, path=path)
+    colliders, _ = build_colliders(options, clip, handmap, props, path=path, world=world)
     at_db = clip if same_rate(clip.fps, db.fps) else clip.resample(db.fps)
     db_colliders = colliders if at_db is clip else build_colliders(options, at_db, handmap, props, path=path)[0]
     rest = clip.skeleton.rest_world_positions()
-    world = at_db.world_xforms()  # posed once for both hands
+    if at_db is not clip or world is None:
+        world = at_db.world_xforms()  # posed once for both hands
 
     def fingers(segment: int):
         a, b = int(db.segments[segment, 0]), int(db.segments[segment, 1])

@@ -201,15 +201,17 @@ def synthesize(source: str | os.PathLike, output: str | os.PathLike, options: Sy
     warnings: list[str] = []
     clip, handmap, with_fingers, added = prepare_hands(source, options, asset, clip, db, cfg, warnings)
     progress(1, 4, "synthesizing")
-    interaction, colliders, iconfig = None, None, None
+    interaction, colliders, iconfig, world = None, None, None, None
     if options.props:
         from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
         from usdhands.jobs.props import read_scene_props, synthesis_interaction
 
         iconfig = load_interaction_config(options.interaction_config) if options.interaction_config \
             else InteractionConfig()
-        props = read_scene_props(options, clip)
-        interaction, colliders = synthesis_interaction(options, clip, handmap, db, cfg, props, iconfig, path=source)
+        world = clip.world_xforms()  # the input posed once: props, terms and the correction of the result
+        props = read_scene_props(options, clip, world)
+        interaction, colliders = synthesis_interaction(options, clip, handmap, db, cfg, props, iconfig, path=source,
+                                                       world=world)
     result = synthesize_clip(clip, handmap, db, cfg, tuple(with_fingers), finger_reference=options.finger_reference,
                              interaction=interaction)
     correction = None
@@ -221,7 +223,7 @@ def synthesize(source: str | os.PathLike, output: str | os.PathLike, options: Sy
 
         corrected_hands = HandMap(**{s: handmap[s] for s in with_fingers})
         fixed, correction = correct_clip(result.clip, corrected_hands, colliders, margin_mm=options.margin,
-                                         config=iconfig)
+                                         config=iconfig, world=world)
         result = replace(result, clip=fixed)
     progress(2, 4, "writing")
     if added:

@@ -41,7 +41,7 @@ from usdhands.model.handmap import HandMap
 from usdhands.model.rotations import quat_angle_deg
 
 __all__ = ["CorrectionReport", "correct_clip", "chain_posers", "penetration_depth_mm", "finger_jitter",
-           "finger_angles", "rest_branch"]
+           "finger_angles", "rest_branch", "with_fingers_posed"]
 
 
 @dataclass
@@ -90,6 +90,30 @@ class CorrectionReport:
             "jitter_after": float(self.jitter_after),
             "max_change_deg": float(self.max_change_deg),
         }
+
+
+def with_fingers_posed(clip: Clip, handmap: HandMap, world: np.ndarray | None) -> np.ndarray:
+    """World transforms ``(T, J, 4, 4)`` of ``clip``, reusing ``world`` for every joint that is neither
+    a finger joint of ``handmap`` nor below one: the finger joints and their descendants are posed
+    from the clip's own local transforms (a clip that differs from the one ``world`` was computed
+    for only in its fingers, such as a synthesized or corrected one). ``None``: full forward kinematics."""
+    if world is None:
+        return clip.world_xforms()
+    from usdhands.model.rotations import trs_to_xform
+
+    parents = clip.skeleton.parents
+    fingers = {clip.skeleton.index(j) for hand in handmap.sides for j in hand.finger_joints}
+    dirty = np.zeros(clip.num_joints, dtype=bool)
+    for j in range(clip.num_joints):  # parents come before children
+        dirty[j] = j in fingers or (parents[j] >= 0 and dirty[parents[j]])
+    js = np.nonzero(dirty)[0]
+    out = np.array(world)
+    if len(js):
+        local = trs_to_xform(clip.translations[:, js], clip.rotations[:, js], clip.scales[:, js])
+        for i, j in enumerate(js):
+            p = int(parents[j])
+            out[:, j] = local[:, i] if p < 0 else out[:, p] @ local[:, i]
+    return out
 
 
 def chain_posers(clip: Clip, handmap: HandMap, config: InteractionConfig,
@@ -159,20 +183,26 @@ def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolu
 
     An upper bound within ``resolution_mm`` of the exact depth (the axis search's lower bound).
     """
-    mm = 0.001 / clip.skeleton.meters_per_unit
     depth = np.zeros(clip.num_frames)
     for poser in posers:
-        frames = _near_frames(poser, colliders, 0.0)
-        if len(frames) == 0:
-            continue
-        angles = _chain_angles(clip, poser.chain)
-        a, b = poser.capsules(frames, angles[frames])
-        n = a.shape[1]
-        need = np.tile(poser.chain.radii, len(frames))
-        lower, _ = axis_clearance(colliders, np.repeat(frames, n), a.reshape(-1, 3), b.reshape(-1, 3), need,
-                                  resolution_mm * mm, find_depth=True)
-        d = np.maximum(need - lower, 0.0).reshape(len(frames), n).max(axis=1) / mm
-        np.maximum.at(depth, frames, d)
+        np.maximum(depth, _chain_depth_mm(clip, poser, colliders, resolution_mm), out=depth)
+    return depth
+
+
+def _chain_depth_mm(clip: Clip, poser: ChainPoser, colliders, resolution_mm: float = 0.05) -> np.ndarray:
+    """Deepest penetration of one chain's capsules per frame, ``(T,)`` mm (:func:`penetration_depth_mm`)."""
+    mm = 0.001 / clip.skeleton.meters_per_unit
+    depth = np.zeros(clip.num_frames)
+    frames = _near_frames(poser, colliders, 0.0)
+    if len(frames) == 0:
+        return depth
+    angles = _chain_angles(clip, poser.chain)
+    a, b = poser.capsules(frames, angles[frames])
+    n = a.shape[1]
+    need = np.tile(poser.chain.radii, len(frames))
+    lower, _ = axis_clearance(colliders, np.repeat(frames, n), a.reshape(-1, 3), b.reshape(-1, 3), need,
+                              resolution_mm * mm, find_depth=True)
+    depth[frames] = np.maximum(need - lower, 0.0).reshape(len(frames), n).max(axis=1) / mm
     return depth
 
 
@@ -181,8 +211,13 @@ def finger_jitter(clip: Clip, joints: list[int]) -> float:
     curves as :func:`finger_angles` reads them)."""
     if clip.num_frames < 3 or not joints:
         return 0.0
+    return float(_jitter_sums(clip, joints).sum() / ((clip.num_frames - 2) * 3 * len(joints)) * clip.fps ** 2)
+
+
+def _jitter_sums(clip: Clip, joints: list[int]) -> np.ndarray:
+    """Sum over frames and axes of the absolute second differences of each joint's curves, ``(len(joints),)``."""
     v = finger_angles(clip, joints)
-    return float(np.abs(np.diff(v, 2, axis=0)).mean() * clip.fps ** 2)
+    return np.abs(np.diff(v, 2, axis=0)).sum(axis=(0, 2))
 
 
 #: How much more the opening is held to its target where the input penetrates than where it is clear
@@ -240,7 +275,8 @@ def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.n
 
 def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 0.0,
                  config: InteractionConfig | None = None, smooth: bool = True,
-                 measure: bool = True, iterations: int = 9) -> tuple[Clip, CorrectionReport]:
+                 measure: bool = True, iterations: int = 9,
+                 world: np.ndarray | None = None) -> tuple[Clip, CorrectionReport]:
     """Push penetrating fingers out of the colliders, smoothly, changing as little as possible.
 
     Parameters
@@ -259,6 +295,10 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         Measure penetration before and after (the report's depths are zeros otherwise).
     iterations : int
         Bisection steps for the bound (the opening to ``2**-iterations`` of its path).
+    world : (T, J, 4, 4) float, optional
+        World transforms of a clip that differs from ``clip`` at most in the finger joints of
+        ``handmap`` (the input a synthesized clip was made from), when the caller has them: only
+        the fingers are posed again.
 
     Returns
     -------
@@ -268,7 +308,8 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     mm = 0.001 / clip.skeleton.meters_per_unit
     margin = margin_mm * mm
     resolution = cfg.tolerance_mm * mm
-    posers = chain_posers(clip, handmap, cfg)
+    world = with_fingers_posed(clip, handmap, world)
+    posers = chain_posers(clip, handmap, cfg, world)
     T = clip.num_frames
     rotations = np.array(clip.rotations)
     unresolved, corrected = [], []
@@ -317,13 +358,35 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     out = clip.replace(rotations=rotations)
     finger_joints = sorted({j for p in posers for j in p.chain.joints})
     change = quat_angle_deg(np.asarray(clip.rotations)[:, finger_joints], rotations[:, finger_joints])
+    # what was not corrected is bit for bit the input: measured once, before
+    changed = [p for p in posers if p.chain.name in corrected]
+    moved = sorted({j for p in changed for j in p.chain.joints})
+    depth_before = depth_after = np.zeros(T)
+    if measure:
+        depth_before, depth_after = np.zeros(T), np.zeros(T)
+        after = {p.chain.name: p for p in chain_posers(out, HandMap(**{p.chain.side: handmap[p.chain.side]
+                                                                        for p in changed}), cfg,
+                                                        with_fingers_posed(out, handmap, world))} if changed else {}
+        for poser in posers:
+            d = _chain_depth_mm(clip, poser, colliders)
+            np.maximum(depth_before, d, out=depth_before)
+            if poser.chain.name in corrected:
+                d = _chain_depth_mm(out, after[poser.chain.name], colliders)
+            np.maximum(depth_after, d, out=depth_after)
+    jitter_before = jitter_after = 0.0
+    if T >= 3 and finger_joints:
+        sums = _jitter_sums(clip, finger_joints)
+        scale = clip.fps ** 2 / ((T - 2) * 3 * len(finger_joints))
+        jitter_before = jitter_after = float(sums.sum() * scale)
+        if moved:
+            sums[np.searchsorted(finger_joints, moved)] = _jitter_sums(out, moved)
+            jitter_after = float(sums.sum() * scale)
     report = CorrectionReport(
-        penetration_before_mm=penetration_depth_mm(clip, posers, colliders) if measure else np.zeros(T),
-        penetration_after_mm=(penetration_depth_mm(out, chain_posers(out, handmap, cfg), colliders)
-                              if measure else np.zeros(T)),
+        penetration_before_mm=depth_before,
+        penetration_after_mm=depth_after,
         frames_corrected=int(opened.sum()),
-        jitter_before=finger_jitter(clip, finger_joints),
-        jitter_after=finger_jitter(out, finger_joints),
+        jitter_before=jitter_before,
+        jitter_after=jitter_after,
         max_change_deg=float(change.max(initial=0.0)),
         unresolved=unresolved,
         chains_corrected=corrected,

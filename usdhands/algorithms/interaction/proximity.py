@@ -36,9 +36,9 @@ def _shells(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
 
 def _closed(faces: np.ndarray) -> bool:
     """Whether every edge is shared by exactly two faces, in opposite directions (a closed, oriented shell)."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = np.sort(e, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).astype(np.int64)
+    key = np.minimum(e[:, 0], e[:, 1]) * (int(e.max(initial=0)) + 1) + np.maximum(e[:, 0], e[:, 1])  # one int per edge
+    _, inv, counts = np.unique(key, return_inverse=True, return_counts=True)
     if np.any(counts != 2):
         return False
     forward = (e[:, 0] < e[:, 1]).astype(int)

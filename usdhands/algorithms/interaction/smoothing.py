@@ -51,11 +51,13 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
     P_filt = np.empty((T, 2, 2))
     K = np.empty((T, 2))
     P = np.array([[r, 0.0], [0.0, 1e6]])
+    steady = T  # the gains are the same from this frame on
     for t in range(T):
         if t > 0:
             P = F @ P @ F.T + Q
         if t > 1 and np.allclose(P, P_pred[t - 1], rtol=1e-13, atol=0.0):  # steady state reached
             P_pred[t:], K[t:], P_filt[t:] = P_pred[t - 1], K[t - 1], P_filt[t - 1]
+            steady = t - 1
             break
         P_pred[t] = P
         k = P[:, 0] / (P[0, 0] + r)
@@ -64,10 +66,15 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
         P_filt[t] = P
     G = P_filt[:-1] @ F.T @ np.linalg.inv(P_pred[1:])  # (T-1, 2, 2) smoother gains
     flat = z.reshape(T, -1)
+    # Where the gains are steady both passes are a fixed linear recursion of the 2-vector state,
+    # x_t = A x_(t-1) + u_t, so each state component follows the second-order recursion
+    # x_t = tr(A) x_(t-1) - det(A) x_(t-2) + u_t + (A - tr(A) I) u_(t-1) (Cayley-Hamilton),
+    # run by scipy's lfilter; the frames before (and the two that start each recursion) are stepped.
+    head = min(steady + 2, T)
     pos = np.empty_like(flat)
     vel = np.empty_like(flat)
     p, v = flat[0].copy(), np.zeros(flat.shape[1])
-    for t in range(T):  # filter: predict, then correct with the shared gain
+    for t in range(head):  # filter: predict, then correct with the shared gain
         if t > 0:
             p = p + dt * v
         innov = flat[t] - p
@@ -75,16 +82,51 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
         v = v + K[t, 1] * innov
         pos[t] = p
         vel[t] = v
-    sp, sv = pos[-1].copy(), vel[-1].copy()
-    out = np.empty_like(flat)
-    out[-1] = sp
+    if head < T:
+        k = K[-1]
+        A = (np.eye(2) - np.outer(k, [1.0, 0.0])) @ F
+        u = (k[0] * flat, k[1] * flat)  # u_t = K z_t
+        _recur(A, u, (pos, vel), head, T)
+    sp, sv = np.empty_like(flat), np.empty_like(flat)
+    sp[-1], sv[-1] = pos[-1], vel[-1]
+    tail = T - 3 if steady <= T - 4 else 0  # the recursion runs backward from here to `steady`
     for t in range(T - 2, -1, -1):  # RTS backward pass
-        dp = sp - (pos[t] + dt * vel[t])
-        dv = sv - vel[t]
-        sp = pos[t] + G[t, 0, 0] * dp + G[t, 0, 1] * dv
-        sv = vel[t] + G[t, 1, 0] * dp + G[t, 1, 1] * dv
-        out[t] = sp
-    return out.reshape(z.shape)
+        if t == tail - 1 and tail > 0:
+            break
+        dp = sp[t + 1] - (pos[t] + dt * vel[t])
+        dv = sv[t + 1] - vel[t]
+        sp[t] = pos[t] + G[t, 0, 0] * dp + G[t, 0, 1] * dv
+        sv[t] = vel[t] + G[t, 1, 0] * dp + G[t, 1, 1] * dv
+    if tail > 0:
+        g = G[-1]
+        n = np.eye(2) - g @ F  # s_t = G s_(t+1) + (I - G F) x_t
+        u = (n[0, 0] * pos + n[0, 1] * vel, n[1, 0] * pos + n[1, 1] * vel)
+        rev = lambda a: a[::-1]  # noqa: E731  time reversed: the backward pass runs forward
+        _recur(g, tuple(map(rev, u)), (rev(sp), rev(sv)), T - tail, T - steady)
+        for t in range(steady - 1, -1, -1):
+            dp = sp[t + 1] - (pos[t] + dt * vel[t])
+            dv = sv[t + 1] - vel[t]
+            sp[t] = pos[t] + G[t, 0, 0] * dp + G[t, 0, 1] * dv
+            sv[t] = vel[t] + G[t, 1, 0] * dp + G[t, 1, 1] * dv
+    return sp.reshape(z.shape)
+
+
+def _recur(A: np.ndarray, u: tuple, x: tuple, start: int, stop: int) -> None:
+    """Run ``x_t = A x_(t-1) + u_t`` for ``t`` in ``[start, stop)`` in place, by lfilter on each component.
+
+    ``A`` ``(2, 2)``; ``u`` and ``x``: the two components, ``(T, C)`` arrays (views allowed);
+    ``x`` holds the states at ``start - 2`` and ``start - 1`` (``start >= 2``).
+    """
+    from scipy.signal import lfilter
+
+    tr, det = float(np.trace(A)), float(np.linalg.det(A))
+    a = np.array([1.0, -tr, det])
+    C = A - tr * np.eye(2)
+    for i in range(2):
+        w = u[i][start:stop] + C[i, 0] * u[0][start - 1:stop - 1] + C[i, 1] * u[1][start - 1:stop - 1]
+        y1, y2 = x[i][start - 1], x[i][start - 2]
+        zi = np.stack([tr * y1 - det * y2, -det * y1])  # lfilter's state after y_(start-1), y_(start-2)
+        x[i][start:stop] = lfilter([1.0], a, w, axis=0, zi=zi)[0]
 
 
 def smoothness_weight(fps: float, time_scale_s: float) -> float:
