@@ -11,7 +11,7 @@ import trimesh
 
 from usdhands.algorithms.interaction.clearance import axis_clearance
 from usdhands.algorithms.interaction.colliders import Colliders, attached_xforms, mesh_collider
-from usdhands.algorithms.interaction.proximity import MeshProximity
+from usdhands.algorithms.interaction.proximity import MeshProximity, _barycentric
 from usdhands.errors import AssetReadError
 from usdhands.formats.props import check_prop_units, read_props
 from usdhands.model.prop import PropMesh
@@ -55,6 +55,24 @@ def test_fast_signed_distance_matches_trimesh_on_the_sample_cup():
     # trimesh on the whole mesh: the sign is wrong at a few points in the wall where the handle enters
     whole = -trimesh.proximity.signed_distance(mesh, pts)
     assert 0.99 < np.mean(np.sign(fast) == np.sign(whole)) < 1.0
+
+
+@pytest.mark.parametrize("shape", ["box", "cylinder"])
+def test_sign_on_edges_and_on_shells_wound_inward_matches_trimesh(shape):
+    """Points whose nearest surface point is on an edge or a corner (a box's and a cylinder's rims)
+    take the side of the edge's pseudonormal or the winding number; a closed shell wound inward
+    (every face reversed, as some exporters write) measures like the one wound outward."""
+    mesh = trimesh.creation.box([2.0, 3.0, 4.0]) if shape == "box" else trimesh.creation.cylinder(1.5, 4.0, sections=24)
+    pts = _near_points(mesh, 4000, 0.6, seed=3)
+    reference = -trimesh.proximity.signed_distance(mesh, pts)
+    outward = MeshProximity(mesh.vertices, mesh.faces)
+    part = outward.parts[0]
+    d, face, closest = part.distance(pts)
+    on_edge = np.sum(_barycentric(closest, mesh.vertices[mesh.faces[face]]) <= 1e-6, axis=1) >= 1
+    assert on_edge.sum() > 500  # edges and corners exercised
+    np.testing.assert_allclose(outward.signed_distance(pts), reference, atol=1e-9)
+    np.testing.assert_allclose(MeshProximity(mesh.vertices, mesh.faces[:, ::-1]).signed_distance(pts), reference,
+                               atol=1e-9)
 
 
 @pytest.mark.skipif(not MUG.exists(), reason="shared assets not present")

@@ -18,7 +18,8 @@ __all__ = ["axis_clearance"]
 
 
 def axis_clearance(colliders, frames: np.ndarray, a: np.ndarray, b: np.ndarray, need: np.ndarray,
-                   resolution: float, *, find_depth: bool = False, max_levels: int = 24) -> tuple[np.ndarray, np.ndarray]:
+                   resolution: float, *, find_depth: bool = False, max_levels: int = 24,
+                   end_distances: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Bounds on the smallest signed distance along each capsule axis.
 
     Parameters
@@ -37,6 +38,10 @@ def axis_clearance(colliders, frames: np.ndarray, a: np.ndarray, b: np.ndarray, 
         False: stop a capsule as soon as it is known to pass or fail ``need`` (a
         clearance test). True: keep refining below ``need`` until ``upper - lower <=
         resolution`` (a penetration depth).
+    end_distances : ((K,), (K,)) float, optional
+        The signed distances at ``a`` and ``b`` when the caller has measured them (a chain's
+        segments share their joints), exact wherever below ``need`` plus the axis length
+        (lower bounds beyond, as ``colliders`` gives them).
 
     Returns
     -------
@@ -51,11 +56,14 @@ def axis_clearance(colliders, frames: np.ndarray, a: np.ndarray, b: np.ndarray, 
     need = np.asarray(need, dtype=np.float64)
     K = len(frames)
     length = np.linalg.norm(b - a, axis=1)
-    ends = np.concatenate([a, b])
-    f2 = np.concatenate([frames, frames])
-    cut = np.concatenate([need, need]) + np.concatenate([length, length])
-    d = colliders.signed_distance(f2, ends, cut)
-    d0, d1 = d[:K], d[K:]
+    if end_distances is None:
+        ends = np.concatenate([a, b])
+        f2 = np.concatenate([frames, frames])
+        cut = np.concatenate([need, need]) + np.concatenate([length, length])
+        d = colliders.signed_distance(f2, ends, cut)
+        d0, d1 = d[:K], d[K:]
+    else:
+        d0, d1 = (np.asarray(d, dtype=np.float64) for d in end_distances)
     upper = np.minimum(d0, d1)
     # open intervals: capsule index, parameters t0 < t1 and distances at both ends
     cap = np.arange(K)

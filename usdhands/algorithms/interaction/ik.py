@@ -182,8 +182,17 @@ class ChainPoser:
         a, b = a[:, first:], b[:, first:]
         n = a.shape[1]
         need = np.tile(self.chain.radii[first:] + margin, K)
+        # the joints are measured once: each is the end of one segment and the start of the next
+        joints = np.concatenate([a, b[:, -1:]], axis=1)  # (K, n + 1, 3)
+        length = np.linalg.norm(b - a, axis=2)
+        cut = np.full((K, n + 1), -np.inf)
+        cut[:, :-1] = need.reshape(K, n) + length
+        cut[:, 1:] = np.maximum(cut[:, 1:], need.reshape(K, n) + length)
+        d = colliders.signed_distance(np.repeat(frames, n + 1), joints.reshape(-1, 3), cut.reshape(-1))
+        d = d.reshape(K, n + 1)
         f = np.repeat(frames, n)
-        lower, upper = axis_clearance(colliders, f, a.reshape(-1, 3), b.reshape(-1, 3), need, resolution)
+        lower, upper = axis_clearance(colliders, f, a.reshape(-1, 3), b.reshape(-1, 3), need, resolution,
+                                      end_distances=(d[:, :-1].reshape(-1), d[:, 1:].reshape(-1)))
         ok = (lower >= need - 0.5 * resolution) & (upper >= need)
         return ok.reshape(K, n).all(axis=1)
 

@@ -57,6 +57,8 @@ class _Part:
         remap[used] = np.arange(len(used))
         self.vertices = np.ascontiguousarray(vertices[used])
         self.faces = np.ascontiguousarray(remap[faces])
+        if closed and _signed_volume(self.vertices, self.faces) < 0:
+            self.faces = np.ascontiguousarray(self.faces[:, ::-1])  # wound inward: the side test needs outward
         self.closed = closed
         self.bounds = np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
         self.tree = igl.AABB()
@@ -68,7 +70,11 @@ class _Part:
             self.winding.init(self.vertices, self.faces, 2)
         tri = self.vertices[self.faces]
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        self.normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        area2 = np.linalg.norm(n, axis=1, keepdims=True)
+        self.normals = n / np.maximum(area2, 1e-300)
+        self.neighbours = _edge_neighbours(self.faces) if closed else None
+        scale = float(np.abs(self.bounds).max(initial=1.0))
+        self.flat = area2[:, 0] <= 1e-12 * scale * scale  # no usable normal
 
     def bbox_distance(self, p: np.ndarray) -> np.ndarray:
         gap = np.maximum(0.0, np.maximum(self.bounds[0] - p, p - self.bounds[1]))
@@ -93,9 +99,21 @@ class _Part:
         side = np.einsum("ij,ij->i", p - closest, self.normals[face])
         tri = self.vertices[self.faces[face]]
         bary = _barycentric(closest, tri)
-        interior = np.all(bary > 1e-6, axis=1) & (np.abs(side) > 1e-12 * (1.0 + d))
+        on = bary <= 1e-6
+        decided = ~on.any(axis=1) & (np.abs(side) > 1e-12 * (1.0 + d)) & ~self.flat[face]
         inside = side < 0
-        rest = ~interior & (d > 0)
+        # nearest on an edge's inside: the side of the edge's pseudonormal, the sum of its two faces'
+        # normals, decides (Baerentzen and Aanaes 2005: exact for a closed, oriented manifold edge)
+        edge = (on.sum(axis=1) == 1) & (d > 0)
+        if edge.any():
+            f = face[edge]
+            g = self.neighbours[f, np.argmax(on[edge], axis=1)]
+            s = np.einsum("ij,ij->i", p[edge] - closest[edge], self.normals[f] + self.normals[g])
+            sure = (np.abs(s) > 1e-12 * (1.0 + d[edge])) & ~self.flat[f] & ~self.flat[g]
+            idx = np.nonzero(edge)[0][sure]
+            decided[idx] = True
+            inside[idx] = s[sure] < 0
+        rest = ~decided & (d > 0)
         if rest.any():
             inside[rest] = self._parity(p[rest])
         return np.where(inside, -d, d)
@@ -108,6 +126,29 @@ class _Part:
             self._fwn = igl.FastWindingNumberBVH()
             self._fwn.init(self.vertices, self.faces, 2)
         return self._fwn.winding_number(np.ascontiguousarray(p)) > 0.5
+
+
+def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Volume enclosed by a closed shell, negative when its faces are wound inward."""
+    t = vertices[faces]
+    return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
+
+
+def _edge_neighbours(faces: np.ndarray) -> np.ndarray:
+    """For each face and corner ``k``, the face across the edge opposite corner ``k``, ``(F, 3)``
+    (every edge shared by exactly two faces: a closed shell)."""
+    F = len(faces)
+    a = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]]).astype(np.int64)  # edge opposite corner 0, 1, 2
+    b = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]]).astype(np.int64)
+    key = np.minimum(a, b) * (int(faces.max(initial=0)) + 1) + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    pairs = order.reshape(-1, 2)  # each key exactly twice
+    slot = np.empty(3 * F, dtype=np.int64)
+    slot[pairs[:, 0]] = pairs[:, 1]
+    slot[pairs[:, 1]] = pairs[:, 0]
+    out = np.empty((F, 3), dtype=np.int64)
+    out[:, 0], out[:, 1], out[:, 2] = slot[:F] % F, slot[F:2 * F] % F, slot[2 * F:] % F
+    return out
 
 
 def _barycentric(x: np.ndarray, tri: np.ndarray) -> np.ndarray:

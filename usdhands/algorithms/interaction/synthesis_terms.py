@@ -173,10 +173,23 @@ class InteractionTerms:
         resolution = 2.0 * mm
         local = np.array(self.to_local(curves))
         fixed = np.zeros(len(frames), dtype=bool)
+        parent_distance = {}  # per parent joint: its distance to the colliders at each input frame
         for poser, cols, reach in self._chains():
             centre = poser.parent_world[frames, :3, 3]
             r = reach + margin
             near = np.nonzero(self.colliders.bbox_gap(frames, centre - r, centre + r) <= 0)[0]
+            if len(near):
+                # every point of the chain's capsules lies within `reach` of its parent joint, which
+                # the candidates do not move: where that joint is farther than `reach` plus the margin
+                # from every collider, no candidate can touch
+                parent = int(self.clip.skeleton.parents[poser.chain.joints[0]])
+                if parent not in parent_distance:
+                    parent_distance[parent] = np.full(self.clip.num_frames, np.nan)
+                known = parent_distance[parent]
+                todo = np.unique(frames[near][np.isnan(known[frames[near]])])
+                if len(todo):
+                    known[todo] = self.colliders.signed_distance(todo, poser.parent_world[todo, :3, 3], r)
+                near = near[known[frames[near]] < r]
             if len(near) == 0:
                 continue
             rel = quat_multiply(quat_conjugate(poser.rest_rotations)[None], local[near][:, cols])
