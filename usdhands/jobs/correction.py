@@ -166,8 +166,10 @@ def correct(source: str | os.PathLike, output: str | os.PathLike, options: Corre
         A bad input or option (unreadable file or prop, no hands, a unit slip in a prop, a bad
         ``attach``, an output equal to an input); nothing is written then.
     """
-    from usdhands.formats.io import read_clip, write_clip
+    from usdhands.errors import AssetReadError, NoSkeletonError
+    from usdhands.formats.io import read_asset, write_clip
     from usdhands.jobs.inputs import check_plot_folder, handmap_for
+    from usdhands.jobs.props import hand_meshes
 
     source, output = Path(source), Path(output)
     progress = progress or _no_progress
@@ -180,11 +182,17 @@ def correct(source: str | os.PathLike, output: str | os.PathLike, options: Corre
     check_correct_options(options)
     check_plot_folder(options.plot, FILES, inputs)
     progress(0, 3, "reading")
-    clip = read_clip(source, animation=options.animation)
+    asset = read_asset(source)
+    if not asset.skeletons:
+        raise NoSkeletonError("no skeleton in file", path=source)
+    try:
+        clip = asset.clip(options.animation)
+    except KeyError as e:
+        raise AssetReadError(str(e.args[0]).split(": ", 1)[-1], path=source) from None
     handmap = handmap_for(clip, source, options.handmap)
     progress(1, 3, "correcting")
     start = time.perf_counter()
-    fixed, report, colliders, config = correct_loaded(clip, handmap, options, source)
+    fixed, report, colliders, config = correct_loaded(clip, handmap, options, source, hand_meshes(asset, clip))
     seconds = time.perf_counter() - start
     progress(2, 3, "writing")
     written = write_clip(source, fixed, output, provenance=correction_provenance(options, config), **write_opts)
@@ -206,17 +214,19 @@ def check_correct_options(options: CorrectOptions) -> None:
     check_prop_options(options)
 
 
-def correct_loaded(clip, handmap, options: CorrectOptions, path):
+def correct_loaded(clip, handmap, options: CorrectOptions, path, meshes=()):
     """The correction of a clip already read: ``(corrected clip, CorrectionReport, Colliders, InteractionConfig)``.
 
-    ``path`` names the animation in errors (a file, or a stage's root layer).
+    ``path`` names the animation in errors (a file, or a stage's root layer); ``meshes``: the
+    meshes skinned to the clip's skeleton, whose vertices give the finger capsules' radii.
     """
     from usdhands.algorithms.interaction.correction import correct_clip
     from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
-    from usdhands.jobs.props import build_colliders, read_scene_props
+    from usdhands.jobs.props import build_colliders, read_scene_props, with_mesh_radii
 
     config = load_interaction_config(options.interaction_config) if options.interaction_config \
         else InteractionConfig()
+    config = with_mesh_radii(config, clip, handmap, meshes)
     props = read_scene_props(options, clip)
     colliders, _ = build_colliders(options, clip, handmap, props, path=path)
     fixed, report = correct_clip(clip, handmap, colliders, margin_mm=options.margin, config=config)

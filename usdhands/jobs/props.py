@@ -136,6 +136,29 @@ def build_colliders(options, clip, handmap, props, path=None, world=None):
     return Colliders(items), attachments
 
 
+def hand_meshes(asset, clip) -> list:
+    """The meshes of ``asset`` skinned to ``clip``'s skeleton (with joint influences)."""
+    index = next((i for i, sk in enumerate(asset.skeletons) if sk is clip.skeleton), None)
+    if index is None:
+        index = next((i for i, sk in enumerate(asset.skeletons)
+                      if tuple(sk.joint_names) == tuple(clip.skeleton.joint_names)), None)
+    return [m for m in asset.meshes if index is not None and m.skeleton_index == index
+            and m.joint_indices is not None and m.joint_weights is not None]
+
+
+def with_mesh_radii(config, clip, handmap, meshes):
+    """``config`` with the finger capsule radii measured on ``meshes`` (the hands' skinned mesh), unless
+    the configuration turns that off (``mesh_radii``); joints it names keep their radii."""
+    from usdhands.algorithms.interaction.finger_geometry import mesh_radii
+
+    if not config.mesh_radii or not meshes:
+        return config
+    measured = {}
+    for hand in handmap.sides:
+        measured.update(mesh_radii(clip.skeleton, hand, meshes, config))
+    return config.with_mesh_radii(measured)
+
+
 def corrected_for_props(options, path, clip, handmap):
     """``clip`` corrected against ``--props`` (``db build --props``): the report's dict and the clip."""
     from usdhands.algorithms.interaction.correction import correct_clip

@@ -206,8 +206,12 @@ def synthesize(source: str | os.PathLike, output: str | os.PathLike, options: Sy
         from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
         from usdhands.jobs.props import read_scene_props, synthesis_interaction
 
+        from usdhands.jobs.props import hand_meshes, with_mesh_radii
+
         iconfig = load_interaction_config(options.interaction_config) if options.interaction_config \
             else InteractionConfig()
+        if not added:  # a grafted hand has no mesh of its own
+            iconfig = with_mesh_radii(iconfig, clip, handmap, hand_meshes(asset, clip))
         world = clip.world_xforms()  # the input posed once: props, terms and the correction of the result
         props = read_scene_props(options, clip, world)
         interaction, colliders = synthesis_interaction(options, clip, handmap, db, cfg, props, iconfig, path=source,

@@ -1,7 +1,8 @@
 """The hand as capsules: one per finger segment, with joint axes and limits from the rig.
 
 Radii per finger and segment are those of an average adult hand (about 6.5 to 10 mm,
-proximal to distal), configurable; lengths come from the rig (joint to child joint, the
+proximal to distal), configurable, or measured on the hand's skinned mesh where the file
+has one (:func:`mesh_radii`); lengths come from the rig (joint to child joint, the
 last segment to the end joint, or 0.8 of the previous bone where the rig has no end
 joint). Each finger joint's Euler axes get a role found from the rest pose: **twist**
 along the bone, **flexion** across the hand (the axis nearest the line from the index
@@ -13,7 +14,7 @@ and role, in degrees.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ from usdhands.model.handmap import FINGERS, HandSide
 from usdhands.model.rotations import DEFAULT_EULER_ORDER
 from usdhands.model.skeleton import Skeleton
 
-__all__ = ["InteractionConfig", "FingerChain", "finger_chains", "load_interaction_config",
+__all__ = ["InteractionConfig", "FingerChain", "finger_chains", "load_interaction_config", "mesh_radii",
            "DEFAULT_RADII_MM", "DEFAULT_LIMITS_DEG"]
 
 #: Capsule radius per finger, proximal to distal segment, millimetres (average adult hand).
@@ -67,6 +68,14 @@ class InteractionConfig:
         Half the deepest penetration the clearance test lets through (the search's resolution).
     smoothing_s : float
         Time scale of the smoothers on a corrected finger, seconds.
+    joint_radii_mm : dict
+        Joint name (or path) to the radius of the segment it starts, mm; overrides
+        ``radii_mm`` for that joint. The jobs fill it from the hand's skinned mesh (``mesh_radii``), names
+        given here taking precedence.
+    mesh_radii : bool
+        Where the animation file has a mesh skinned to the hand, take each segment's radius
+        from the vertices it drives (:func:`mesh_radii`); ``radii_mm`` then applies only
+        where the mesh has too few of them.
     ik : str
         ``"opening"``: each chain opens along one path toward its rest pose, distal joints
         first in overlapping ramps, and the least clear opening is the bound (continuous in
@@ -80,6 +89,8 @@ class InteractionConfig:
     tip_fraction: float = 0.8
     tolerance_mm: float = 0.5
     smoothing_s: float = 0.15
+    joint_radii_mm: dict = field(default_factory=dict)
+    mesh_radii: bool = True
     ik: str = "opening"
 
     @classmethod
@@ -91,8 +102,22 @@ class InteractionConfig:
         limits = json.loads(json.dumps(base.limits_deg))
         for finger, roles in d.get("limits_deg", {}).items():
             limits[finger].update(roles)
-        rest = {k: d[k] for k in ("tip_fraction", "tolerance_mm", "smoothing_s", "ik") if k in d}
-        return cls(radii_mm=radii, limits_deg=limits, **rest)
+        rest = {k: d[k] for k in ("tip_fraction", "tolerance_mm", "smoothing_s", "mesh_radii", "ik") if k in d}
+        return cls(radii_mm=radii, limits_deg=limits, joint_radii_mm=dict(d.get("joint_radii_mm", {})), **rest)
+
+    def with_mesh_radii(self, measured_mm: dict) -> "InteractionConfig":
+        """This configuration with radii measured on a mesh (joint name to mm) where it names none."""
+        if not self.mesh_radii or not measured_mm:
+            return self
+        given = self.joint_radii_mm
+        kept = {k: v for k, v in measured_mm.items() if k not in given and k.rsplit("/", 1)[-1] not in given}
+        return replace(self, joint_radii_mm={**kept, **given})
+
+    def joint_radius_mm(self, name: str, default: float) -> float:
+        """The radius ``joint_radii_mm`` gives the joint (by its name or path, or its last path
+        component), else ``default``."""
+        r = self.joint_radii_mm.get(name)
+        return self.joint_radii_mm.get(name.rsplit("/", 1)[-1], default) if r is None else r
 
 
 def load_interaction_config(path: str | Path) -> InteractionConfig:
@@ -220,7 +245,8 @@ def finger_chains(skeleton: Skeleton, hand: HandSide, config: InteractionConfig 
             tip = np.asarray(skeleton.rest_translations[kids[0]], dtype=np.float64)
         else:
             tip = np.asarray(skeleton.rest_translations[last], dtype=np.float64) * cfg.tip_fraction
-        radii = np.array(_per_joint(cfg.radii_mm[finger], n), dtype=np.float64) * mm
+        radii = np.array([cfg.joint_radius_mm(skeleton.joint_names[j], r) * mm
+                          for j, r in zip(js, _per_joint(cfg.radii_mm[finger], n))], dtype=np.float64)
         axes, signs, limits = [], [], []
         lim_cfg = cfg.limits_deg[finger]
         per_role = {r: _per_joint(lim_cfg[r], n) for r in ROLES}
@@ -242,4 +268,72 @@ def finger_chains(skeleton: Skeleton, hand: HandSide, config: InteractionConfig 
             limits.append(box)
         out.append(FingerChain(hand.side, finger, tuple(js), tip, radii, np.array(axes), np.array(signs),
                                np.array(limits)))
+    return out
+
+
+#: Fewest vertices a segment must drive (along the middle of its axis) for its radius to be measured.
+MESH_RADIUS_MIN_VERTICES = 8
+
+
+def mesh_radii(skeleton: Skeleton, hand: HandSide, meshes, config: InteractionConfig | None = None) -> dict:
+    """Capsule radius of each finger segment measured on the meshes skinned to the hand.
+
+    A vertex belongs to the joint with its largest weight, if that weight is at least 0.5.
+    A segment's radius is the median distance from its axis (the joint to the next joint,
+    or to the tip) of the vertices its joint drives that lie over the middle 70% of the
+    axis (the knuckles' flesh belongs to both neighbours), in the bind pose: for a finger
+    modelled as a tube, the tube's radius. Segments with fewer than
+    :data:`MESH_RADIUS_MIN_VERTICES` such vertices are left out (the configuration's radius applies).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The meshes' skeleton.
+    hand : HandSide
+    meshes : sequence of SkinnedMesh
+        Meshes bound to ``skeleton`` (others, and meshes without influences, are ignored by the caller).
+    config : InteractionConfig, optional
+        For the tip of a chain without an end joint.
+
+    Returns
+    -------
+    dict
+        Name of the segment's joint to its radius, mm.
+    """
+    pts, owner = [], []
+    for mesh in meshes:
+        if mesh.joint_indices is None or mesh.joint_weights is None or not len(mesh.points):
+            continue
+        idx = np.asarray(mesh.joint_indices).reshape(len(mesh.points), -1)
+        w = np.asarray(mesh.joint_weights, dtype=np.float64).reshape(idx.shape)
+        if not idx.size:
+            continue
+        best = np.argmax(w, axis=1)
+        keep = w[np.arange(len(w)), best] >= 0.5
+        p = np.asarray(mesh.points, dtype=np.float64)[keep]
+        m = np.asarray(mesh.geom_bind_xform, dtype=np.float64)
+        pts.append(p @ m[:3, :3].T + m[:3, 3])
+        owner.append(idx[np.arange(len(idx)), best][keep])
+    if not pts:
+        return {}
+    pts, owner = np.concatenate(pts), np.concatenate(owner)
+    bind = skeleton.bind_xforms if skeleton.bind_xforms is not None else skeleton.rest_world_xforms()
+    out = {}
+    for chain in finger_chains(skeleton, hand, config):
+        js = list(chain.joints)
+        ends = [bind[j, :3, 3] for j in js] + [bind[js[-1], :3, :3] @ chain.tip_offset + bind[js[-1], :3, 3]]
+        for k, j in enumerate(js):
+            q = pts[owner == j]
+            a, b = ends[k], ends[k + 1]
+            ab = b - a
+            length2 = float(ab @ ab)
+            if len(q) < MESH_RADIUS_MIN_VERTICES or length2 <= 0:
+                continue
+            t = (q - a) @ ab / length2
+            q = q[(t > 0.15) & (t < 0.85)]
+            if len(q) < MESH_RADIUS_MIN_VERTICES:
+                continue
+            t = (q - a) @ ab / length2
+            r = float(np.median(np.linalg.norm(q - (a + t[:, None] * ab), axis=1)))
+            out[skeleton.joint_names[j]] = r * skeleton.meters_per_unit * 1000.0
     return out

@@ -1,0 +1,119 @@
+"""Finger capsules from the skinned hand mesh: a hand made of tubes of known radii gives those radii,
+and the correction measures penetration with them (the configuration's table where the mesh has
+too few vertices, names in the configuration first)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, finger_chains, mesh_radii
+from usdhands.model.asset import Asset, SkinnedMesh
+from usdhands.model.clip import Clip
+from usdhands.samples.humanoid import humanoid_handmap, humanoid_skeleton
+
+#: Tube radius per segment of the left hand's fingers, cm (the default table says 6.5 to 10 mm).
+TUBE_CM = {"thumb": (0.71, 0.62, 0.53), "index": (0.5, 0.45, 0.4), "middle": (0.52, 0.47, 0.42),
+           "ring": (0.5, 0.44, 0.38), "pinky": (0.45, 0.4, 0.35)}
+
+
+def tube_hand(skeleton, hand, rings: int = 12, around: int = 16, skip: tuple = ()) -> SkinnedMesh:
+    """A mesh of one tube per finger segment (joint to next joint or tip) of radius :data:`TUBE_CM`,
+    every vertex skinned fully to the segment's joint; ``skip``: joint names given no tube."""
+    rest = skeleton.rest_world_xforms()
+    pts, faces, joints = [], [], []
+    for chain in finger_chains(skeleton, hand):
+        js = list(chain.joints)
+        ends = [rest[j, :3, 3] for j in js] + [rest[js[-1], :3, :3] @ chain.tip_offset + rest[js[-1], :3, 3]]
+        for k, j in enumerate(js):
+            if skeleton.joint_names[j].rsplit("/", 1)[-1] in skip:
+                continue
+            a, b = ends[k], ends[k + 1]
+            axis = (b - a) / np.linalg.norm(b - a)
+            e1 = np.cross(axis, [0.0, 0.0, 1.0] if abs(axis[2]) < 0.9 else [1.0, 0.0, 0.0])
+            e1 /= np.linalg.norm(e1)
+            e2 = np.cross(axis, e1)
+            t = np.linspace(0.0, 1.0, rings)[:, None, None]
+            u = np.linspace(0.0, 2 * np.pi, around, endpoint=False)[None, :, None]
+            ring = a + t * (b - a) + TUBE_CM[chain.finger][k] * (np.cos(u) * e1 + np.sin(u) * e2)
+            base = sum(len(p) for p in pts)
+            pts.append(ring.reshape(-1, 3))
+            for r in range(rings - 1):
+                for s in range(around):
+                    i0, i1 = base + r * around + s, base + r * around + (s + 1) % around
+                    faces += [[i0, i1, i1 + around], [i0, i1 + around, i0 + around]]
+            joints += [j] * (rings * around)
+    points = np.concatenate(pts)
+    faces = np.asarray(faces)
+    return SkinnedMesh("hand", points, np.full(len(faces), 3), faces.reshape(-1),
+                       joint_indices=np.asarray(joints)[:, None], joint_weights=np.ones((len(points), 1)))
+
+
+def test_the_radii_of_a_hand_made_of_tubes():
+    sk = humanoid_skeleton()
+    hand = humanoid_handmap(sk)["left"]
+    measured = mesh_radii(sk, hand, [tube_hand(sk, hand, skip=("LeftHandRing3",))])
+    for chain in finger_chains(sk, hand):
+        for k, j in enumerate(chain.joints):
+            name = sk.joint_names[j].rsplit("/", 1)[-1]
+            if name == "LeftHandRing3":
+                assert sk.joint_names[j] not in measured  # no vertices: the configuration's radius applies
+                continue
+            assert measured[sk.joint_names[j]] == pytest.approx(TUBE_CM[chain.finger][k] * 10.0, rel=1e-9)  # mm
+    config = InteractionConfig(joint_radii_mm={"LeftHandIndex1": 7.5}).with_mesh_radii(measured)
+    radii = {c.finger: c.radii for c in finger_chains(sk, hand, config)}
+    np.testing.assert_allclose(radii["index"], [0.75, 0.45, 0.4])  # the name given wins over the mesh
+    np.testing.assert_allclose(radii["ring"], [0.5, 0.44, InteractionConfig().radii_mm["ring"][2] / 10.0])
+    assert InteractionConfig(mesh_radii=False).with_mesh_radii(measured).joint_radii_mm == {}
+
+
+def test_weights_below_half_do_not_count():
+    sk = humanoid_skeleton()
+    hand = humanoid_handmap(sk)["left"]
+    mesh = tube_hand(sk, hand)
+    weak = SkinnedMesh(mesh.name, mesh.points, mesh.face_vertex_counts, mesh.face_vertex_indices,
+                       joint_indices=np.concatenate([mesh.joint_indices, np.zeros_like(mesh.joint_indices)], axis=1),
+                       joint_weights=np.full((len(mesh.points), 2), 0.5) - [0.0, 1e-3] * np.array([[-1.0, 1.0]]))
+    assert mesh_radii(sk, hand, [weak]) == mesh_radii(sk, hand, [mesh])  # 0.501 to the finger joint
+    none = SkinnedMesh(mesh.name, mesh.points, mesh.face_vertex_counts, mesh.face_vertex_indices,
+                       joint_indices=np.concatenate([mesh.joint_indices, mesh.joint_indices + 1], axis=1),
+                       joint_weights=np.full((len(mesh.points), 2), 0.49))
+    assert mesh_radii(sk, hand, [none]) == {}
+
+
+@pytest.fixture(scope="module")
+def hand_on_a_ledge(tmp_path_factory):
+    """The humanoid at rest with its left hand of tubes written as .glb, and a block 7 mm below the
+    middle of the index's proximal segment (the tube there is 5 mm thick, the default capsule 9 mm)."""
+    from usdhands.formats.io import write_asset
+
+    sk = humanoid_skeleton()
+    hand = humanoid_handmap(sk)["left"]
+    clip = Clip(sk, 30.0, np.tile(sk.rest_rotations, (4, 1, 1)), name="rest")
+    folder = tmp_path_factory.mktemp("ledge")
+    src = folder / "hand.glb"
+    write_asset(Asset("hand", (sk,), (clip,), (tube_hand(sk, hand),)), src)
+    rest = sk.rest_world_positions()
+    a, b = rest[sk.index("LeftHandIndex1")], rest[sk.index("LeftHandIndex2")]
+    mid = (a + b) / 2
+    block = trimesh.creation.box([0.6, 1.0, 0.8])
+    block.apply_translation(mid + [0.0, -0.7 - 0.5, 0.0])  # its top 7 mm below the axis
+    prop = folder / "ledge.obj"
+    (block.apply_scale(0.01)).export(prop)  # the .glb reads back in metres; an OBJ is taken in the clip's units
+    return src, prop, folder
+
+
+@pytest.mark.parametrize("config, deepest_mm", [({}, 0.0), ({"mesh_radii": False}, 2.0),
+                                                ({"joint_radii_mm": {"LeftHandIndex1": 8.0}}, 1.0)])
+def test_correct_measures_the_fingers_the_file_draws(hand_on_a_ledge, config, deepest_mm):
+    from usdhands.jobs.correction import CorrectOptions, correct
+
+    src, prop, folder = hand_on_a_ledge
+    cfg = folder / f"config{len(json.dumps(config))}.json"
+    cfg.write_text(json.dumps(config))
+    result = correct(src, folder / "out.glb", CorrectOptions(props=(prop,), interaction_config=cfg))
+    assert result.penetration_before_mm["max"] == pytest.approx(deepest_mm, abs=0.06)
+    assert result.chains_corrected == (("left index",) if deepest_mm else ())
