@@ -309,3 +309,71 @@ def test_correction_of_a_clip_differing_in_its_fingers_reuses_the_inputs_world_t
     assert report.chains_corrected and report.to_dict()["penetration_before_mm"]["max"] > 1.0
     np.testing.assert_array_equal(reused.rotations, out.rotations)
     assert reused_report.to_dict() == report.to_dict()
+
+
+def _with_roll_joint(flat: bool = False):
+    """The humanoid with a roll joint between the left index's first two joints (twisted 25 degrees
+    at rest, animated), or with the second joint moved under the hand (``flat``); the index curls."""
+    from scipy.spatial.transform import Rotation
+
+    from usdhands.model.clip import Clip
+    from usdhands.model.rotations import quat_conjugate, quat_multiply
+    from usdhands.model.skeleton import Skeleton
+    from usdhands.samples.humanoid import humanoid_skeleton
+
+    def quat_from_axis_angle(axis, radians):
+        return Rotation.from_rotvec(np.multiply.outer(np.atleast_1d(radians), axis)).as_quat().reshape(
+            np.shape(radians) + (4,))
+
+    sk = humanoid_skeleton()
+    i1, i2 = sk.index("LeftHandIndex1"), sk.index("LeftHandIndex2")
+    names, parents = list(sk.joint_names), list(sk.parents)
+    tr, rot = np.array(sk.rest_translations), np.array(sk.rest_rotations)
+    bone = tr[i2] / 2
+    roll = quat_from_axis_angle(bone / np.linalg.norm(bone), np.radians(25.0))
+    # insert the roll after Index1; Index2 (and below) shift by one
+    names.insert(i1 + 1, names[i1] + "/Roll")
+    parents = [p + (p > i1) for p in parents]
+    parents.insert(i1 + 1, i1)
+    tr = np.insert(tr, i1 + 1, bone, axis=0)
+    rot = np.insert(rot, i1 + 1, roll, axis=0)
+    j2 = i2 + 1
+    parents[j2] = i1 + 1
+    tr[j2] = bone
+    rot[j2] = quat_multiply(quat_conjugate(roll), rot[j2])  # the same rest pose below the roll
+    tr[j2] = Rotation.from_quat(quat_conjugate(roll)).apply(bone)
+    if flat:
+        parents[j2] = sk.index("LeftHand")
+    skel = Skeleton(tuple(names), np.array(parents), tr, rot, meters_per_unit=sk.meters_per_unit, up_axis="Y")
+    T = 8
+    rotations = np.tile(skel.rest_rotations, (T, 1, 1))
+    twist = quat_from_axis_angle(bone / np.linalg.norm(bone), np.radians(np.linspace(0.0, 40.0, T)))
+    rotations[:, i1 + 1] = quat_multiply(twist, roll)
+    curl = quat_from_axis_angle(np.array([0.0, 0.0, 1.0]), np.radians(-np.linspace(10.0, 60.0, T)))
+    for j in (i1, j2, j2 + 1):
+        rotations[:, j] = quat_multiply(rotations[:, j], curl)
+    clip = Clip(skel, 30.0, rotations, name="roll")
+    return clip, humanoid_handmap(skel)
+
+
+def test_a_roll_joint_between_finger_joints_is_carried_along():
+    """The capsules the correction poses from the finger's angles end where the clip's forward
+    kinematics puts the joints, with an animated roll joint between two of them."""
+    from usdhands.algorithms.interaction.correction import finger_angles
+
+    clip, hm = _with_roll_joint()
+    world = clip.world_positions()
+    index = next(p for p in chain_posers(clip, hm, InteractionConfig()) if p.chain.name == "left index")
+    assert index.between is not None
+    frames = np.arange(clip.num_frames)
+    a, b = index.capsules(frames, finger_angles(clip, index.chain.joints))
+    np.testing.assert_allclose(a, world[:, list(index.chain.joints)], atol=1e-9)
+    np.testing.assert_allclose(b[:, :-1], world[:, list(index.chain.joints[1:])], atol=1e-9)
+
+
+def test_finger_joints_that_are_not_a_chain_are_refused():
+    from usdhands.errors import UnsupportedRigError
+
+    clip, hm = _with_roll_joint(flat=True)
+    with pytest.raises(UnsupportedRigError, match="left index finger's joints are not a chain: '.*LeftHandIndex2'"):
+        correct_clip(clip, hm, colliders_for(clip, cylinder_under_palm()))

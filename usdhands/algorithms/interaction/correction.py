@@ -132,7 +132,40 @@ def chain_posers(clip: Clip, handmap: HandMap, config: InteractionConfig,
             given = np.concatenate([world[:, js][:, :, :3, 3], tip[:, None]], axis=1)
             out.append(ChainPoser(chain, np.ascontiguousarray(pw), np.asarray(clip.translations[:, js]),
                                   np.asarray(clip.scales[:, js]), np.asarray(clip.skeleton.rest_rotations[js]),
-                                  given_points=given))
+                                  given_points=given, between=_between(clip, chain, world)))
+    return out
+
+
+def _between(clip: Clip, chain: FingerChain, world: np.ndarray) -> np.ndarray | None:
+    """The transforms from each chain joint to the next one's parent where that parent is a joint
+    below it rather than itself, ``(T, n, 4, 4)`` (None when every joint is the child of the one before).
+
+    Raises
+    ------
+    UnsupportedRigError
+        A chain joint that is not below the one before it (a flat rig): turning a finger joint
+        would not move the rest of the finger.
+    """
+    from usdhands.errors import UnsupportedRigError
+
+    sk = clip.skeleton
+    js = list(chain.joints)
+    out = None
+    for k in range(1, len(js)):
+        p = int(sk.parents[js[k]])
+        if p == js[k - 1]:
+            continue
+        a = p
+        while a >= 0 and a != js[k - 1]:
+            a = int(sk.parents[a])
+        if a < 0:
+            raise UnsupportedRigError(
+                f"the {chain.name} finger's joints are not a chain: '{sk.joint_names[js[k]]}' is not below "
+                f"'{sk.joint_names[js[k - 1]]}', so turning one would not move the next; correcting fingers "
+                f"needs each finger joint parented under the one before")
+        if out is None:
+            out = np.broadcast_to(np.eye(4), (clip.num_frames, len(js), 4, 4)).copy()
+        out[:, k] = np.linalg.inv(world[:, js[k - 1]]) @ world[:, p]
     return out
 
 
@@ -364,9 +397,10 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     depth_before = depth_after = np.zeros(T)
     if measure:
         depth_before, depth_after = np.zeros(T), np.zeros(T)
-        after = {p.chain.name: p for p in chain_posers(out, HandMap(**{p.chain.side: handmap[p.chain.side]
-                                                                        for p in changed}), cfg,
-                                                        with_fingers_posed(out, handmap, world))} if changed else {}
+        after = {}
+        if changed:  # only the corrected hands' fingers differ from the clip's world transforms
+            hands = HandMap(**{p.chain.side: handmap[p.chain.side] for p in changed})
+            after = {p.chain.name: p for p in chain_posers(out, hands, cfg, with_fingers_posed(out, hands, world))}
         for poser in posers:
             d = _chain_depth_mm(clip, poser, colliders)
             np.maximum(depth_before, d, out=depth_before)

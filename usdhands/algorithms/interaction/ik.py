@@ -52,6 +52,10 @@ class ChainPoser:
     given_points : (T, n + 1, 3) float, optional
         The chain's joint positions and tip in the pose given, world (from the clip's
         forward kinematics), for the broad phase.
+    between : (T, n, 4, 4) float, optional
+        Where a chain joint's parent is not the joint before it but a joint below that one
+        (a roll or twist joint in between, never changed): the transform from the joint before
+        to the parent, per frame (identity elsewhere).
     """
 
     chain: FingerChain
@@ -61,6 +65,7 @@ class ChainPoser:
     rest_rotations: np.ndarray
     order: str = DEFAULT_EULER_ORDER
     given_points: np.ndarray | None = None
+    between: np.ndarray | None = None
 
     def angles(self, base: np.ndarray, u: np.ndarray, via: np.ndarray | None = None) -> np.ndarray:
         """Euler angles ``(K, n, 3)`` degrees at path parameters ``u`` ``(K,)`` from ``base`` ``(K, n, 3)``.
@@ -165,6 +170,8 @@ class ChainPoser:
         world = self.parent_world[frames]
         pts = np.empty((len(frames), n + 1, 3))
         for k in range(n):
+            if self.between is not None and k > 0:
+                world = world @ self.between[frames, k]
             world = world @ local[:, k]
             pts[:, k] = world[:, :3, 3]
         pts[:, n] = world[:, :3, :3] @ self.chain.tip_offset + world[:, :3, 3]
