@@ -117,3 +117,16 @@ def test_correct_measures_the_fingers_the_file_draws(hand_on_a_ledge, config, de
     result = correct(src, folder / "out.glb", CorrectOptions(props=(prop,), interaction_config=cfg))
     assert result.penetration_before_mm["max"] == pytest.approx(deepest_mm, abs=0.06)
     assert result.chains_corrected == (("left index",) if deepest_mm else ())
+
+
+@pytest.mark.parametrize("config, finds", [({}, False), ({"mesh_radii": False}, True)])
+def test_check_measures_with_the_same_capsules_as_correct(hand_on_a_ledge, config, finds):
+    from usdhands.jobs.validation import CheckOptions, check
+
+    src, prop, folder = hand_on_a_ledge
+    cfg = folder / f"check{len(json.dumps(config))}.json"
+    cfg.write_text(json.dumps(config))
+    result = check([src], CheckOptions(props=(prop,), interaction_config=cfg))
+    props = [f for f in result.findings if f.rule == "props"]
+    assert bool(props) == finds
+    assert all("left index finger penetrates" in f.message for f in props)

@@ -175,7 +175,8 @@ def _check_file(path: Path, options: CheckOptions) -> list[Finding]:
     if options.props and not _unsound(findings):
         from usdhands.formats.io import read_asset
 
-        findings += prop_findings(str(path), read_asset(path).clips, options)
+        asset = read_asset(path)
+        findings += prop_findings(str(path), asset.clips, options, asset=asset)
     return findings
 
 
@@ -218,11 +219,13 @@ def _check_options(options: CheckOptions) -> None:
     check_correct_options(_prop_options(options))
 
 
-def prop_findings(name: str, clips, options: CheckOptions, handmap_of=None) -> list[Finding]:
+def prop_findings(name: str, clips, options: CheckOptions, handmap_of=None, asset=None) -> list[Finding]:
     """The ``props`` rule on ``clips`` (of the file or stage ``name``): a finding per finger and
     prop that goes deeper than ``options.penetration_tolerance_mm`` into the prop.
 
     ``handmap_of(clip)``: the clip's hand map (default: the one the file records, or detection).
+    ``asset``: the file read, whose meshes skinned to the hand give the finger capsules' radii
+    as ``correct`` takes them.
 
     ``where`` is the SkelAnimation's prim path for USD, else the finger's first joint (the
     glTF node, the BVH joint). Clips without a detectable hand are left to the ``hands`` rule.
@@ -232,7 +235,7 @@ def prop_findings(name: str, clips, options: CheckOptions, handmap_of=None) -> l
     from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
     from usdhands.errors import NoHandsError
     from usdhands.jobs.inputs import handmap_for
-    from usdhands.jobs.props import build_colliders, read_scene_props
+    from usdhands.jobs.props import build_colliders, hand_meshes, read_scene_props, with_mesh_radii
 
     prop_options = _prop_options(options)
     config = load_interaction_config(options.interaction_config) if options.interaction_config \
@@ -245,7 +248,8 @@ def prop_findings(name: str, clips, options: CheckOptions, handmap_of=None) -> l
             continue
         props = read_scene_props(prop_options, clip)
         colliders, _ = build_colliders(prop_options, clip, handmap, props, path=name)
-        for poser in chain_posers(clip, handmap, config):
+        meshes = hand_meshes(asset, clip) if asset is not None else ()
+        for poser in chain_posers(clip, handmap, with_mesh_radii(config, clip, handmap, meshes)):
             for item in colliders.items:
                 depth = penetration_depth_mm(clip, [poser], Colliders([item]))
                 deep = depth > options.penetration_tolerance_mm
