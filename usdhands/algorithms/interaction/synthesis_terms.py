@@ -79,9 +79,10 @@ class InteractionTerms:
         Shortest segment a proximity cut may leave.
     margin_mm : float
     config : InteractionConfig, optional
-    stride : int
-        The term is a mean over the segment's frames: every ``stride``-th frame is corrected
-        (from the first; at least one per segment).
+    stride, samples : int
+        The term is a mean over the segment's frames: frames about ``stride`` apart are
+        corrected, evenly from the first to the last, at least ``samples`` of them (all of a
+        shorter segment).
     world : (T, J, 4, 4) float, optional
         ``clip.world_xforms()``, when the caller has it (both hands share it).
 
@@ -108,7 +109,8 @@ class InteractionTerms:
     min_frames: int = 10
     margin_mm: float = 0.0
     config: InteractionConfig | None = None
-    stride: int = 3
+    stride: int = 6
+    samples: int = 4
     world: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -143,14 +145,17 @@ class InteractionTerms:
             q0, q1 = int(bounds[i]), int(bounds[i + 1])
             if not self.near[q0:q1].any():
                 continue
+            n = q1 - q0  # the frames sampled, evenly from the first to the last
+            at = np.unique(np.round(np.linspace(0, n - 1, min(n, max(self.samples, -(-n // self.stride))))))
+            at = at.astype(np.int64)
             for j in range(k):
                 if candidates[i, j] < 0:
                     continue
                 seg = self.fingers(int(candidates[i, j]))
-                pick = np.round(np.linspace(0, len(seg) - 1, q1 - q0)).astype(np.int64)[::self.stride]
+                stretch = np.round(np.linspace(0, len(seg) - 1, q1 - q0)).astype(np.int64)
                 rows.append((i, j))
-                frames.append(np.arange(q0, q1)[::self.stride])
-                fragments.append(seg[pick])
+                frames.append(q0 + at)
+                fragments.append(seg[stretch[at]])
         if not rows:
             return out
         frames_all = np.concatenate(frames)
