@@ -5,11 +5,14 @@ BVH), then measures clips per second of:
 
 - ``batch`` on the local process pool with 1 and 2 workers;
 - ``batch`` on a local Dask cluster (``--scheduler local``) with 1 and 2 workers;
+- ``batch`` sent to a Dask cluster that is already running (``dask scheduler`` and ``dask
+  worker --nworkers N --nthreads 1`` started before, as a farm's are: ``--scheduler
+  tcp://...``) with 1 and 2 workers;
 - the baseline: one ``usdhands synthesize`` process per clip, run one after the other on
   the first ``--baseline`` clips (each pays the interpreter start-up and the database load).
 
-Every batch run starts from an empty output folder; the pool or cluster start-up is
-included in its time. Prints the rates and the ratios 2 workers / 1 worker and batch /
+Every batch run starts from an empty output folder; the pool or LocalCluster start-up is
+included in its time (the running cluster's is not: that is the difference between them). Prints the rates and the ratios 2 workers / 1 worker and batch /
 process-per-clip (targets: >= 1.7 and >= 5). The machine's load average is printed
 beside them: other processes on a shared machine slow the 2-worker runs most.
 
@@ -19,6 +22,7 @@ Run: ``python benchmarks/bench_batch.py [--clips 200] [--baseline 20]``
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shutil
 import subprocess
@@ -63,6 +67,35 @@ def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None) 
     return seconds
 
 
+@contextlib.contextmanager
+def running_dask_cluster(workers: int, folder: Path):
+    """A ``dask scheduler`` and ``dask worker`` processes (``workers`` of 1 thread) on a free local
+    port, started and waited for before the timing: the address."""
+    import socket
+
+    from distributed import Client
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = f"tcp://127.0.0.1:{port}"
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / "dask.log", "w") as log:
+        procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port",
+                                   str(port), "--no-dashboard"], stdout=log, stderr=log, cwd=folder)]
+        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--nworkers", str(workers),
+                                       "--nthreads", "1", "--no-dashboard", "--local-directory", str(folder)],
+                                      stdout=log, stderr=log, cwd=folder))
+        try:
+            with Client(address, timeout="60s") as client:
+                client.wait_for_workers(workers, timeout=180)
+            yield address
+        finally:
+            for p in reversed(procs):
+                p.terminate()
+                p.wait(timeout=60)
+
+
 def process_per_clip(clips: list[Path], out: Path) -> float:
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
@@ -85,11 +118,17 @@ def main() -> None:
         print(f"{len(clips)} clips generated in {time.perf_counter() - t0:.1f} s; {os.cpu_count()} CPUs; "
               f"load average {os.getloadavg()[0]:.1f}")
         rates = {}
-        runs = [("local pool", None)] + ([] if args.no_dask else [("Dask LocalCluster", "local")])
+        runs = [("local pool", None)] + ([] if args.no_dask else [("Dask LocalCluster", "local"),
+                                                                  ("Dask cluster running", "running")])
         for name, scheduler in runs:
             for workers in (1, 2):
                 load = os.getloadavg()[0]
-                seconds = run_batch_cli(tmp / "in", tmp / "out", workers, scheduler)
+                if scheduler == "running":
+                    with running_dask_cluster(workers, tmp / f"dask{workers}") as address:
+                        load = os.getloadavg()[0]
+                        seconds = run_batch_cli(tmp / "in", tmp / "out", workers, address)
+                else:
+                    seconds = run_batch_cli(tmp / "in", tmp / "out", workers, scheduler)
                 rates[(name, workers)] = len(clips) / seconds
                 print(f"{name:18s} {workers} worker(s): {seconds:7.1f} s, {rates[(name, workers)]:6.2f} clips/s "
                       f"(load average before {load:.1f})")
