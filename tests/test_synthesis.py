@@ -203,6 +203,22 @@ def test_knn_ties_go_to_the_lower_index_whatever_the_bound():
         assert r.index[0].tolist() == [0, 2] and r.cost[0, 0] == r.cost[0, 1]
 
 
+def test_knn_twelve_features_unrolled_equal_the_generic_alignment_to_the_bit():
+    """D = 12 (the wrist features) runs an unrolled twin of the alignment; a zero 13th column
+    adds exactly 0.0 to every local cost, so the generic alignment must give the same bits."""
+    rng = np.random.default_rng(12)
+    q = np.cumsum(rng.normal(size=(300, 12)), axis=0)
+    d = np.cumsum(rng.normal(size=(2000, 12)), axis=0)
+    qb, ds = _random_segments(rng, 300, 5, 50), _random_segments(rng, 2000, 5, 50)
+    pad = lambda a: np.concatenate([a, np.zeros((len(a), 1))], axis=1)  # noqa: E731
+    for bound in ("none", "kim"):
+        r12 = knn_segments(q, qb, d, ds, k=4, band=0.3, bound=bound)
+        r13 = knn_segments(pad(q), qb, pad(d), ds, k=4, band=0.3, bound=bound)
+        assert np.array_equal(r12.index, r13.index) and np.array_equal(r12.cost, r13.cost)
+        assert np.array_equal(r12.aligned, r13.aligned) and np.array_equal(r12.abandoned, r13.abandoned)
+        assert (r12.index >= 0).all()
+
+
 def test_knn_rejects_bad_input():
     with pytest.raises(ValueError, match=r"Expected k >= 1, got 0"):
         knn_segments(np.zeros((10, 6)), [[0, 10]], np.zeros((10, 6)), [[0, 10]], k=0)
@@ -273,6 +289,26 @@ def test_canonical_curves_round_trip():
     back = apply_canonical_curves(base, rig, cur)
     fj = [sk.index(j) for j in hm.left.finger_joints]
     assert quat_angle_deg(back.rotations[:, fj], clip.rotations[:, fj]).max() < 1e-6
+
+
+def test_canonical_to_local_equals_the_three_hamilton_products():
+    """local = reference ⊗ C⁻¹ ⊗ canonical ⊗ C, done as one 4×4 matrix per slot: the same to rounding."""
+    from usdhands.algorithms.synthesis.finger_transfer import canonical_to_local, euler_xyz_deg_to_quat
+    from usdhands.model.rotations import quat_conjugate
+
+    sk, hm = tiny_skeleton(), tiny_handmap()
+    rng = np.random.default_rng(8)
+    clip = _random_finger_clip(sk, hm, rng)
+    for pose in (None, clip):  # relative to the rest pose, or to the first frame of the input
+        rig = hand_rig(sk, hm.left, pose)
+        curves = rng.uniform(-90, 90, size=(40, NUM_DOFS))
+        slots = np.nonzero(rig.present)[0]
+        can = euler_xyz_deg_to_quat(curves.reshape(40, -1, 3)[:, slots])
+        C = rig.frame[slots]
+        rel = quat_multiply(quat_multiply(quat_conjugate(C)[None], can), C[None])
+        want = quat_multiply(rig.reference_rotations(sk, slots)[None], rel)
+        got = canonical_to_local(sk, rig, curves)
+        assert got.shape == want.shape and np.abs(got - want).max() < 1e-14
 
 
 def _rotated_rest_rig(sk: Skeleton, rng) -> Skeleton:
@@ -386,6 +422,24 @@ def small_db():
     hm = tiny_handmap()
     items = [DatabaseClip(c, hm, lab, f"/data/{c.name}.bvh") for lab, c in gesture_set(2)]
     return build_database(items, fps=30, mirror=True)
+
+
+def test_world_xforms_for_equals_full_forward_kinematics_on_the_arm_chains():
+    """Only the chains to the arms are computed (joint-major, seen time-major); those equal Clip.world_xforms."""
+    from usdhands.algorithms.synthesis.wrist_features import world_xforms_for
+
+    sk, hm = tiny_skeleton(), tiny_handmap()
+    rng = np.random.default_rng(4)
+    rot = quat_multiply(sk.rest_rotations[None], euler_deg_to_quat(rng.uniform(-60, 60, (20, sk.num_joints, 3))))
+    clip = Clip(sk, 30, rot, np.broadcast_to(sk.rest_translations, (20, sk.num_joints, 3)) + rng.normal(0, 1, (20, 1, 3)))
+    full = clip.world_xforms()
+    part = world_xforms_for(clip, [hm.left, hm.right])
+    assert part.shape == full.shape
+    need = sorted({j for h in (hm.left, hm.right) for name in (h.wrist, h.forearm, h.shoulder) if name
+                   for j in sk.chain_to_root(sk.index(name))})
+    assert np.array_equal(part[:, need], full[:, need])
+    rest = [j for j in range(sk.num_joints) if j not in need]
+    assert rest and not part[:, rest].any()
 
 
 def test_database_round_trip_memory_mapped(small_db, tmp_path):

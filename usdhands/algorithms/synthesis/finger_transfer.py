@@ -237,9 +237,35 @@ def canonical_to_local(skeleton: Skeleton, rig: HandRig, curves: np.ndarray) -> 
     T = curves.shape[0]
     slots = np.nonzero(rig.present)[0]
     can = euler_xyz_deg_to_quat(curves.reshape(T, NUM_SLOTS, 3)[:, slots])
+    return np.einsum("sij,tsj->tsi", canonical_to_local_matrices(skeleton, rig, slots), can, optimize=True)
+
+
+def canonical_to_local_matrices(skeleton: Skeleton, rig: HandRig, slots: np.ndarray) -> np.ndarray:
+    """Per slot the ``(4, 4)`` matrix ``K`` with ``local = K @ canonical`` (quaternions xyzw), ``(S, 4, 4)``.
+
+    ``local = reference ⊗ C⁻¹ ⊗ canonical ⊗ C`` (``C`` the slot's anatomical frame) with
+    the constant factors multiplied out once: ``K = L(reference) L(C⁻¹) R(C)``, where
+    ``L(a) b = a ⊗ b`` and ``R(c) b = b ⊗ c``. Equal to the three Hamilton products to
+    rounding (``tests/test_finger_transfer_fast.py``), and one small matrix product per
+    frame and joint instead of three.
+    """
     C = rig.frame[slots]
-    rel = quat_multiply(quat_multiply(quat_conjugate(C)[None], can), C[None])
-    return quat_multiply(rig.reference_rotations(skeleton, slots)[None], rel)
+    return _left_matrices(rig.reference_rotations(skeleton, slots)) @ _left_matrices(quat_conjugate(C)) @ \
+        _right_matrices(C)
+
+
+def _left_matrices(a: np.ndarray) -> np.ndarray:
+    """``(..., 4, 4)`` matrices ``L(a)`` with ``L(a) @ b = a ⊗ b`` (Hamilton product, xyzw)."""
+    x, y, z, w = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
+    return np.stack([np.stack([w, -z, y, x], -1), np.stack([z, w, -x, y], -1),
+                     np.stack([-y, x, w, z], -1), np.stack([-x, -y, -z, w], -1)], -2)
+
+
+def _right_matrices(c: np.ndarray) -> np.ndarray:
+    """``(..., 4, 4)`` matrices ``R(c)`` with ``R(c) @ b = b ⊗ c`` (Hamilton product, xyzw)."""
+    x, y, z, w = np.moveaxis(np.asarray(c, dtype=np.float64), -1, 0)
+    return np.stack([np.stack([w, z, -y, x], -1), np.stack([-z, w, x, y], -1),
+                     np.stack([y, -x, w, z], -1), np.stack([-x, -y, -z, w], -1)], -2)
 
 
 def apply_canonical_curves(clip: Clip, rig: HandRig, curves: np.ndarray) -> Clip:

@@ -219,6 +219,9 @@ def world_xforms_for(clip: Clip, hands: list[HandSide]) -> np.ndarray:
     Forward kinematics runs on the chains from the root to the wrist, elbow and
     shoulder of the given hands; other joints' entries are left zero. Much cheaper
     than :meth:`Clip.world_xforms` on rigs with many finger, face or leg joints.
+    The array is a joint-major block seen time-major (``world[:, j]`` is contiguous):
+    only the pages of the joints computed are ever written (a 3-minute clip of 65
+    joints would otherwise zero and touch 47 MB for a dozen joints).
     """
     sk = clip.skeleton
     need = set()
@@ -230,7 +233,7 @@ def world_xforms_for(clip: Clip, hands: list[HandSide]) -> np.ndarray:
             need.add(_root_index(sk, hand))
     joints = sorted(need)
     T = clip.num_frames
-    out = np.zeros((T, sk.num_joints, 4, 4))
+    out = np.zeros((sk.num_joints, T, 4, 4)).transpose(1, 0, 2, 3)
     from usdhands.model.rotations import trs_to_xform
 
     local = trs_to_xform(clip.translations[:, joints], clip.rotations[:, joints], clip.scales[:, joints])
