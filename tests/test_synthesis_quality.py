@@ -274,6 +274,38 @@ def test_candidate_weights_fall_with_the_square_of_the_cost():
     np.testing.assert_allclose(w, [[0.7 * 0.8, 0.3 + 0.7 * 0.2], [1.0, 0.0]])
 
 
+def test_candidates_of_the_chosen_take_get_no_share_of_the_mix():
+    """The mix averages out what each take holds of its own: the other candidates of the
+    path's own take share it, so they are left out (a one-take database plays the path's alone)."""
+    from usdhands.algorithms.synthesis.synthesize import played_weights
+
+    costs = np.array([[1.0, 2.0, 4.0], [1.0, 2.0, 4.0]])
+    cand = np.array([[10, 11, 12], [10, 11, 12]])
+    takes = np.array([[0, 0, 1], [0, 0, 0]])  # row 0: candidate 1 is of the chosen's take; row 1: all are
+    w = played_weights(costs, cand, np.array([0, 1]), 0.7, takes)
+    np.testing.assert_allclose(w[0], [0.3 + 0.7 * 1 / 1.0625, 0.0, 0.7 * 0.0625 / 1.0625])
+    np.testing.assert_allclose(w[1], [0.0, 1.0, 0.0])
+
+
+def test_a_one_take_database_plays_the_chosen_candidate_alone():
+    """K-fold on one long take (windows held out against the rest of it): every candidate is of
+    the take itself, so the default mix synthesizes exactly what the paper's choice alone does."""
+    from usdhands.algorithms.synthesis.config import SynthesisConfig
+    from usdhands.algorithms.synthesis.kfold import kfold_evaluation
+    from usdhands.model import Clip
+
+    clips = [c for _, c in gesture_set(2, seed=3)]
+    one = Clip(clips[0].skeleton, clips[0].fps, np.concatenate([c.rotations for c in clips]),
+               np.concatenate([c.translations for c in clips]), name="one_take")
+    items = [DatabaseClip(one, tiny_handmap(), None)]
+    mixed = kfold_evaluation(items, SynthesisConfig(), folds=3, min_window_s=2.0)
+    alone = kfold_evaluation(items, SynthesisConfig().with_values(stitching={"candidate_mix": 0.0}), folds=3,
+                             min_window_s=2.0)
+    assert mixed["windows"] == 6  # both hands, three windows of the one take
+    assert mixed["methods"]["synthesis"] == alone["methods"]["synthesis"]
+    assert mixed["methods"]["synthesis"]["error_deg"] < 0.8 * mixed["methods"]["mean_pose"]["error_deg"]
+
+
 def test_mixing_the_candidates_beats_the_chosen_one_alone_on_held_out_takes():
     """Three takes of each gesture with their own finger variations: the held-out take's
     fingers are better predicted by the close candidates together than by one of them

@@ -19,8 +19,8 @@ fist merges two real steps into one: a pop of twice the real speed). Here instea
   slerp agree closely);
 - :func:`play_segments`: every input segment gets the weighted sum of some database
   segments' fingers, each played along its own smoothed warp (synthesis plays the
-  path's candidate mixed with all ``k`` candidates of the row, see
-  :func:`~usdhands.algorithms.synthesis.synthesize.candidate_weights`);
+  path's candidate mixed with the ``k`` candidates of the row but those of its own
+  take, see :func:`~usdhands.algorithms.synthesis.synthesize.played_weights`);
 - :func:`step_limits` / :func:`limit_steps`: after stitching, no DOF may move by more
   per frame than the database's own high-percentile step (99.5th by default), so
   what remains of a pop (a seam blend, a fast warp) is spread over a few frames,

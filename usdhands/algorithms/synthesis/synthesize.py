@@ -252,7 +252,7 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
                               cfg.path.normalize_terms)
     chosen = cand[np.arange(N), path]
     st = cfg.stitching
-    played = played_weights(costs, cand, path, st.candidate_mix)
+    played = played_weights(costs, cand, path, st.candidate_mix, db.segment_clip()[np.maximum(cand, 0)])
     lens = db.segments[np.maximum(cand, 0), 1] - db.segments[np.maximum(cand, 0), 0]  # (N, k)
     n = (qb[:, 1] - qb[:, 0])[:, None]
     bands = np.where((sc.length_factor * lens >= n) & (lens <= sc.length_factor * n), sc.dtw_band, 1.0)
@@ -295,13 +295,24 @@ def candidate_weights(costs: np.ndarray) -> np.ndarray:
     return w / w.sum()
 
 
-def played_weights(costs: np.ndarray, cand: np.ndarray, path: np.ndarray, mix: float) -> np.ndarray:
+def played_weights(costs: np.ndarray, cand: np.ndarray, path: np.ndarray, mix: float,
+                   takes: np.ndarray | None = None) -> np.ndarray:
     """Weight ``(N, k)`` of every candidate in the fragment played for each input segment.
 
     ``(1 − mix)`` for the path's candidate plus ``mix`` times :func:`candidate_weights`
     of the row (``costs (N, k)``, ``cand (N, k)`` with -1 for none, ``path (N,)``).
+    With ``takes (N, k)`` (the database clip of each candidate), the other candidates
+    from the path's own take get no share: the mix is there to average out the few
+    degrees of finger pose each take holds of its own, which candidates of one take
+    share (mixing them only blurs its motion; on a database of one take the fragment
+    is the path's candidate alone, as in the paper).
     """
     c = np.where(np.asarray(cand) >= 0, np.asarray(costs, dtype=np.float64), np.inf)
+    if takes is not None:
+        rows = np.arange(len(c))
+        takes = np.asarray(takes)
+        same = (takes == takes[rows, path][:, None]) & (np.arange(c.shape[1])[None] != np.asarray(path)[:, None])
+        c = np.where(same, np.inf, c)
     ok = np.isfinite(c)
     zero = ok & (c <= 0)
     best = np.where(ok, c, np.inf).min(axis=1, keepdims=True)
