@@ -49,12 +49,20 @@ COMMANDS: dict[str, list[str]] = {
 SIDE_FILES: dict[str, dict[str, tuple[str, str | None]]] = {
     "inspect": {"--handmap": ("json", None)},
     "handmap": {"--handmap": ("json", None)},
-    "synthesize": {"--handmap": ("json", None), "--config": ("json", None)},
-    "evaluate": {"--config": ("json", None), "--labels-file": ("csv", "--labels")},
-    "splice": {"--hands-markers": ("csv", None)},
+    "db build": {"--handmap": ("json", None), "--config": ("json", None), "--labels-file": ("csv", None),
+                 "--props": ("mesh", None), "--interaction-config": ("json", None)},
+    "synthesize": {"--handmap": ("json", None), "--config": ("json", None), "--props": ("mesh", None),
+                   "--interaction-config": ("json", None)},
+    "evaluate": {"--config": ("json", None), "--labels-file": ("csv", "--labels"), "--handmap": ("json", None)},
+    "splice": {"--hands-markers": ("csv", None), "--body-markers": ("csv", None), "--body-handmap": ("json", None),
+               "--hands-handmap": ("json", None)},
     "reduce": {"--handmap": ("json", None)},
     "expand": {"--model": ("json", "--model")},
-    "correct": {"--handmap": ("json", None), "--interaction-config": ("json", None)},
+    "correct": {"--handmap": ("json", None), "--interaction-config": ("json", None), "--props": ("mesh", "--props")},
+    "check": {"--props": ("mesh", None), "--interaction-config": ("json", None)},
+    # batch refuses its side files before any clip runs (the content of props is read per clip)
+    "batch": {"--handmap": ("json", None), "--config": ("json", None), "--model": ("json", None),
+              "--interaction-config": ("json", None), "--props": ("file", None), "--db": ("folder", None)},
 }
 
 
@@ -129,9 +137,14 @@ def main_input_cases(folder: Path, samples: Path) -> dict[str, tuple[Path, str]]
     return cases
 
 
+#: kind of side file -> its extension; "file": any file whose content is read later (the classes
+#: every reader refuses alike), "folder": a folder (a finger database)
+SIDE_KINDS = {"json": ".json", "csv": ".csv", "mesh": ".obj", "file": ".glb", "folder": ""}
+
+
 def side_file_cases(folder: Path, kind: str) -> dict[str, tuple[Path, str]]:
-    """Hostile side files of a kind ("json" or "csv"): class -> (path, piece of the expected message)."""
-    ext = ".json" if kind == "json" else ".csv"
+    """Hostile side files of a kind (:data:`SIDE_KINDS`): class -> (path, piece of the expected message)."""
+    ext = SIDE_KINDS[kind]
     cases: dict[str, tuple[Path, str]] = {}
 
     def add(name: str, content, message: str) -> None:
@@ -143,10 +156,20 @@ def side_file_cases(folder: Path, kind: str) -> dict[str, tuple[Path, str]]:
         cases[name] = (path, message)
 
     add("missing", lambda p: None, "no such")
-    add("folder", lambda p: p.mkdir(), "is a folder")
+    if kind == "folder":
+        add("a_file", b"not a database\n", "is a file, not a finger database")
+    else:
+        add("folder", lambda p: p.mkdir(), "is a folder")
     add("fifo", lambda p: os.mkfifo(p), "not a regular file")
     add("devzero", lambda p: p.symlink_to("/dev/zero"), "not a regular file")
-    add("not_utf8", b"\xff\xfe\x00\x81 not text\n", "not UTF-8")
+    if kind in ("json", "csv"):
+        add("not_utf8", b"\xff\xfe\x00\x81 not text\n", "not UTF-8")
+    if kind == "mesh":
+        triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+        add("empty", b"", "has no triangles")
+        add("nan_vertex", triangle.replace("v 0 0 0", "v nan 0 0") + "f 1 2 3\n", "NaN or infinite coordinates")
+        add("face_index", triangle + "f 1 2 99\n", "cannot read as a mesh")
+        add("far_vertices", "v 1e308 0 0\nv -1e308 0 0\nv 0 1e308 0\nf 1 2 3\n", "")
     if kind == "json":
         add("deep", '{"a": ' + deep_json(100_000) + "}", "nested 100001 deep")
         add("nan", '{"a": NaN}', "NaN is not a JSON number")
@@ -169,7 +192,7 @@ def corpus(tmp_path_factory, sample_assets):
     (folder / "main").mkdir()
     main_cases = main_input_cases(folder / "main", sample_assets)
     side = {}
-    for kind in ("json", "csv"):
+    for kind in SIDE_KINDS:
         (folder / kind).mkdir()
         side[kind] = side_file_cases(folder / kind, kind)
     prop = folder / "good_table.obj"

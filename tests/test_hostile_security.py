@@ -347,6 +347,18 @@ CASES = {
     "reduce --model over input": (["reduce", "{clip}", "--model", "{side}"], "ok.glb", "input"),
     "reduce --model over -o": (["reduce", "{clip}", "-o", "{in}", "--model", "{side}"], "new.glb", "-o"),
     "expand --model": (["expand", "{clip}", "--model", "{in}", "-o", "{side}"], "model.json", "--model"),
+    "handmap --write-schema over input": (["handmap", "{clip}", "--write-schema", "{side}"], "ok.glb", "input"),
+    "db build --props": (["db", "build", "{clip}", "--props", "{in}", "-o", "{side}"], "prop.obj", "--props"),
+    "db build --interaction-config": (["db", "build", "{clip}", "--interaction-config", "{in}", "-o", "{side}"],
+                                      "ic.json", "--interaction-config"),
+    "synthesize --props": (["synthesize", "{clip}", "--props", "{in}", "-o", "{side}"], "prop.glb", "--props"),
+    "synthesize --interaction-config": (["synthesize", "{clip}", "--interaction-config", "{in}", "-o", "{side}"],
+                                        "ic.glb", "--interaction-config"),
+    "correct --props": (["correct", "{clip}", "--props", "{in}", "-o", "{side}"], "prop.glb", "--props"),
+    "correct --handmap": (["correct", "{clip}", "--props", "{clip}", "--handmap", "{in}", "-o", "{side}"],
+                          "map.glb", "--handmap"),
+    "correct --interaction-config": (["correct", "{clip}", "--props", "{clip}", "--interaction-config", "{in}",
+                                      "-o", "{side}"], "ic.glb", "--interaction-config"),
 }
 SPELLINGS = ["same", "symlink", "hard link", "./", "../dir/"]
 
@@ -372,6 +384,47 @@ def test_output_never_lands_on_an_input(ok_glb, tmp_path, capsys, monkeypatch, c
     what = "the input" if label == "input" else f"the {label} file"
     assert (code, err) == (2, [f"usdhands: error: {Path(out)}: output path equals {what}; choose another {folder}"])
     assert sha(side) == checksum and snapshot(tmp_path) == before
+
+
+BATCH_SIDE = ["--handmap", "--config", "--model", "--interaction-config"]
+
+
+@pytest.mark.parametrize("spelling", ["same", "symlink", "hard link"])
+@pytest.mark.parametrize("written", ["report.json", "batch_options.json"])
+@pytest.mark.parametrize("option", BATCH_SIDE)
+def test_batch_never_writes_its_own_files_over_a_side_file(ok_glb, tmp_path, capsys, option, written, spelling):
+    """``batch --out DIR`` writes DIR/report.json and DIR/batch_options.json: a side file there (or a
+    link to one) is refused before any clip runs (it was overwritten, exit 0)."""
+    out = tmp_path / "out"
+    out.mkdir()
+    side = tmp_path / "side.json" if spelling != "same" else out / written
+    side.write_text("{}\n")
+    if spelling == "symlink":
+        os.symlink(side, out / written)
+    elif spelling == "hard link":
+        os.link(side, out / written)
+    checksum = sha(side)
+    before = snapshot(tmp_path)
+    code, err = run(capsys, "batch", ok_glb, "--job", "convert", "--to", "usda", "--out", out, "--workers", "1",
+                    option, out / written)
+    assert (code, err) == (2, [f"usdhands: error: {out / written}: batch writes {written} over the {option} file; "
+                               "choose another --out folder"])
+    assert sha(side) == checksum and snapshot(tmp_path) == before
+
+
+def test_batch_clip_output_hard_linked_to_an_input_fails_that_clip(ok_glb, tmp_path, capsys):
+    """A clip's output that is a hard link of an input clip is refused by batch itself before the job
+    runs (the resolved-path comparison alone missed it; a pipeline's own job function may not check)."""
+    (tmp_path / "takes").mkdir()
+    a = tmp_path / "takes" / "a.glb"
+    ok_glb.rename(a)
+    os.link(a, tmp_path / "takes" / "a.usda")  # the convert output of a.glb there: a hard link of a.glb
+    checksum = sha(a)
+    code, _ = run(capsys, "batch", a, "--job", "convert", "--to", "usda", "--out", tmp_path / "takes",
+                  "--workers", "1")
+    report = __import__("json").loads((tmp_path / "takes" / "report.json").read_text())
+    assert code == 1 and [c["error"] for c in report["clips"]] == ["the output would overwrite an input"]
+    assert sha(a) == checksum and sha(tmp_path / "takes" / "a.usda") == checksum
 
 
 def test_db_build_output_folder_holding_an_input_refused(ok_glb, tmp_path, capsys):

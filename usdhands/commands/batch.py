@@ -96,8 +96,12 @@ def _prop_options(args) -> dict:
 
 
 def run(args) -> int:
-    from usdhands.jobs.batch import BatchOptions, run_batch
+    from usdhands.jobs.batch import BatchOptions, check_side_files, run_batch
 
+    # every side file given is checked, also those the job does not read
+    check_side_files({"--handmap": args.handmap, "--config": args.config, "--model": args.model,
+                      "--interaction-config": args.interaction_config, "--props": args.props, "--db": args.db},
+                     args.out)
     options = BatchOptions(job=args.job, out=args.out, job_options=job_options(args),
                            workers=args.workers or os.cpu_count() or 1, scheduler=args.scheduler, to=args.to,
                            model=args.model)

@@ -192,12 +192,14 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
         named = [Path(p) for p in inputs]
         raise UsdHandsError(f"no input clips found ({', '.join(extensions)})",
                             path=named[0] if len(named) == 1 else None)
+    check_side_files(_side_inputs(options, job_options), out)
     resolved = {Path(p).resolve() for p, _ in pairs}
+    identities = {_identity(p) for p, _ in pairs} - {None}
     out.mkdir(parents=True, exist_ok=True)
     recorded = _record_options(out, options, job_options)
     todo, records = [], {}
     for src, dst in pairs:
-        if dst.resolve() in resolved:
+        if dst.resolve() in resolved or _identity(dst) in identities:  # the same path, a symlink or a hard link
             records[src] = ClipRecord(str(src), str(dst), "failed", 0.0, "the output would overwrite an input")
         elif _up_to_date(src, dst, recorded, _side_files(options, job_options)):
             records[src] = ClipRecord(str(src), str(dst), "skipped")
@@ -313,6 +315,76 @@ def _record_options(out: Path, options: BatchOptions, job_options) -> float:
         pass
     _write_json(path, current)
     return path.stat().st_mtime
+
+
+def _side_inputs(options: BatchOptions, job_options) -> dict:
+    """Every side file the batch's clips read, by option (None or () where not given)."""
+    return {"--handmap": getattr(job_options, "handmap", None), "--config": getattr(job_options, "config", None),
+            "--interaction-config": getattr(job_options, "interaction_config", None),
+            "--model": options.model, "--props": tuple(getattr(job_options, "props", ()) or ()),
+            "--db": getattr(job_options, "db", None)}
+
+
+def check_side_files(inputs: dict, out: Path) -> None:
+    """Refuse, before any clip runs, a side file every clip would fail on, and ``report.json`` or
+    ``batch_options.json`` landing on a side file.
+
+    What a side file is for is checked once here instead of once per clip: it must be a
+    regular file (``--db`` a folder), JSON side files strict JSON valid under their schema
+    (a hand map's joints are checked per clip, against each skeleton).
+
+    Raises
+    ------
+    UsdHandsError
+        One line naming the side file, or the batch's own file that would overwrite it.
+    """
+    from usdhands.errors import ConfigError, OutputPathError
+    from usdhands.formats.registry import same_file
+    from usdhands.input_files import check_regular_file, read_json
+    from usdhands.jobs.outputs import check_paths, each_path
+
+    check_paths(inputs)  # a named pipe or a device: refused before anything is opened
+    for label, value in inputs.items():
+        for path in each_path(value):
+            for name in (REPORT_FILE, OPTIONS_FILE):
+                if same_file(out / name, path):
+                    raise OutputPathError(f"batch writes {name} over the {label} file; choose another --out folder",
+                                          path=out / name)
+            if label == "--db":
+                if not path.is_dir():
+                    raise ConfigError("no such finger database folder" if not path.exists() else
+                                      "is a file, not a finger database (a folder made by 'usdhands db build')",
+                                      path=path)
+            elif label == "--props":
+                check_regular_file(path, what="prop file")
+            elif label == "--config":
+                from usdhands.jobs.inputs import load_config
+
+                load_config(path)
+            elif label == "--interaction-config":
+                from usdhands.algorithms.interaction.finger_geometry import load_interaction_config
+
+                load_interaction_config(path)
+            elif label == "--model":
+                from usdhands.algorithms.reduction.model import ReductionModel
+
+                ReductionModel.load(path)
+            else:  # a hand map: its joints are checked against each clip's skeleton
+                from usdhands.json_schemas import first_schema_error
+
+                data = read_json(path, what="hand map file", error=ConfigError)
+                error = first_schema_error(data, "handmap")
+                if error is not None:
+                    raise ConfigError(f"invalid hand map at {error[0]}: {error[1]}", path=path)
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """(device, inode) of an existing file, None for a missing one: hard links share it."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
 
 
 def _side_files(options: BatchOptions, job_options) -> list[Path]:

@@ -140,6 +140,9 @@ def build_db(inputs: Sequence[str | os.PathLike], output: str | os.PathLike,
                  "--interaction-config": options.interaction_config},
                 replaced_folders={"-o": output})
     cfg = load_config(options.config)
+    from usdhands.jobs.props import check_interaction_config
+
+    check_interaction_config(options)
     if options.props:
         from usdhands.jobs.props import check_prop_options
 

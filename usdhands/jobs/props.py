@@ -63,6 +63,15 @@ def check_prop_options(options) -> None:
     parse_attachments(options.attach)
 
 
+def check_interaction_config(options) -> None:
+    """Refuse a bad ``interaction_config`` before any work, also when no ``props`` are given
+    (nothing reads it then, but a missing or broken file named on the command line is an error)."""
+    if options.interaction_config is not None and not options.props:
+        from usdhands.algorithms.interaction.finger_geometry import load_interaction_config
+
+        load_interaction_config(options.interaction_config)
+
+
 def read_scene_props(options, clip, world=None):
     """Every prop of ``--props`` in the clip's units, checked for unit slips: list of (path, PropMesh).
 

@@ -209,6 +209,9 @@ def _prop_options(options: CheckOptions):
 
 
 def _check_options(options: CheckOptions) -> None:
+    from usdhands.jobs.props import check_interaction_config
+
+    check_interaction_config(options)
     if not options.props:
         return
     from usdhands.jobs.correction import check_correct_options
