@@ -19,10 +19,12 @@ import pytest
 from hostile import ROOT, _limits  # noqa: E402  (tests/ is on sys.path)
 
 RUNNER = Path(__file__).resolve().parent / "fuzz" / "run.py"
+sys.path.insert(0, str(RUNNER.parent))
+from fuzz_target import READERS  # noqa: E402
 SECONDS = 4
 
 
-@pytest.mark.parametrize("reader", ["bvh", "glb", "gltf", "usda", "usdc", "handmap"])
+@pytest.mark.parametrize("reader", sorted(READERS))
 def test_short_fuzz_run_finds_nothing(reader, tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     out = subprocess.run([sys.executable, str(RUNNER), reader, "--seconds", str(SECONDS), "--engine", "random",
@@ -37,7 +39,6 @@ def test_short_fuzz_run_finds_nothing(reader, tmp_path):
 
 def test_the_target_reports_what_breaks_the_promise():
     """The check itself: a traceback-raising reader is a finding, a UsdHandsError is not."""
-    sys.path.insert(0, str(RUNNER.parent))
     from fuzz_target import Target
 
     target = Target("bvh")

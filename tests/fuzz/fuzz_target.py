@@ -17,8 +17,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sample_assets" / "gestures" / "ok_00.glb"
 
-#: reader -> file extension fed to it
-READERS = {"bvh": ".bvh", "gltf": ".gltf", "glb": ".glb", "usda": ".usda", "usdc": ".usdc", "handmap": ".json"}
+#: reader -> file extension fed to it: the asset readers, then the side files (hand map, synthesis and
+#: interaction configurations, reduction model, finger database manifest, marker and label CSVs)
+READERS = {"bvh": ".bvh", "gltf": ".gltf", "glb": ".glb", "usda": ".usda", "usdc": ".usdc", "handmap": ".json",
+           "config": ".json", "interaction": ".json", "model": ".json", "manifest": ".json", "markers": ".csv",
+           "labels": ".csv"}
+#: frames of the clip a markers CSV is read for (its seed has as many rows)
+MARKER_FRAMES = 4
 #: Most CPU seconds one read may take before it counts as a hang (CPU, not wall-clock: the
 #: machine may be busy).
 READ_SECONDS = 20
@@ -39,10 +44,14 @@ def _seed_files() -> dict[str, list[bytes]]:
     rest = Asset(str(SAMPLE), asset.skeletons, (), ())
     folder = Path(tempfile.mkdtemp(prefix="usdhands_fuzz_seeds_"))
     out: dict[str, list[bytes]] = {}
+    side = _side_file_seeds(folder)
     for reader, ext in READERS.items():
         if reader == "handmap":
             out[reader] = [json.dumps({"skeleton": asset.skeletons[0].name,
                                        **detect_hands(asset.skeletons[0]).to_dict()}, indent=2).encode()]
+            continue
+        if reader in side:
+            out[reader] = side[reader]
             continue
         out[reader] = []
         for k, a in enumerate((small, rest)):
@@ -50,6 +59,31 @@ def _seed_files() -> dict[str, list[bytes]]:
             write_asset(a, path)
             out[reader].append(path.read_bytes())
     return out
+
+
+def _side_file_seeds(folder: Path) -> dict[str, list[bytes]]:
+    """Seeds of the side-file readers: each file as usdhands writes it or the docs show it."""
+    from usdhands.algorithms.interaction.finger_geometry import DEFAULT_LIMITS_DEG, DEFAULT_RADII_MM
+    from usdhands.algorithms.synthesis.config import SynthesisConfig
+    from usdhands.jobs.inputs import bundled_database_path
+    from usdhands.jobs.reduction import reduce
+    from usdhands.jobs.splicing import MARKER_NAMES
+
+    model = folder / "model.json"
+    reduce(SAMPLE, None, model_output=model)
+    columns = [f"{side}.{m}.{a}" for side in ("left", "right") for m in MARKER_NAMES for a in "xyz"]
+    rows = [",".join(["frame", *columns])] + [",".join([str(f), *(f"{0.5 * k + f:.3f}" for k in range(len(columns)))])
+                                              for f in range(MARKER_FRAMES)]
+    interaction = {"radii_mm": {k: list(v) for k, v in DEFAULT_RADII_MM.items()}, "limits_deg": DEFAULT_LIMITS_DEG,
+                   "tip_fraction": 0.8, "tolerance_mm": 0.5, "smoothing_s": 0.15, "ik": "ccd"}
+    return {
+        "config": [json.dumps(SynthesisConfig().to_dict(), indent=2).encode()],
+        "interaction": [json.dumps(interaction, indent=2).encode()],
+        "model": [model.read_bytes()],
+        "manifest": [(bundled_database_path() / "manifest.json").read_bytes()],
+        "markers": [("\n".join(rows) + "\n").encode()],
+        "labels": [b"# file,label\nok_00.glb,ok\nbeat_01.glb, beat\n\"takes/x,y.glb\",\"quoted, label\"\n"],
+    }
 
 
 def seeds(reader: str) -> list[bytes]:
@@ -117,6 +151,10 @@ class Target:
         self.timer = timer  # off under libFuzzer, which has its own -timeout
 
     def _read(self, path: Path) -> None:
+        side = _SIDE_READERS.get(self.reader)
+        if side is not None:
+            side(self, path)
+            return
         if self.reader == "handmap":
             from usdhands.model.hand_detection import load_handmap
 
@@ -172,3 +210,65 @@ class Target:
         name = f"{self.reader}-{hashlib.sha256(data).hexdigest()[:16]}{self.ext}"
         (crashes / name).write_bytes(data)
         return {"file": str(crashes / name), "problem": problem}
+
+
+def _read_manifest(target: Target, path: Path) -> None:
+    """The bytes as the manifest of a copy of the bundled database (its arrays as they are)."""
+    import shutil
+
+    from usdhands.algorithms.synthesis.database import load_database
+    from usdhands.jobs.inputs import bundled_database_path
+
+    db = target.folder / "db"
+    if not db.is_dir():
+        shutil.copytree(bundled_database_path(), db)
+    shutil.copyfile(path, db / "manifest.json")
+    load_database(db)
+
+
+def _read_labels(target: Target, path: Path) -> None:
+    from usdhands.errors import UsdHandsError
+    from usdhands.jobs.inputs import labeller
+
+    label = labeller(None, path)
+    for name in ("ok_00.glb", "takes/x,y.glb", "beat_01"):
+        try:
+            label(Path(name))
+        except UsdHandsError:
+            pass  # no label for that file: a one-line error of its own
+
+
+def _side_reader(load):
+    def read(target: Target, path: Path) -> None:
+        load(path)
+    return read
+
+
+def _load_model(path):
+    from usdhands.algorithms.reduction.model import ReductionModel
+
+    return ReductionModel.load(path)
+
+
+def _load_config(path):
+    from usdhands.algorithms.synthesis.config import load_synthesis_config
+
+    return load_synthesis_config(path)
+
+
+def _load_interaction(path):
+    from usdhands.algorithms.interaction.finger_geometry import load_interaction_config
+
+    return load_interaction_config(path)
+
+
+def _load_markers(path):
+    from usdhands.jobs.splicing import read_markers_csv
+
+    return read_markers_csv(path, MARKER_FRAMES)
+
+
+#: side-file reader -> ``read(target, path)``
+_SIDE_READERS = {"config": _side_reader(_load_config), "interaction": _side_reader(_load_interaction),
+                 "model": _side_reader(_load_model), "manifest": _read_manifest,
+                 "markers": _side_reader(_load_markers), "labels": _read_labels}

@@ -1,9 +1,12 @@
 """Fuzz one reader of usdhands: ``python tests/fuzz/run.py bvh --seconds 600``.
 
 Readers: ``bvh``, ``gltf``, ``glb``, ``usda``, ``usdc`` (the file readers behind every
-command) and ``handmap`` (the JSON side files). Each starts from seeds generated from
-the committed samples (see :mod:`fuzz_target`) and feeds mutated bytes to
-``read_asset`` (or ``load_handmap``). The promise is the one of the command line: a
+command) and the side files: ``handmap``, ``config`` (synthesis configuration),
+``interaction`` (interaction configuration), ``model`` (reduction model), ``manifest``
+(a finger database's manifest, over the bundled database's arrays), ``markers`` (splice's
+marker CSV) and ``labels`` (the labels CSV). Each starts from seeds generated from the
+committed samples (see :mod:`fuzz_target`) and feeds mutated bytes to ``read_asset``
+(or the side file's loader). The promise is the one of the command line: a
 :class:`~usdhands.errors.UsdHandsError` or a clean read; any other exception, a crash
 of the interpreter or a read over the time/memory bound is a finding.
 
@@ -58,6 +61,13 @@ def run_atheris(target: Target, seconds: float, crashes: Path) -> None:
         import usdhands.formats.io  # noqa: F401
         import usdhands.formats.usd  # noqa: F401
         import usdhands.model.hand_detection  # noqa: F401
+        import usdhands.algorithms.synthesis.config  # noqa: F401
+        import usdhands.algorithms.synthesis.database  # noqa: F401
+        import usdhands.algorithms.reduction.model  # noqa: F401
+        import usdhands.algorithms.interaction.finger_geometry  # noqa: F401
+        import usdhands.jobs.inputs  # noqa: F401
+        import usdhands.jobs.splicing  # noqa: F401
+        import usdhands.input_files  # noqa: F401
     corpus = Path(tempfile.mkdtemp(prefix=f"usdhands_fuzz_{target.reader}_"))
     for k, data in enumerate(seeds(target.reader)):
         (corpus / f"seed{k}").write_bytes(data)
