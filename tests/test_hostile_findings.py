@@ -122,6 +122,75 @@ def test_db_build_into_a_folder_that_cannot_be_made(sample_assets, tmp_path):
                   message="cannot write into folder")
 
 
+@pytest.fixture()
+def immutable_folder(tmp_path):
+    """``tmp/ro``, a folder nobody may write into, root included (``chattr +i``: the tests run as root,
+    where permission bits stop nothing); skipped where the file system or the user cannot set it."""
+    import subprocess
+
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    if shutil.which("chattr") is None or subprocess.run(["chattr", "+i", str(folder)],
+                                                        capture_output=True).returncode != 0:
+        pytest.skip("chattr +i not available here")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["chattr", "-i", str(folder)], check=True)
+
+
+WRITES = {  # command -> (argv; the output named in the error)
+    "convert usdc": (["convert", "{src}", "{ro}/x.usdc"], "{ro}/x.usdc"),
+    "db build": (["db", "build", "{src}", "-o", "{ro}/db"], "{ro}/db"),
+    "synthesize": (["synthesize", "{src}", "-o", "{ro}/x.glb"], "{ro}/x.glb"),
+    "reduce --model": (["reduce", "{src}", "--model", "{ro}/m.json"], "{ro}/m.json"),
+    "handmap": (["handmap", "{src}", "-o", "{ro}/h.json"], "{ro}/h.json"),
+    "splice": (["splice", "{src}", "{src}", "-o", "{ro}/s.glb"], "{ro}/s.glb"),
+    "batch": (["batch", "{src}", "--job", "convert", "--to", "usda", "--out", "{ro}", "--workers", "1"],
+              "{ro}/batch_options.json"),
+}
+
+
+@pytest.mark.parametrize("command", sorted(WRITES))
+def test_writing_into_a_folder_that_refuses_writes(command, sample_assets, tmp_path, immutable_folder):
+    """PermissionError in 'db build -o'; after that fix, 'reduce --model' and 'batch' still named their
+    temporary files (m.json.tmp, .batch_options.json.XXXX) instead of the output."""
+    src = tmp_path / "ok.glb"
+    shutil.copy(sample_assets / "gestures" / "ok_00.glb", src)
+    argv, named = WRITES[command]
+    fill = {"src": src, "ro": immutable_folder}
+    check_promise([a.format(**fill) for a in argv], folder=tmp_path, inputs=[src], names=named.format(**fill),
+                  message=f"cannot write into folder {str(immutable_folder)!r}")
+
+
+def test_reduce_model_leaves_a_file_named_like_its_temporary_alone(sample_assets, tmp_path):
+    """The model was written to the fixed name MODEL.tmp, then renamed: a user's file of that name
+    was overwritten and removed."""
+    src = tmp_path / "ok.glb"
+    shutil.copy(sample_assets / "gestures" / "ok_00.glb", src)
+    keep = tmp_path / "m.json.tmp"
+    keep.write_text("the user's own file\n")
+    run = run_bounded(["reduce", src, "--model", tmp_path / "m.json"])
+    assert run.code == 0, run.stderr
+    assert keep.read_text() == "the user's own file\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.json", "m.json.tmp", "ok.glb"]
+
+
+def test_db_build_over_a_database_leaves_a_folder_named_like_its_old_copy_alone(sample_assets, tmp_path):
+    """Rebuilding a database moved the old one to the fixed name '.DB.old', removing first a folder of
+    that name (a user's, with whatever it held)."""
+    src = tmp_path / "ok.glb"
+    shutil.copy(sample_assets / "gestures" / "ok_00.glb", src)
+    for k in range(2):  # built, then rebuilt over itself
+        if k == 1:
+            (tmp_path / ".db.old").mkdir()
+            (tmp_path / ".db.old" / "notes.txt").write_text("the user's own\n")
+        run = run_bounded(["db", "build", src, "-o", tmp_path / "db"])
+        assert run.code == 0, run.stderr
+    assert (tmp_path / ".db.old" / "notes.txt").read_text() == "the user's own\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".db.old", "db", "ok.glb"]
+
+
 @pytest.mark.parametrize("kind", ["fifo", "devzero"])
 @pytest.mark.parametrize("role", ["input", "handmap", "config", "labels", "model"])
 def test_non_regular_files_are_refused(kind, role, sample_assets, tmp_path):

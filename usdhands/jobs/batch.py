@@ -403,7 +403,12 @@ def _up_to_date(src: Path, dst: Path, options_time: float, side_files: Sequence[
 
 
 def _write_json(path: Path, obj) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    except OSError as e:  # a read-only folder: named, not the temporary file
+        from usdhands.errors import OutputPathError
+
+        raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
     try:
         with os.fdopen(fd, "w") as f:
             json.dump(obj, f, indent=2)

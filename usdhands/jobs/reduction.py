@@ -185,7 +185,11 @@ def reduce(source: str | os.PathLike, output: str | os.PathLike | None = None,
         model = dataclasses.replace(model, metadata={
             **model.metadata, "paper_names": {c: paper[c] for c in model.curves if c in paper},
             "frames": int(clip.num_frames), "fps": float(clip.fps)})
-        written.append(model.save(model_output))
+        from usdhands.formats.registry import atomic_output
+
+        with atomic_output(model_output) as tmp:  # an unwritable folder named in one line; SIGTERM cleaned up
+            model.save(tmp)
+        written.append(Path(model_output))
     if options.plot is not None:
         from usdhands.jobs.plots.reduction import plot_reduction
 

@@ -296,11 +296,16 @@ class ReductionModel:
         )
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the model as JSON (atomically: a temporary file, then a rename)."""
+        """Write the model as JSON (atomically: a temporary file of a name no other file has, then a rename;
+        a fixed ``NAME.tmp`` overwrote, then removed, a user's file of that name)."""
+        import secrets
+
         path = Path(path)
-        tmp = path.with_name(path.name + ".tmp")
+        tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)  # never an existing file; the umask's mode
         try:
-            tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(json.dumps(self.to_dict(), indent=2) + "\n")
             os.replace(tmp, path)
         except BaseException:
             tmp.unlink(missing_ok=True)

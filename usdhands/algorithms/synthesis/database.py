@@ -374,9 +374,8 @@ def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
         for name in db._array_names():
             np.save(tmp / f"{name}.npy", np.ascontiguousarray(getattr(db, name)))
         (tmp / "manifest.json").write_text(json.dumps(db.manifest(), indent=1) + "\n")
-        if path.exists():
-            old = path.with_name(f".{path.name}.old")
-            shutil.rmtree(old, ignore_errors=True)  # left by an interrupted earlier save
+        if path.exists():  # the old database moved aside under a fresh name (a fixed '.NAME.old' was
+            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))  # a user's, removed)
             os.replace(path, old)
             os.replace(tmp, path)
             shutil.rmtree(old)
