@@ -438,37 +438,53 @@ def test_usd_quaternion_of_magnitude_1e38_converts_to_a_valid_glb(sample_assets,
     assert run_bounded(["inspect", out]).code == 0
 
 
-def test_sigterm_mid_write_leaves_nothing(sample_assets, tmp_path):
-    """14 of 25 runs left .out.XXXX.usdc (and USD's own temporary) beside the target."""
+@pytest.mark.parametrize("target", ["out.usda", "out.usdc", "out.glb", "out_db", "rebuilt_db"])
+def test_sigterm_mid_write_leaves_nothing(target, sample_assets, tmp_path):
+    """14 of 25 runs left .out.XXXX.usdc (and USD's own temporary) beside the target; every writer
+    (USD text and crate, glTF binary, a database folder) is signalled while its temporary exists."""
     import signal
     import subprocess
     import sys
     import time
 
-    from hostile import ROOT, listing
+    from hostile import ROOT, listing, sha
 
     src = tmp_path / "long.glb"
     shutil.copy(sample_assets / "conversation.glb", src)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     terminated = 0
+    kept = []  # rebuilt_db: the database being replaced, which a signal must leave as it was
+    if target == "rebuilt_db":
+        assert run_bounded(["db", "build", src, "-o", tmp_path / target]).code == 0
+        kept = listing(tmp_path)
+        old_bytes = {p: sha(tmp_path / p) for p in kept}
     for attempt in range(5):
-        out = tmp_path / "out.usda"
-        proc = subprocess.Popen([sys.executable, "-m", "usdhands", "convert", str(src), str(out)], env=env,
+        out = tmp_path / target
+        argv = ["db", "build", src, "-o", out] if target.endswith("_db") else ["convert", src, out]
+        proc = subprocess.Popen([sys.executable, "-m", "usdhands", *map(str, argv)], env=env,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline:  # wait for the temporary output
-            if any(name.startswith(".out.") for name in os.listdir(tmp_path)):
+            if any(name.startswith(f".{out.stem}.") for name in os.listdir(tmp_path)):
                 proc.send_signal(signal.SIGTERM)
                 break
             time.sleep(0.002)
         _, err = proc.communicate(timeout=120)
-        if proc.returncode == 0:
-            out.unlink()
+        if proc.returncode in (0, -signal.SIGTERM) and out.exists() and not kept:  # done before the signal
+            assert run_bounded(["inspect", out] if out.is_file() else ["synthesize", src, "--db", out, "-o",
+                                                                      tmp_path / "check.glb"]).code == 0
+            shutil.rmtree(out) if out.is_dir() else out.unlink()
+            (tmp_path / "check.glb").unlink(missing_ok=True)
+            continue
+        if kept and proc.returncode in (0, -signal.SIGTERM):  # the new database took the old one's place
+            assert listing(tmp_path) == kept
             continue
         assert proc.returncode == 143, (proc.returncode, err)
         assert err.strip().splitlines() == ["usdhands: terminated"]
         terminated += 1
-        assert listing(tmp_path) == ["long.glb"], "temporary output left behind"
+        assert listing(tmp_path) == (kept or ["long.glb"]), "temporary output left behind"
+        if kept:
+            assert {p: sha(tmp_path / p) for p in kept} == old_bytes, "the old database changed"
     assert terminated >= 1
 
 

@@ -19,12 +19,12 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
-import signal
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Protocol
 
+from usdhands.deferred_signals import DeferredSignals
 from usdhands.errors import AssetReadError, OutputPathError
 
 __all__ = [
@@ -208,42 +208,6 @@ def _current_umask() -> int:
     return mask
 
 
-_CLEANUP_SIGNALS = (signal.SIGTERM, signal.SIGINT)
-
-
-class _DeferredSignals:
-    """SIGTERM/SIGINT recorded instead of handled until :meth:`replay` (main thread only).
-
-    Blocking the signals (pthread_sigmask) did not close the window: USD's worker threads
-    take the signal and Python runs its handler in the main thread all the same.
-    """
-
-    def __init__(self):
-        import threading
-
-        self.saved: dict = {}
-        self.pending: list[int] = []
-        if threading.current_thread() is threading.main_thread():
-            for sig in _CLEANUP_SIGNALS:
-                self.saved[sig] = signal.signal(sig, lambda signum, frame: self.pending.append(signum))
-
-    def restore(self) -> None:
-        for sig, handler in self.saved.items():
-            signal.signal(sig, handler)
-        self.saved = {}
-
-    def replay(self) -> None:
-        """Restore the handlers and run the one of each signal that came meanwhile (it raises)."""
-        saved = dict(self.saved)
-        self.restore()
-        for sig in self.pending:
-            handler = saved.get(sig)
-            if callable(handler):
-                handler(sig, None)
-            elif handler == signal.SIG_DFL:
-                signal.raise_signal(sig)
-
-
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
@@ -255,7 +219,7 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         raise OutputPathError("is a folder; give the output a file name", path=path)
     # SIGTERM/SIGINT deferred until the temporary file's name is known to the cleanup below:
     # a signal right after mkstemp left .out.XXXX files behind
-    deferred = _DeferredSignals()
+    deferred = DeferredSignals()
     tmp_path = None
     try:
         try:

@@ -32,7 +32,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,6 +46,7 @@ from usdhands.algorithms.synthesis.config import SegmentationConfig
 from usdhands.algorithms.synthesis.wrist_features import (
     NUM_WRIST_FEATURES, WRIST_FEATURE_NAMES, mirror_features, reach_cm, world_xforms_for, wrist_features,
 )
+from usdhands.deferred_signals import signals_deferred
 from usdhands.errors import ConfigError
 from usdhands.input_files import check_regular_file, read_json
 from usdhands.json_schemas import first_schema_error, load_schema
@@ -350,6 +350,16 @@ def database_schema() -> dict:
     return load_schema("database")
 
 
+def _unused_name(path: Path, tag: str) -> Path:
+    """A hidden name beside ``path`` that no file has now (``.NAME.TAGxxxxxxxx``)."""
+    import secrets
+
+    while True:
+        candidate = path.with_name(f".{path.name}.{tag}{secrets.token_hex(4)}")
+        if not os.path.lexists(candidate):
+            return candidate
+
+
 def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
     """Write ``db`` to the folder ``path`` (created; replaced atomically if it exists as a database).
 
@@ -364,27 +374,40 @@ def save_database(db: FingerDatabase, path: str | os.PathLike) -> Path:
             raise ConfigError("exists and is not a folder", path=path)
         if any(path.iterdir()) and not (path / "manifest.json").exists():
             raise ConfigError("is a non-empty folder that is not a finger database; refusing to overwrite", path=path)
+    # SIGTERM/SIGINT (raised as exceptions by the command line) wait while a temporary folder is
+    # made and named, while the folders are renamed, and while they are removed: a signal there
+    # left mkdtemp's folder or the old database behind. The old database is put back if the new
+    # one did not take its place.
+    tmp = old = None
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", dir=path.parent))
-    except OSError as e:  # read-only, a file in the way, a name too long
-        raise ConfigError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
-    try:
-        os.chmod(tmp, 0o755)  # mkdtemp makes it private
+        with signals_deferred():
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                tmp = _unused_name(path, "")
+                os.mkdir(tmp)
+            except OSError as e:  # read-only, a file in the way, a name too long
+                tmp = None
+                raise ConfigError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}",
+                                  path=path) from None
         for name in db._array_names():
             np.save(tmp / f"{name}.npy", np.ascontiguousarray(getattr(db, name)))
         (tmp / "manifest.json").write_text(json.dumps(db.manifest(), indent=1) + "\n")
-        if path.exists():  # the old database moved aside under a fresh name (a fixed '.NAME.old' was
-            old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old.", dir=path.parent))  # a user's, removed)
-            os.replace(path, old)
-            os.replace(tmp, path)
-            shutil.rmtree(old)
-        else:
+        with signals_deferred():
+            if path.exists():  # the old database moved aside under a fresh name (a fixed '.NAME.old'
+                old = _unused_name(path, "old.")  # was a user's folder, and was removed)
+                os.replace(path, old)
             os.replace(tmp, path)
     except OSError as e:  # the folder filled up or became unwritable while writing
         raise ConfigError(f"cannot write the database: {e.strerror}", path=path) from None
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        with signals_deferred():
+            if tmp is not None:
+                shutil.rmtree(tmp, ignore_errors=True)
+            if old is not None and old.exists():
+                if path.exists():
+                    shutil.rmtree(old, ignore_errors=True)
+                else:
+                    os.replace(old, path)
     return path
 
 
