@@ -100,11 +100,10 @@ MAX_OBJECTS = 100_000
 
 def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
     try:
+        check_json_depth(text, path, what="glTF JSON")  # pygltflib recurses into what json parsed; its size
         data = json.loads(text, parse_constant=refuse_json_constant)
-        check_json_depth(text, path, what="glTF JSON")  # pygltflib recurses into what json parsed
-    except RecursionError:
-        check_json_depth(text, path, what="glTF JSON")
-        raise
+    except MemoryError:
+        raise AssetReadError("glTF JSON too large to parse in the memory there is", path=path) from None
     except UnicodeDecodeError as e:
         raise AssetReadError(f"glTF JSON is not UTF-8 ({e.reason} at byte {e.start})", path=path) from None
     except json.JSONDecodeError as e:
