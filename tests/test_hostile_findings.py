@@ -314,6 +314,26 @@ def test_usd_all_zero_bind_transforms(sample_assets, tmp_path):
                   message="bindTransforms of joint 'Hips' is singular")
 
 
+@pytest.mark.parametrize("attr", ["bindTransforms", "restTransforms"])
+def test_usd_joint_transform_that_is_not_affine(attr, sample_assets, tmp_path):
+    """usda fuzz (76 findings in 10 minutes): a bindTransform whose fourth column reads 0 0 0 0 instead
+    of 0 0 0 1 passed the 3x3 check; solving a child's rest from it raised LinAlgError (file without
+    restTransforms, as usdhands writes from a glTF). A restTransform like it is refused as well."""
+    import re
+
+    text = humanoid_usda_text(sample_assets)
+    if attr == "bindTransforms":
+        text = re.sub(r"\n\s*uniform matrix4d\[\] restTransforms = \[[^\n]*", "", text, count=1)
+    start = text.index(f"uniform matrix4d[] {attr} = [")
+    end = text.index("\n", start)
+    line = text[start:end]
+    second = [m.start() for m in re.finditer(r", 1\) \)", line)][1]
+    bad = tmp_path / "projective.usda"
+    bad.write_text(text[:start] + line[:second] + ", 0) )" + line[second + len(", 1) )"):] + text[end:])
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message=f"{attr} of joint 'Hips/Spine' is not an affine transform (its fourth column is not 0 0 0 1)")
+
+
 @pytest.mark.parametrize("edit,message", [
     (lambda t: t.replace("elementSize = 5", "elementSize = 3", 1), "elementSize 3 / 5"),
     (lambda t: t.replace("elementSize = 5", "elementSize = 2147483647", 2), "elementSize 2147483647 / 2147483647"),

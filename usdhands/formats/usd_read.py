@@ -450,10 +450,15 @@ def _check_xforms(m: np.ndarray, names: list[str], attr: str, path, where: str) 
         r = np.where(ok_scale[:, None, None], m[:, :3, :3] / np.where(ok_scale[:, None], scale, 1.0)[:, None, :],
                      np.eye(3))
         singular = ~ok_scale | (np.abs(np.linalg.det(r)) < 1e-6)
-    bad = np.flatnonzero(~finite | singular)
+        # USD's fourth column (our last row) must be 0 0 0 1: a 0 there (usda fuzz) made the matrix
+        # singular past the 3x3 check, a LinAlgError when a child's rest was solved from its bind
+        projective = finite & ((np.abs(m[:, 3, :3]).max(axis=1) > 1e-6) | (np.abs(m[:, 3, 3] - 1.0) > 1e-6))
+    bad = np.flatnonzero(~finite | singular | projective)
     if len(bad):
         j = int(bad[0])
-        what = "is not finite (or overflows)" if not finite[j] else "is singular (a zero scale or collapsed axes)"
+        what = ("is not finite (or overflows)" if not finite[j] else
+                "is singular (a zero scale or collapsed axes)" if singular[j] else
+                "is not an affine transform (its fourth column is not 0 0 0 1)")
         raise AssetReadError(f"{attr} of joint '{names[j]}' {what}", path=path, location=where)
 
 
