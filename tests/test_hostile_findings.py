@@ -334,6 +334,23 @@ def test_usd_joint_transform_that_is_not_affine(attr, sample_assets, tmp_path):
                   message=f"{attr} of joint 'Hips/Spine' is not an affine transform (its fourth column is not 0 0 0 1)")
 
 
+@pytest.mark.parametrize("attr", ["bindTransforms", "restTransforms"])
+def test_usd_joint_transforms_holding_strings(attr, sample_assets, tmp_path):
+    """usdc fuzz: a corrupt crate's restTransforms held strings, one per joint (ValueError converting
+    them to floats); a .usda typing the attribute string[] reaches the same code."""
+    import re
+
+    text = humanoid_usda_text(sample_assets)
+    start = text.index(f"uniform matrix4d[] {attr} = [")
+    end = text.index("\n", start)
+    count = len(re.findall(r"\( \(", text[start:end]))
+    strings = ", ".join(['"usdhands"'] * count)
+    bad = tmp_path / "strings.usda"
+    bad.write_text(text[:start] + f"uniform string[] {attr} = [{strings}]" + text[end:])
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message=f"{attr} holds StringArray values, not matrix4d[]")
+
+
 @pytest.mark.parametrize("edit,message", [
     (lambda t: t.replace("elementSize = 5", "elementSize = 3", 1), "elementSize 3 / 5"),
     (lambda t: t.replace("elementSize = 5", "elementSize = 2147483647", 2), "elementSize 2147483647 / 2147483647"),

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
 from usdhands.errors import AssetReadError, InvalidAnimationError, JointMismatchError
 from usdhands.formats.usd_common import (
@@ -404,12 +404,12 @@ def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_u
     if len(set(tokens)) != J:
         raise AssetReadError("repeated joint paths in 'joints'", path=path, location=where)
 
-    bind = skel.GetBindTransformsAttr().Get()
+    bind = _matrices(skel.GetBindTransformsAttr(), "bindTransforms", path, where)
     bind = None if bind is None or len(bind) == 0 else bind
     if bind is not None and len(bind) != J:
         raise JointMismatchError(f"bindTransforms has {len(bind)} entries for {J} joints", path=path, location=where)
     bind_np = matrices_to_numpy(bind) if bind is not None else None
-    rest = skel.GetRestTransformsAttr().Get()
+    rest = _matrices(skel.GetRestTransformsAttr(), "restTransforms", path, where)
     rest = None if rest is None or len(rest) == 0 else rest
     if rest is not None and len(rest) != J:
         raise JointMismatchError(f"restTransforms has {len(rest)} entries for {J} joints", path=path, location=where)
@@ -432,6 +432,16 @@ def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_u
     t, q, s = xform_to_trs(local)
     sk = Skeleton(names, parents, t, q, s, bind_np, meters_per_unit=meters_per_unit, up_axis=up_axis, name=where)
     return sk, tokens
+
+
+def _matrices(attr: Usd.Attribute, name: str, path, where: str):
+    """The ``matrix4d[]`` value of ``attr`` (None where unauthored), refused when it holds another type:
+    a corrupt .usdc's restTransforms held strings (usdc fuzz: ValueError converting them)."""
+    value = attr.Get()
+    if value is not None and not isinstance(value, Vt.Matrix4dArray):
+        kind = type(value[0]).__name__ if isinstance(value, (list, tuple)) and len(value) else type(value).__name__
+        raise AssetReadError(f"{name} holds {kind} values, not matrix4d[]", path=path, location=where)
+    return value
 
 
 def _check_xforms(m: np.ndarray, names: list[str], attr: str, path, where: str) -> None:
