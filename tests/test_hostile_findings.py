@@ -351,6 +351,22 @@ def test_usd_joint_transforms_holding_strings(attr, sample_assets, tmp_path):
                   message=f"{attr} holds StringArray values, not matrix4d[]")
 
 
+@pytest.mark.parametrize("attr", ["point3f[] points", "quatf[] rotations.timeSamples"])
+def test_usd_numbers_typed_as_strings(attr, sample_assets, tmp_path):
+    """Found auditing the usdc finding above: a mesh's points or an animation's rotations typed
+    string[] (as a corrupt crate can hold them) raised ValueError converting them."""
+    import re
+
+    text = humanoid_usda_text(sample_assets)
+    start = text.index(attr)
+    end = text.index("}", start) if "timeSamples" in attr else text.index("\n", start)
+    body = re.sub(r"\[[^\]]*\]", lambda m: "[" + ", ".join(['"x"'] * m.group(0).count("(")) + "]", text[start:end])
+    bad = tmp_path / "strings.usda"
+    bad.write_text(text[:start] + body.replace(attr.split()[0], "string[]", 1) + text[end:])
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message="cannot read as USD: an attribute holds values of another type than its schema's")
+
+
 @pytest.mark.parametrize("edit,message", [
     (lambda t: t.replace("elementSize = 5", "elementSize = 3", 1), "elementSize 3 / 5"),
     (lambda t: t.replace("elementSize = 5", "elementSize = 2147483647", 2), "elementSize 2147483647 / 2147483647"),

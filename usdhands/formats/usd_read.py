@@ -103,6 +103,11 @@ def read_usd(path: str | os.PathLike, *, fps: float | None = None) -> Asset:
             # a corrupt .usdc whose array attribute holds a Payload, a Specifier... (.usdc fuzz)
             raise AssetReadError(f"cannot read as USD: an attribute holds a {held.group(1)} where an array belongs",
                                  path=path) from None
+        except ValueError as e:  # strings where numbers belong: a mesh's points or rotations typed string[]
+            if not str(e).startswith("could not convert"):
+                raise
+            raise AssetReadError(f"cannot read as USD: an attribute holds values of another type than its schema's "
+                                 f"({str(e)[:80]})", path=path) from None
 
 
 def read_stage(stage: Usd.Stage, *, fps: float | None = None, path: str | os.PathLike | None = None) -> Asset:
