@@ -581,12 +581,13 @@ def test_metacarpals_without_database_counterpart_are_reported_and_left_alone(sm
 
 def test_saving_over_a_database_replaces_it_and_refuses_other_folders(small_db, tmp_path):
     path = save_database(small_db, tmp_path / "db")
-    (tmp_path / ".db.old").mkdir()  # debris of an interrupted save
+    (tmp_path / ".db.old").mkdir()  # the name older versions moved the database to: may be a user's folder
     (tmp_path / ".db.old" / "x").write_text("x")
     save_database(small_db, path)
     assert sorted(f.name for f in path.iterdir()) == ["features.npy", "fingers.npy", "manifest.json",
                                                       "segments.npy", "tracks.npy"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["db"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".db.old", "db"]  # left alone, nothing else left
+    assert (tmp_path / ".db.old" / "x").read_text() == "x"
     other = tmp_path / "notes"
     other.mkdir()
     (other / "a.txt").write_text("keep")
