@@ -531,20 +531,39 @@ def test_usd_quaternion_of_magnitude_1e38_converts_to_a_valid_glb(sample_assets,
     assert run_bounded(["inspect", out]).code == 0
 
 
+def _signalled_mid_write(src, out, sig):
+    """Run ``convert SRC OUT`` (``db build`` for an OUT ending in _db) and send ``sig`` once its
+    temporary output (``.OUT.XXXX``) exists: (the finished process, its stderr)."""
+    import subprocess
+    import sys
+    import time
+
+    from hostile import ROOT
+
+    argv = ["db", "build", src, "-o", out] if out.name.endswith("_db") else ["convert", src, out]
+    proc = subprocess.Popen([sys.executable, "-m", "usdhands", *map(str, argv)],
+                            env=dict(os.environ, PYTHONPATH=str(ROOT)), stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:  # wait for the temporary output
+        if any(name.startswith(f".{out.stem}.") for name in os.listdir(out.parent)):
+            proc.send_signal(sig)
+            break
+        time.sleep(0.002)
+    _, err = proc.communicate(timeout=120)
+    return proc, err
+
+
 @pytest.mark.parametrize("target", ["out.usda", "out.usdc", "out.glb", "out_db", "rebuilt_db"])
 def test_sigterm_mid_write_leaves_nothing(target, sample_assets, tmp_path):
     """14 of 25 runs left .out.XXXX.usdc (and USD's own temporary) beside the target; every writer
     (USD text and crate, glTF binary, a database folder) is signalled while its temporary exists."""
     import signal
-    import subprocess
-    import sys
-    import time
 
-    from hostile import ROOT, listing, sha
+    from hostile import listing, sha
 
     src = tmp_path / "long.glb"
     shutil.copy(sample_assets / "conversation.glb", src)
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
     terminated = 0
     kept = []  # rebuilt_db: the database being replaced, which a signal must leave as it was
     if target == "rebuilt_db":
@@ -553,16 +572,7 @@ def test_sigterm_mid_write_leaves_nothing(target, sample_assets, tmp_path):
         old_bytes = {p: sha(tmp_path / p) for p in kept}
     for attempt in range(5):
         out = tmp_path / target
-        argv = ["db", "build", src, "-o", out] if target.endswith("_db") else ["convert", src, out]
-        proc = subprocess.Popen([sys.executable, "-m", "usdhands", *map(str, argv)], env=env,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        deadline = time.monotonic() + 120
-        while proc.poll() is None and time.monotonic() < deadline:  # wait for the temporary output
-            if any(name.startswith(f".{out.stem}.") for name in os.listdir(tmp_path)):
-                proc.send_signal(signal.SIGTERM)
-                break
-            time.sleep(0.002)
-        _, err = proc.communicate(timeout=120)
+        proc, err = _signalled_mid_write(src, out, signal.SIGTERM)
         if proc.returncode in (0, -signal.SIGTERM) and out.exists() and not kept:  # done before the signal
             assert run_bounded(["inspect", out] if out.is_file() else ["synthesize", src, "--db", out, "-o",
                                                                       tmp_path / "check.glb"]).code == 0
@@ -586,28 +596,15 @@ def test_sigint_mid_write_leaves_nothing(target, sample_assets, tmp_path):
     """Ctrl-C (SIGINT) while the temporary output exists: exit 130, one line, nothing left (the issue
     found this held; kept so that it goes on holding)."""
     import signal
-    import subprocess
-    import sys
-    import time
 
-    from hostile import ROOT, listing
+    from hostile import listing
 
     src = tmp_path / "long.glb"
     shutil.copy(sample_assets / "conversation.glb", src)
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
     interrupted = 0
     for attempt in range(4):
         out = tmp_path / target
-        argv = ["db", "build", src, "-o", out] if target.endswith("_db") else ["convert", src, out]
-        proc = subprocess.Popen([sys.executable, "-m", "usdhands", *map(str, argv)], env=env,
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        deadline = time.monotonic() + 120
-        while proc.poll() is None and time.monotonic() < deadline:
-            if any(name.startswith(f".{out.stem}.") for name in os.listdir(tmp_path)):
-                proc.send_signal(signal.SIGINT)
-                break
-            time.sleep(0.002)
-        _, err = proc.communicate(timeout=120)
+        proc, err = _signalled_mid_write(src, out, signal.SIGINT)
         if proc.returncode != 130 and out.exists():  # finished before the signal was handled
             shutil.rmtree(out) if out.is_dir() else out.unlink()
             continue
