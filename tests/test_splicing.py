@@ -52,23 +52,26 @@ def _finger_error_deg(result, case):
 
 
 # -- cost functions against their naive twins ------------------------------------------
-def _random_pass_one(rng, n, m, trunk):
+def _random_pass_one(rng, n, m, trunk, half=2):
     P = rng.normal(size=(n, 4, 3)) * 10
     Q = rng.normal(size=(m, 4, 3)) * 10
     vb, ab, evb, eab = sign_features(np.cumsum(P, 0), 30.0)
     vh, ah, evh, eah = sign_features(np.cumsum(Q, 0), 30.0)
     yb = rng.uniform(-180, 180, n) if trunk else None
     yh = rng.uniform(-180, 180, m) if trunk else None
-    return FirstPassInput(P, Q, vb, ab, vh, ah, (evb, eab, evh, eah), 2, yb, yh)
+    return FirstPassInput(P, Q, vb, ab, vh, ah, (evb, eab, evh, eah), half, yb, yh)
 
 
 @pytest.mark.parametrize("trunk", [False, True])
-def test_first_pass_cost_equals_naive_eq6(trunk):
+@pytest.mark.parametrize("n, m, half", [(17, 23, 2), (9, 12, 0), (9, 12, 1), (11, 8, 3), (4, 3, 2), (3, 9, 2)])
+def test_first_pass_cost_equals_naive_eq6(trunk, n, m, half):
+    """Every cell, with whole windows (the kernel's precomputed centring sums) and
+    windows cut by the clips' ends, and clips too short for any whole window."""
     rng = np.random.default_rng(0)
-    inp = _random_pass_one(rng, 17, 23, trunk)
+    inp = _random_pass_one(rng, n, m, trunk, half)
     full = first_pass_cost_naive(inp)
-    i, j = np.mgrid[0:17, 0:23]
-    fast = first_pass_cost(inp, i.ravel(), j.ravel()).reshape(17, 23)
+    i, j = np.mgrid[0:n, 0:m]
+    fast = first_pass_cost(inp, i.ravel(), j.ravel()).reshape(n, m)
     np.testing.assert_allclose(fast, full, atol=1e-9)
     # values are counts of sign disagreements: 0, 1 or 4 per component
     assert set(np.unique(full)) <= set(range(0, 97))

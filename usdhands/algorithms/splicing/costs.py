@@ -115,7 +115,7 @@ def _sgn(x, eps):  # pragma: no cover - compiled
     return 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh, eps_ah,
                        half, use_trunk, yaw_b, yaw_h):  # pragma: no cover - compiled
     """Eq. 6 (with eq. 7's angle, or the trunk angles) on runs of cells along rows.
@@ -127,17 +127,23 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
     products ``f(i + k, j + k)`` (``|k| <= half``, both frames inside their clips), so
     each ``f(a, b)`` (a sum over the markers) is computed once, for every frame pair the
     asked cells' windows reach, and shared by the cells of its diagonal, instead of
-    once per window it falls in. Each cell's value depends on that cell alone (not on
-    which other cells are asked or in what order). Eq. 6 is accumulated column by
-    column in contiguous slices of a run, which the compiler vectorises.
+    once per window it falls in. The window sums of the frames' own marker sums (the
+    centring terms) are the same for every cell whose window is whole: they are summed
+    once per frame, in the order the cells near the ends add them (the same bits).
+    Each cell's value depends on that cell alone (not on which other cells are asked
+    or in what order). Eq. 6 is accumulated marker by marker in contiguous slices of a
+    run, which the compiler vectorises (``error_model="numpy"``: no zero-division
+    checks in the loops, none can divide by zero).
     """
     R = run_row.shape[0]
-    N = 0
-    for r in range(R):
-        N += run_len[r]
     n = P.shape[0]
     m = Q.shape[0]
     K = P.shape[1]
+    N = 0
+    Lmax = 1
+    for r in range(R):
+        N += run_len[r]
+        Lmax = max(Lmax, run_len[r])
     out = np.empty(N)
     X = np.ascontiguousarray(P[:, :, 0])
     Z = np.ascontiguousarray(P[:, :, 2])
@@ -170,6 +176,18 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
             for ax in range(3):
                 SB[i, mk, ax] = _sgn(vb[i, mk, ax], eps_vb)
                 SB[i, mk, 3 + ax] = _sgn(ab[i, mk, ax], eps_ab)
+    # the frame sums over a whole window (frames half .. n - 1 - half), k = -half .. half from 0.0
+    WX = np.zeros(n)
+    WZ = np.zeros(n)
+    WXh = np.zeros(m)
+    WZh = np.zeros(m)
+    for k in range(-half, half + 1):
+        for a in range(half, n - half):
+            WX[a] += SX[a + k]
+            WZ[a] += SZ[a + k]
+        for b in range(half, m - half):
+            WXh[b] += SXh[b + k]
+            WZh[b] += SZh[b + k]
     # eq. 7's products of frame pairs: f(a, b) for b in need_lo[a] .. need_hi[a], stored
     # row after row from foff[a]
     need_lo = np.full(n, m, dtype=np.int64)
@@ -209,16 +227,11 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
             for u in range(w):
                 fxz[u] += xa * zs[u] - xs[u] * za
                 fxx[u] += xa * xs[u] + za * zs[u]
-    sxz = np.empty(m)
-    sxx = np.empty(m)
-    bx = np.empty(m)
-    bz = np.empty(m)
-    hx = np.empty(m)
-    hz = np.empty(m)
-    cnt = np.empty(m, dtype=np.int64)
-    co = np.empty(m)
-    si = np.empty(m)
-    d = np.empty(m)
+    sxz = np.empty(Lmax)
+    sxx = np.empty(Lmax)
+    co = np.empty(Lmax)
+    si = np.empty(Lmax)
+    whole = K * (2 * half + 1)  # markers in a whole window
     c = 0
     for r in range(R):
         # a run of cells: row i, columns j0 .. j0 + L - 1
@@ -231,15 +244,10 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
                 co[t] = np.cos(th)
                 si[t] = np.sin(th)
         else:
-            # eq. 7 over the window: the diagonal's products, frame sums and counts
+            # eq. 7 over the window: the diagonal's products
             for t in range(L):
                 sxz[t] = 0.0
                 sxx[t] = 0.0
-                bx[t] = 0.0
-                bz[t] = 0.0
-                hx[t] = 0.0
-                hz[t] = 0.0
-                cnt[t] = 0
             for k in range(-half, half + 1):
                 a = i + k
                 if a < 0 or a >= n:
@@ -248,43 +256,69 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
                 t_hi = min(L, m - (j0 + k))
                 if t_lo >= t_hi:
                     continue
-                o = j0 + k
                 w = t_hi - t_lo
-                base = foff[a] + o + t_lo - need_lo[a]
+                base = foff[a] + j0 + k + t_lo - need_lo[a]
                 f_xz = FXZ[base:base + w]
                 f_xx = FXX[base:base + w]
                 s_xz = sxz[t_lo:t_hi]
                 s_xx = sxx[t_lo:t_hi]
-                sa = SX[a]
-                za_ = SZ[a]
-                b_x = bx[t_lo:t_hi]
-                b_z = bz[t_lo:t_hi]
-                h_x = hx[t_lo:t_hi]
-                h_z = hz[t_lo:t_hi]
-                cn = cnt[t_lo:t_hi]
-                sh_x = SXh[o + t_lo:o + t_hi]
-                sh_z = SZh[o + t_lo:o + t_hi]
                 for u in range(w):
                     s_xz[u] += f_xz[u]
                     s_xx[u] += f_xx[u]
-                    b_x[u] += sa
-                    b_z[u] += za_
-                    h_x[u] += sh_x[u]
-                    h_z[u] += sh_z[u]
-                    cn[u] += K
-            for t in range(L):  # without branches, so it vectorises: r = 0 gives the identity
-                num = sxz[t] - (bx[t] * hz[t] - hx[t] * bz[t]) / cnt[t]
-                den = sxx[t] - (bx[t] * hx[t] + bz[t] * hz[t]) / cnt[t]
-                r = np.sqrt(num * num + den * den)
-                r0 = (r == 0.0) * 1.0
-                rr = r + r0
+            # the cells whose window is whole, t0 <= t < t1: the centring sums precomputed
+            t0 = 0
+            t1 = 0
+            if half <= i < n - half:
+                t0 = min(max(half - j0, 0), L)
+                t1 = max(min(m - half - j0, L), t0)
+            bxi = WX[i]
+            bzi = WZ[i]
+            whx = WXh[j0 + t0:j0 + t1]
+            whz = WZh[j0 + t0:j0 + t1]
+            s_xz = sxz[t0:t1]
+            s_xx = sxx[t0:t1]
+            cs = co[t0:t1]
+            sn = si[t0:t1]
+            for t in range(t1 - t0):  # without branches, so it vectorises: r = 0 gives the identity
+                num = s_xz[t] - (bxi * whz[t] - whx[t] * bzi) / whole
+                den = s_xx[t] - (bxi * whx[t] + bzi * whz[t]) / whole
+                rad = np.sqrt(num * num + den * den)
+                r0 = (rad == 0.0) * 1.0
+                rr = rad + r0
+                cs[t] = den / rr + r0
+                sn[t] = num / rr
+            # the cells near the clips' ends: the window's frames inside both clips
+            for t in range(L):
+                if t0 <= t < t1:
+                    continue
+                j = j0 + t
+                bx = 0.0
+                bz = 0.0
+                hx = 0.0
+                hz = 0.0
+                cnt = 0
+                for k in range(-half, half + 1):
+                    a = i + k
+                    b = j + k
+                    if a < 0 or a >= n or b < 0 or b >= m:
+                        continue
+                    bx += SX[a]
+                    bz += SZ[a]
+                    hx += SXh[b]
+                    hz += SZh[b]
+                    cnt += K
+                num = sxz[t] - (bx * hz - hx * bz) / cnt
+                den = sxx[t] - (bx * hx + bz * hz) / cnt
+                rad = np.sqrt(num * num + den * den)
+                r0 = (rad == 0.0) * 1.0
+                rr = rad + r0
                 co[t] = den / rr + r0
                 si[t] = num / rr
+        dl = out[c:c + L]
         for t in range(L):
-            d[t] = 0.0
+            dl[t] = 0.0
         cs = co[:L]
         sn = si[:L]
-        dl = d[:L]
         for mk in range(K):
             b0 = SB[i, mk, 0]
             b1 = SB[i, mk, 1]
@@ -321,8 +355,6 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
                 dd += e1 * e1
                 dd += e4 * e4
                 dl[t] = dd
-        for t in range(L):
-            out[c + t] = d[t]
         c += L
     return out
 

@@ -585,15 +585,21 @@ def partial_world_xforms(clip: Clip, joints: Sequence[int]) -> np.ndarray:
 
     Other joints are left zero; pass the result as ``world=`` to the marker functions
     (forward kinematics of a whole 60-joint character costs more than the alignment).
+    The array is a joint-major block seen time-major: each joint's transforms are
+    contiguous, so only the computed joints' pages are ever written (a 65-joint clip
+    of 600 frames would otherwise fault in and clear 2.5 MB for a few joints).
     """
     sk = clip.skeleton
     need = sorted({a for j in joints for a in sk.chain_to_root(int(j))})
     local = trs_to_xform(clip.translations[:, need], clip.rotations[:, need], clip.scales[:, need])
-    world = np.zeros((clip.num_frames, sk.num_joints, 4, 4))
+    world = np.zeros((sk.num_joints, clip.num_frames, 4, 4))
     for k, j in enumerate(need):  # parents come before children
         p = int(sk.parents[j])
-        world[:, j] = local[:, k] if p < 0 else world[:, p] @ local[:, k]
-    return world
+        if p < 0:
+            world[j] = local[:, k]
+        else:
+            np.matmul(world[p], local[:, k], out=world[j])
+    return world.transpose(1, 0, 2, 3)
 
 
 def _side_joints(skeleton, side: HandSide) -> list[int]:
