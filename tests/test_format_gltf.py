@@ -644,3 +644,6 @@ def test_a_document_loaded_again_is_equal_and_independent(sample_assets):
     fresh = load_gltf(src)
     assert second.gltf == fresh.gltf and second.gltf is not fresh.gltf
     assert second.gltf.nodes[0].name != "changed by a writer" and second.gltf.animations[0].channels
+    other = load_gltf(sample_assets / "humanoid.glb")  # another text in between: the documents never mix
+    assert load_gltf(src).gltf == fresh.gltf and load_gltf(sample_assets / "humanoid.glb").gltf == other.gltf
+    assert other.gltf != fresh.gltf

@@ -122,36 +122,41 @@ def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
     if objects > MAX_OBJECTS:
         raise AssetReadError(f"{objects:,} objects in the top-level arrays: more than {MAX_OBJECTS:,} are refused",
                              path=path)
-    key = bytes(text) if isinstance(text, (bytes, bytearray, memoryview)) else text.encode("utf-8", "surrogatepass")
-    decoded = _DECODED.get(key)
-    if decoded is None:
-        try:
-            decoded = pygltflib.GLTF2.gltf_from_json(text)
-        except Exception as e:  # dataclasses_json raises a variety of types on wrong shapes
-            raise AssetReadError(f"invalid glTF JSON structure: {type(e).__name__}: {e}".splitlines()[0],
-                                 path=path) from None
-        if len(key) <= _DECODED_MAX_BYTES:
-            while len(_DECODED) >= _DECODED_MAX_ENTRIES:
-                _DECODED.pop(next(iter(_DECODED)), None)
-            _DECODED[key] = decoded
-    else:
-        _DECODED[key] = _DECODED.pop(key, decoded)  # most recently used last
+    global _last_decoded
+    key = None
+    if len(text) <= _DECODED_MAX_BYTES:
+        key = bytes(text) if isinstance(text, (bytes, bytearray, memoryview)) else text.encode("utf-8", "surrogatepass")
+        last = _last_decoded
+        if last is not None and last[0] == key:
+            return copy.deepcopy(last[1])
+    try:
+        decoded = pygltflib.GLTF2.from_dict(data, infer_missing=True)  # gltf_from_json without parsing again
+    except Exception as e:  # dataclasses_json raises a variety of types on wrong shapes
+        raise AssetReadError(f"invalid glTF JSON structure: {type(e).__name__}: {e}".splitlines()[0],
+                             path=path) from None
+    if key is None:
+        return decoded
+    _last_decoded = (key, decoded)
     return copy.deepcopy(decoded)
 
 
 #: pygltflib's decoding of the JSON into objects (dataclasses_json) takes about 1 ms per
-#: object: 57 ms for the sample conversation, which a synthesis read twice (the input,
-#: then again as the source its output keeps). The last few documents decoded are kept,
-#: keyed by their JSON text, and every load gets its own deep copy (2 ms): the same
-#: text always gives the same document, and callers may change theirs.
-_DECODED: dict[bytes, pygltflib.GLTF2] = {}
-_DECODED_MAX_ENTRIES = 4
+#: object: 57 ms for the sample conversation, which a synthesis reads twice (the input,
+#: then again as the source its output keeps). The last document decoded is kept with
+#: its JSON text, when that is at most 8 MB (a .glb's JSON, without the binary chunk;
+#: a .gltf with its buffers in data URIs is larger and is not kept), and a load of the
+#: same text gets a deep copy of it (2 ms): the same text always gives the same
+#: document, and callers may change theirs. So a process holds at most one such
+#: document (its text, and the objects, a few times the text's size) beyond what its
+#: callers hold.
+_last_decoded: tuple[bytes, pygltflib.GLTF2] | None = None
 _DECODED_MAX_BYTES = 8 << 20
 
 
 def clear_decoded_cache() -> None:
-    """Forget the decoded documents (benchmarks timing a first read call this)."""
-    _DECODED.clear()
+    """Forget the decoded document (benchmarks timing a first read call this)."""
+    global _last_decoded
+    _last_decoded = None
 
 
 def _split_glb(path: Path, raw: bytes) -> tuple[bytes, bytes | None]:
