@@ -647,3 +647,24 @@ def test_a_document_loaded_again_is_equal_and_independent(sample_assets):
     other = load_gltf(sample_assets / "humanoid.glb")  # another text in between: the documents never mix
     assert load_gltf(src).gltf == fresh.gltf and load_gltf(sample_assets / "humanoid.glb").gltf == other.gltf
     assert other.gltf != fresh.gltf
+
+
+def test_a_property_pygltflib_types_as_required_missing_reads_without_warnings(tmp_path):
+    """A channel without target (skipped by the reader) and a property dataclasses_json
+    defaults to None: no RuntimeWarning escapes the read (the fuzz harness counts any
+    as a value nobody checked), and the clip is the one without that channel."""
+    import warnings
+
+    path = build_test_gltf(tmp_path, "embedded")
+    data = json.loads(path.read_text())
+    dropped = data["animations"][0]["channels"].pop()  # the channel on the mesh node, which the reader ignores
+    data["animations"][0]["channels"].append({"sampler": dropped["sampler"]})  # the same channel without target
+    bad = tmp_path / "no_target.gltf"
+    bad.write_text(json.dumps(data))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        clip = read_clip(bad)
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
+    want = read_clip(path)
+    np.testing.assert_array_equal(clip.rotations, want.rotations)
+    np.testing.assert_array_equal(clip.translations, want.translations)

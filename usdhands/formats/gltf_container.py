@@ -19,6 +19,7 @@ import os
 import stat
 import struct
 import urllib.parse
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -130,7 +131,12 @@ def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
         if last is not None and last[0] == key:
             return copy.deepcopy(last[1])
     try:
-        decoded = pygltflib.GLTF2.from_dict(data, infer_missing=True)  # gltf_from_json without parsing again
+        with warnings.catch_warnings():
+            # dataclasses_json's note on a missing property pygltflib types as required (a channel
+            # without target, an image without uri): the readers check what they use
+            warnings.filterwarnings("ignore", "(Missing value|'NoneType' object value) of non-optional type",
+                                    RuntimeWarning)
+            decoded = pygltflib.GLTF2.from_dict(data, infer_missing=True)  # gltf_from_json without parsing again
     except Exception as e:  # dataclasses_json raises a variety of types on wrong shapes
         raise AssetReadError(f"invalid glTF JSON structure: {type(e).__name__}: {e}".splitlines()[0],
                              path=path) from None

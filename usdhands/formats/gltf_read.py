@@ -496,8 +496,14 @@ def _keys_are_frames(times: np.ndarray, at: np.ndarray, snap: float) -> bool:
 
 
 def _norm(q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
-    return np.divide(q, np.where(n > 0, n, 1.0), out=out)  # zero quaternions stay zero: Clip.validate reports them
+    """Quaternions ``(..., 4)`` over their length; zero ones stay zero (Clip.validate reports them).
+
+    The squares are added left to right, as ``np.linalg.norm`` adds four components (the
+    same bits), without its reduction along a four-long axis (half the time).
+    """
+    sq = q * q
+    n = np.sqrt(sq[..., 0] + sq[..., 1] + sq[..., 2] + sq[..., 3])
+    return np.divide(q, np.where(n > 0, n, 1.0)[..., None], out=out)
 
 
 def channel_keys(doc: GltfFile, anim_index: int, channel_index: int,
@@ -640,10 +646,15 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     at = t0 + np.arange(n) / rate
     sk = binding.skeleton
     J = sk.num_joints
-    rot = np.broadcast_to(sk.rest_rotations, (n, J, 4)).copy()
-    tra = np.broadcast_to(sk.rest_translations, (n, J, 3)).copy()
-    sca = np.broadcast_to(sk.rest_scales, (n, J, 3)).copy()
-    target = {"rotation": rot, "translation": tra, "scale": sca}
+    # joint-major blocks, so each channel writes one contiguous stretch (writing a joint's column of
+    # a time-major array walks the whole array once per channel); the clip copies each into time
+    # order once
+    target = {}
+    for path, rest in (("rotation", sk.rest_rotations), ("translation", sk.rest_translations),
+                       ("scale", sk.rest_scales)):
+        a = target[path] = np.empty((J, n, rest.shape[-1]))
+        still = np.setdiff1d(np.arange(J), [j for _, j, p in chans if p == path])
+        a[still] = rest[still][:, None]  # the rest where no channel writes the whole joint below
     snap = snap_time(rate)
     on_frames: dict[int, bool] = {}  # input accessor -> its keys are the frames
     for c, j, path in chans:
@@ -653,13 +664,12 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
         if on_frames[accessor_of[c]]:  # baked keys: the values themselves, as sample_channel gives them, in place
             vals = values[1::3] if interp == "CUBICSPLINE" else values
             if path == "rotation":
-                _norm(vals, out=target[path][:, j])
+                _norm(vals, out=target[path][j])
             else:
-                target[path][:, j] = vals
+                target[path][j] = vals
         else:
-            target[path][:, j] = sample_channel(times, values, interp, at, path == "rotation", snap)
-    for a in (rot, tra, sca):
-        a.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
+            target[path][j] = sample_channel(times, values, interp, at, path == "rotation", snap)
+    rot, tra, sca = (target[p].transpose(1, 0, 2) for p in ("rotation", "translation", "scale"))
     return Clip(sk, rate, rot, tra, sca, name=name, start_time=t0)
 
 
