@@ -33,3 +33,26 @@ def test_z_to_y_maps_up_vector_to_y():
     assert np.allclose(up_axis_xform("Z", "Y")[:3, :3] @ [0, 0, 1], [0, 1, 0])
     with pytest.raises(ValueError, match="Expected up axes 'Y' or 'Z', got 'X' -> 'Y'"):
         up_axis_xform("X", "Y")
+
+
+@pytest.mark.parametrize("up", ["Z", "Y"])
+def test_clip_to_rotations_equal_the_root_turned_on_a_copy(up):
+    """The rotations are those of a copy with the roots turned (the way it was written
+    first), to the bit; where the turn changes no bit (the same up axis) the clip's own
+    array is shared instead of copied, and copied where it changes one (a root's -0.0)."""
+    from usdhands.model.rotations import quat_multiply
+    from usdhands.model.units import _axis_quat
+
+    clip = z_up_clip()
+    for negative_zero in (False, True):
+        rot = np.array(clip.rotations)
+        if negative_zero:
+            rot[3, 0] = [-0.0, -0.0, -0.0, 1.0]  # the turn by the identity gives +0.0: a bit changes
+        src = Clip(clip.skeleton, 30, rot, clip.translations)
+        out = clip_to(src, skeleton_to(src.skeleton, 1.0, up))
+        want = np.array(src.rotations)
+        want[:, 0] = quat_multiply(_axis_quat("Z", up), want[:, 0])
+        assert np.array_equal(out.rotations.view(np.uint64), want.view(np.uint64))
+        unchanged = np.array_equal(want.view(np.uint64), src.rotations.view(np.uint64))
+        assert unchanged == (up == "Z" and not negative_zero)
+        assert np.shares_memory(out.rotations, src.rotations) == unchanged

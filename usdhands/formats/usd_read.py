@@ -647,6 +647,8 @@ def _copy_components(anim_query, codes: list, K: int, out: tuple[np.ndarray, ...
     formats = ("f", "f", "e")
     for f, code in enumerate(codes):
         values = anim_query.ComputeJointLocalTransformComponents(code)
+        if values is None or len(values) != 3:
+            raise ValueError
         for k in range(3):
             v = memoryview(values[k])
             if len(values[k]) != K:  # (one value would broadcast)

@@ -71,8 +71,11 @@ def clip_to(clip: Clip, skeleton: Skeleton) -> Clip:
     roots = src.parents < 0
     t = clip.translations * f
     t[:, roots] = t[:, roots] @ m[:3, :3].T
-    r = np.array(clip.rotations)
-    r[:, roots] = quat_multiply(q, r[:, roots])
+    turned = quat_multiply(q, clip.rotations[:, roots])
+    r = clip.rotations
+    if not np.array_equal(turned.view(np.uint64), r[:, roots].view(np.uint64)):  # the same up axis: nothing turns
+        r = np.array(r)
+        r[:, roots] = turned
     return clip.replace(skeleton=skeleton, rotations=r, translations=t)
 
 
