@@ -130,3 +130,22 @@ def test_check_measures_with_the_same_capsules_as_correct(hand_on_a_ledge, confi
     props = [f for f in result.findings if f.rule == "props"]
     assert bool(props) == finds
     assert all("left index finger penetrates" in f.message for f in props)
+
+
+def test_correct_stage_measures_the_fingers_the_stage_draws(hand_on_a_ledge):
+    """The stage hook takes the skinned mesh's radii as the correct job does."""
+    pxr = pytest.importorskip("pxr")
+    import usdhands.usd
+    from usdhands.formats.io import read_asset, write_asset
+    from usdhands.jobs.correction import CorrectOptions
+
+    src, prop, folder = hand_on_a_ledge
+    usda = folder / "hand.usda"
+    write_asset(read_asset(src), usda)
+    cfg = folder / "no_mesh.json"
+    cfg.write_text(json.dumps({"mesh_radii": False}))
+    with_mesh = usdhands.usd.correct_stage(pxr.Usd.Stage.Open(str(usda)), props=[prop])
+    without = usdhands.usd.correct_stage(pxr.Usd.Stage.Open(str(usda)), props=[prop],
+                                         options=CorrectOptions(interaction_config=cfg))
+    assert with_mesh.report["penetration_before_mm"]["max"] == 0.0
+    assert without.report["penetration_before_mm"]["max"] == pytest.approx(2.0, abs=0.06)

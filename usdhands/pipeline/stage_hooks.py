@@ -197,7 +197,9 @@ def correct_stage(stage: Usd.Stage, props=(), skeleton_path: str | None = None,
     if progress:
         progress(1, 2, "correcting")
     start = time.perf_counter()
-    fixed, report, _, config = correct_loaded(clip, handmap, options, where)
+    from usdhands.jobs.props import hand_meshes
+
+    fixed, report, _, config = correct_loaded(clip, handmap, options, where, hand_meshes(asset, clip))
     seconds = time.perf_counter() - start
     with _editing(stage, layer) as target:
         skel, anim = _author(stage, fixed, clip.name, None, correction_provenance(options, config))
