@@ -149,3 +149,16 @@ def test_correct_stage_measures_the_fingers_the_stage_draws(hand_on_a_ledge):
                                          options=CorrectOptions(interaction_config=cfg))
     assert with_mesh.report["penetration_before_mm"]["max"] == 0.0
     assert without.report["penetration_before_mm"]["max"] == pytest.approx(2.0, abs=0.06)
+
+
+def test_check_stage_measures_the_fingers_the_stage_draws(hand_on_a_ledge):
+    pxr = pytest.importorskip("pxr")
+    import usdhands.usd
+    from usdhands.formats.io import read_asset, write_asset
+    from usdhands.jobs.validation import CheckOptions
+
+    src, prop, folder = hand_on_a_ledge
+    usda = folder / "hand_check.usda"
+    write_asset(read_asset(src), usda)
+    findings = usdhands.usd.check_stage(pxr.Usd.Stage.Open(str(usda)), CheckOptions(props=(prop,)))
+    assert not [f for f in findings if f.rule == "props"]

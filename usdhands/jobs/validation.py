@@ -161,7 +161,8 @@ def check_usd_stage(stage, options: CheckOptions = CheckOptions()) -> list[Findi
             prim = stage.GetPrimAtPath(clip.skeleton.name)
             return (read_hand_map(prim, path=name) if prim else None) or detect_hands(clip.skeleton)
 
-        findings += prop_findings(name, read_stage(stage, path=name).clips, options, recorded_or_detected)
+        asset = read_stage(stage, path=name)
+        findings += prop_findings(name, asset.clips, options, recorded_or_detected, asset=asset)
     return findings
 
 
