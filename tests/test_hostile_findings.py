@@ -605,8 +605,15 @@ def test_sigint_mid_write_leaves_nothing(target, sample_assets, tmp_path):
     for attempt in range(4):
         out = tmp_path / target
         proc, err = _signalled_mid_write(src, out, signal.SIGINT)
-        if proc.returncode != 130 and out.exists():  # finished before the signal was handled
+        if out.exists():  # the output was in place before the signal was handled (exit 0, or 130 when the
+            # interrupt came between the rename and the exit): then it is whole, and nothing else is left
+            assert proc.returncode in (0, 130), (proc.returncode, err)
+            others = [p for p in listing(tmp_path) if p != target and not p.startswith(target + os.sep)]
+            assert others == ["long.glb"], "temporary output left behind"
+            assert run_bounded(["inspect", out] if out.is_file() else ["synthesize", src, "--db", out, "-o",
+                                                                      tmp_path / "check.glb"]).code == 0
             shutil.rmtree(out) if out.is_dir() else out.unlink()
+            (tmp_path / "check.glb").unlink(missing_ok=True)
             continue
         assert (proc.returncode, err.strip().splitlines()) == (130, ["usdhands: interrupted"])
         interrupted += 1
