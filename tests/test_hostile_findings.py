@@ -541,9 +541,14 @@ def _signalled_mid_write(src, out, sig):
     from hostile import ROOT
 
     argv = ["db", "build", src, "-o", out] if out.name.endswith("_db") else ["convert", src, out]
+    import signal
+
+    # SIGINT as a terminal gives it: a shell that starts jobs in the background (a CI runner's) has the
+    # tests ignore SIGINT, and Python keeps an ignored SIGINT ignored in the child
     proc = subprocess.Popen([sys.executable, "-m", "usdhands", *map(str, argv)],
                             env=dict(os.environ, PYTHONPATH=str(ROOT)), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 120
     while proc.poll() is None and time.monotonic() < deadline:  # wait for the temporary output
         if any(name.startswith(f".{out.stem}.") for name in os.listdir(out.parent)):
