@@ -367,6 +367,55 @@ def test_usd_numbers_typed_as_strings(attr, sample_assets, tmp_path):
                   message="cannot read as USD: an attribute holds values of another type than its schema's")
 
 
+def test_usd_joints_that_are_no_array(sample_assets, tmp_path):
+    """usdc fuzz (rerun after the fixes, 706 of 3,485 findings): a corrupt crate's joints held a
+    Variability ('not iterable' TypeError); a .usda typing joints float reaches the same code."""
+    import re
+
+    text = humanoid_usda_text(sample_assets)
+    bad = tmp_path / "joints.usda"
+    bad.write_text(re.sub(r"uniform token\[\] joints = \[[^\n]*", "uniform float joints = 1.5", text, count=1))
+    check_promise(["convert", bad, tmp_path / "out.glb"], folder=tmp_path, inputs=[bad], names=bad,
+                  message="joints holds a float, not token[]")
+
+
+class _Spec:
+    """A stand-in for an Sdf spec whose children field holds what a corrupt crate held."""
+
+    path = "/Root"
+
+    def __init__(self, held):
+        self.held = held
+
+    def HasInfo(self, key):
+        return True
+
+    def GetInfo(self, key):
+        if isinstance(self.held, type) and issubclass(self.held, Exception):
+            raise self.held("utf-8", b"\xe6", 0, 1, "invalid continuation byte") \
+                if self.held is UnicodeDecodeError else self.held("No to_python converter")
+        return self.held
+
+
+@pytest.mark.parametrize("held,message", [
+    (1.5, "holds no list of names"),                       # 'float' object is not iterable (1,264 findings)
+    (TypeError, "holds no list of names"),                 # No to_python converter for layer offsets (799)
+    (UnicodeDecodeError, "holds names that are not UTF-8"),  # tokens that are not UTF-8 (616)
+    ([1, 2], "holds no list of names"),
+])
+def test_crate_children_fields_holding_other_values(held, message, tmp_path):
+    """usdc fuzz (rerun after the fixes): the check that every listed child has a spec read the
+    children fields (primChildren, properties...) as they were: a float, layer offsets Python cannot
+    hold, tokens that are not UTF-8 raised tracebacks."""
+    from usdhands.errors import AssetReadError
+    from usdhands.formats.usd_common import _children
+
+    with pytest.raises(AssetReadError) as e:
+        _children(_Spec(held), "primChildren", tmp_path / "x.usdc")
+    assert str(e.value) == f"{tmp_path / 'x.usdc'}: cannot read as USD: primChildren of </Root> {message}"
+    assert _children(_Spec(["Hips", "Body"]), "primChildren", tmp_path / "x.usdc") == ["Hips", "Body"]
+
+
 @pytest.mark.parametrize("edit,message", [
     (lambda t: t.replace("elementSize = 5", "elementSize = 3", 1), "elementSize 3 / 5"),
     (lambda t: t.replace("elementSize = 5", "elementSize = 2147483647", 2), "elementSize 2147483647 / 2147483647"),

@@ -93,12 +93,28 @@ def tf_error_reason(err: BaseException, path: str | os.PathLike | None = None) -
 MAX_LAYERS = 10_000
 
 
-def _children(spec, key: str) -> list[str]:
-    """The names a spec's children field (``primChildren``, ``properties``...) lists."""
+def _children(spec, key: str, path: Path) -> list[str]:
+    """The names a spec's children field (``primChildren``, ``properties``...) lists.
+
+    Raises
+    ------
+    AssetReadError
+        The field holds something else than a list of names: in a corrupt crate it held a
+        float, a Variability, layer offsets or tokens that are not UTF-8 (usdc fuzz, 3,485
+        findings in 5 minutes: TypeError and UnicodeDecodeError tracebacks).
+    """
     try:
-        return list(spec.GetInfo(key)) if spec.HasInfo(key) else []
+        names = list(spec.GetInfo(key)) if spec.HasInfo(key) else []
     except Tf.ErrorException:  # not a field of this kind of spec
         return []
+    except UnicodeDecodeError:
+        raise AssetReadError(f"cannot read as USD: {key} of <{spec.path}> holds names that are not UTF-8",
+                             path=path) from None
+    except TypeError:  # not iterable, or a value Python cannot hold
+        raise AssetReadError(f"cannot read as USD: {key} of <{spec.path}> holds no list of names", path=path) from None
+    if not all(isinstance(n, str) for n in names):
+        raise AssetReadError(f"cannot read as USD: {key} of <{spec.path}> holds no list of names", path=path)
+    return names
 
 
 def check_children(layer: Sdf.Layer, path: Path) -> None:
@@ -120,22 +136,22 @@ def check_children(layer: Sdf.Layer, path: Path) -> None:
     while todo:
         here = todo.pop()
         spec = layer.GetObjectAtPath(here)
-        for name in _children(spec, "primChildren"):
+        for name in _children(spec, "primChildren", path):
             child = here.AppendChild(name)
             if child.isEmpty or layer.GetObjectAtPath(child) is None:
                 raise missing(here, "primChildren", child if not child.isEmpty else name)
             todo.append(child)
-        for name in _children(spec, "variantSetChildren"):
+        for name in _children(spec, "variantSetChildren", path):
             variant_set = here.AppendVariantSelection(name, "")
             vs_spec = None if variant_set.isEmpty else layer.GetObjectAtPath(variant_set)
             if vs_spec is None:
                 raise missing(here, "variantSetChildren", variant_set if not variant_set.isEmpty else name)
-            for variant in _children(vs_spec, "variantChildren"):
+            for variant in _children(vs_spec, "variantChildren", path):
                 child = here.AppendVariantSelection(name, variant)
                 if child.isEmpty or layer.GetObjectAtPath(child) is None:
                     raise missing(variant_set, "variantChildren", child if not child.isEmpty else variant)
                 todo.append(child)
-        for name in _children(spec, "properties"):
+        for name in _children(spec, "properties", path):
             child = here.AppendProperty(name)
             if child.isEmpty or layer.GetObjectAtPath(child) is None:
                 raise missing(here, "properties", child if not child.isEmpty else name)
@@ -265,7 +281,7 @@ def joint_tokens_for(names: Sequence[str], parents: Sequence[int]) -> list[str]:
     return tokens
 
 
-def skeleton_tokens_and_names(skel: UsdSkel.Skeleton) -> tuple[list[str], list[str]]:
+def skeleton_tokens_and_names(skel: UsdSkel.Skeleton, path=None) -> tuple[list[str], list[str]]:
     """The joint tokens of a Skeleton prim and the names the model uses for them.
 
     The names are the tokens, unless the prim's customData ``usdhands:sourceJointNames``
@@ -274,7 +290,12 @@ def skeleton_tokens_and_names(skel: UsdSkel.Skeleton) -> tuple[list[str], list[s
     the tokens' last elements (``mixamorig:Hips`` for the token ``mixamorig_Hips``): then
     the names are the tokens' paths with each element replaced by its joint's name.
     """
-    tokens = [str(t) for t in (skel.GetJointsAttr().Get() or [])]
+    joints = skel.GetJointsAttr().Get()
+    if joints is not None and not isinstance(joints, (Vt.TokenArray, Vt.StringArray, list, tuple)):
+        # a corrupt crate's joints held a Variability (usdc fuzz: 'not iterable' TypeError)
+        raise AssetReadError(f"joints holds a {type(joints).__name__}, not token[]", path=path,
+                             location=str(skel.GetPath()))
+    tokens = [str(t) for t in (joints or [])]
     names = list(tokens)
     stored = skel.GetPrim().GetCustomDataByKey(SOURCE_JOINT_NAMES_KEY)
     if stored is not None and len(stored) == len(tokens) and len(set(map(str, stored))) == len(tokens):

@@ -394,7 +394,7 @@ def read_skeleton(skel: UsdSkel.Skeleton, query=None, *, path=None, meters_per_u
     """
     prim = skel.GetPrim()
     where = str(prim.GetPath())
-    tokens, names = skeleton_tokens_and_names(skel)
+    tokens, names = skeleton_tokens_and_names(skel, path)
     J = len(tokens)
     if J == 0:
         return None, []
