@@ -578,15 +578,27 @@ def test_write_clip_keeps_extensions_materials_extras_and_other_animations(tmp_p
 
 
 @pytest.mark.parametrize("name", ["robot_expressive/RobotExpressive.glb", "SAMPLE:conversation.glb",
-                                  "SAMPLE:humanoid.glb"])
-def test_clips_equal_channel_by_channel_sampling(shared_assets, name):
+                                  "SAMPLE:humanoid.glb", "GENERATED"])
+def test_clips_equal_channel_by_channel_sampling(shared_assets, tmp_path, name):
     """read_gltf copies baked channels straight into the clip (keys checked once per input
-    accessor): the same arrays, to the bit, as sampling every channel on its own."""
+    accessor, float32 values converted where they are put, a joint-major block transposed
+    once where every joint has a channel of a kind): the same arrays, to the bit, as
+    sampling every channel on its own, time-major in memory."""
     from usdhands.formats.gltf_container import load_gltf
     from usdhands.formats.gltf_read import animation_channels, channel_keys, detect_fps, scan_scene, snap_time
 
-    path = (Path(__file__).resolve().parent.parent / "sample_assets" / name[7:] if name.startswith("SAMPLE:")
-            else shared_assets / name)
+    if name == "GENERATED":  # every joint keyed (rotation, translation and scale): the transposed blocks
+        rng = np.random.default_rng(3)
+        T, J = 41, 9
+        sk = Skeleton([f"j{k}" for k in range(J)], [-1] + [int(rng.integers(0, k)) for k in range(1, J)],
+                      rng.normal(size=(J, 3)), np.tile([0.0, 0.0, 0.0, 1.0], (J, 1)))
+        q = rng.normal(size=(T, J, 4))
+        clip = Clip(sk, 24.0, q / np.linalg.norm(q, axis=-1, keepdims=True), rng.normal(size=(T, J, 3)),
+                    1 + rng.random((T, J, 3)), name="Take")
+        path = write_asset(Asset("g", (sk,), (clip,)), tmp_path / "generated.glb")
+    else:
+        path = (Path(__file__).resolve().parent.parent / "sample_assets" / name[7:] if name.startswith("SAMPLE:")
+                else shared_assets / name)
     asset = read_asset(path)
     doc = load_gltf(path)
     scene = scan_scene(doc)
@@ -610,6 +622,8 @@ def test_clips_equal_channel_by_channel_sampling(shared_assets, name):
         assert np.array_equal(clip.rotations, want["rotation"])
         assert np.array_equal(clip.translations, want["translation"])
         assert np.array_equal(clip.scales, want["scale"])
+        for a in (clip.rotations, clip.translations, clip.scales):
+            assert a.flags.c_contiguous and not a.flags.writeable
 
 
 def test_differs_from_rest_equals_the_frame_by_frame_test():

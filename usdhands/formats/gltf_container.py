@@ -13,9 +13,9 @@ re-packing of buffer views.
 from __future__ import annotations
 
 import base64
-import copy
 import json
 import os
+import pickle
 import stat
 import struct
 import urllib.parse
@@ -61,14 +61,15 @@ class GltfFile:
         The file read.
     gltf : pygltflib.GLTF2
         The JSON document.
-    buffers : list of bytes
-        Content of each ``gltf.buffers[i]`` (GLB chunk, data URI or external file).
+    buffers : list of bytes-like
+        Content of each ``gltf.buffers[i]`` (GLB chunk, data URI or external file); a GLB's
+        binary chunk is a read-only ``memoryview`` of the file's bytes.
     is_glb : bool
     """
 
     path: Path
     gltf: pygltflib.GLTF2
-    buffers: list[bytes]
+    buffers: list[bytes | memoryview]
     is_glb: bool
     _cache: dict = field(default_factory=dict, repr=False)
 
@@ -129,7 +130,7 @@ def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
         key = bytes(text) if isinstance(text, (bytes, bytearray, memoryview)) else text.encode("utf-8", "surrogatepass")
         last = _last_decoded
         if last is not None and last[0] == key:
-            return copy.deepcopy(last[1])
+            return _copy(last[1])
     try:
         with warnings.catch_warnings():
             # dataclasses_json's note on a missing property pygltflib types as required (a channel
@@ -143,7 +144,13 @@ def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
     if key is None:
         return decoded
     _last_decoded = (key, decoded)
-    return copy.deepcopy(decoded)
+    return _copy(decoded)
+
+
+def _copy(decoded: pygltflib.GLTF2) -> pygltflib.GLTF2:
+    """A copy of a document sharing no object with it: a pickle round trip, a third of
+    ``copy.deepcopy``'s time (1.0 against 3.7 ms for 1,800 objects)."""
+    return pickle.loads(pickle.dumps(decoded, protocol=pickle.HIGHEST_PROTOCOL))
 
 
 #: pygltflib's decoding of the JSON into objects (dataclasses_json) takes about 1 ms per
@@ -151,7 +158,7 @@ def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
 #: then again as the source its output keeps). The last document decoded is kept with
 #: its JSON text, when that is at most 8 MB (a .glb's JSON, without the binary chunk;
 #: a .gltf with its buffers in data URIs is larger and is not kept), and a load of the
-#: same text gets a deep copy of it (2 ms): the same text always gives the same
+#: same text gets a deep copy of it (a pickle round trip, about 1 ms): the same text always gives the same
 #: document, and callers may change theirs. So a process holds at most one such
 #: document (its text, and the objects, a few times the text's size) beyond what its
 #: callers hold.
@@ -165,8 +172,8 @@ def clear_decoded_cache() -> None:
     _last_decoded = None
 
 
-def _split_glb(path: Path, raw: bytes) -> tuple[bytes, bytes | None]:
-    """JSON and BIN chunks of a GLB file, with every length checked."""
+def _split_glb(path: Path, raw: bytes) -> tuple[bytes, memoryview | None]:
+    """JSON and BIN chunks of a GLB file, with every length checked (the BIN chunk a view of ``raw``)."""
     if len(raw) < 12:
         raise AssetReadError(f"truncated .glb: {len(raw)} bytes, shorter than the 12-byte header", path=path)
     magic, version, length = struct.unpack_from("<4sII", raw, 0)
@@ -189,7 +196,7 @@ def _split_glb(path: Path, raw: bytes) -> tuple[bytes, bytes | None]:
         if ctype == CHUNK_JSON and json_chunk is None:
             json_chunk = raw[start:end]
         elif ctype == CHUNK_BIN and bin_chunk is None and json_chunk is not None:
-            bin_chunk = raw[start:end]
+            bin_chunk = memoryview(raw)[start:end]  # the file's bytes, not a copy of them (18 MB: 4 ms)
         offset = end
     if json_chunk is None:
         raise AssetReadError("corrupt .glb: no JSON chunk", path=path)

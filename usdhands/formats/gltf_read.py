@@ -507,10 +507,13 @@ def _norm(q: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
 
 
 def channel_keys(doc: GltfFile, anim_index: int, channel_index: int,
-                 targets: int | None = None) -> tuple[np.ndarray, np.ndarray, str]:
+                 targets: int | None = None, *, stored: bool = False) -> tuple[np.ndarray, np.ndarray, str]:
     """Key times ``(K,)``, values ``(K or 3K, C)`` and interpolation of one channel.
 
     A ``weights`` channel needs ``targets``, the morph target count of its node (its C).
+    Values are float64, or with ``stored`` the float32 numbers of a FLOAT accessor as
+    they are in the buffer (the caller converts them where it puts them; normalized
+    integers are always mapped to float64).
     """
     a = doc.gltf.animations[anim_index]
     ch = a.channels[channel_index]
@@ -523,7 +526,7 @@ def channel_keys(doc: GltfFile, anim_index: int, channel_index: int,
         raise doc.error(f"unknown interpolation {interp!r}", where)
     _check_component_types(doc, smp.input, smp.output, ch.target.path, where)
     times = doc.accessor(smp.input)[:, 0]
-    values = doc.accessor(smp.output)
+    values = doc.accessor(smp.output, as_float=not (stored and doc.gltf.accessors[smp.output].componentType == FLOAT))
     need = times.shape[0] * (3 if interp == "CUBICSPLINE" else 1)
     if ch.target.path == "weights":
         if targets is None or values.size != need * targets:
@@ -620,7 +623,7 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     chans = animation_channels(doc, anim_index, binding)
     if not chans:
         return None
-    keys = {c: channel_keys(doc, anim_index, c) for c, _, _ in chans}
+    keys = {c: channel_keys(doc, anim_index, c, stored=True) for c, _, _ in chans}
     anim = doc.gltf.animations[anim_index]
     accessor_of = {c: anim.samplers[anim.channels[c].sampler].input for c in keys}  # key times accessor per channel
     # each input accessor once (channels usually share one; each channel_keys call gives a new view)
@@ -646,31 +649,58 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     at = t0 + np.arange(n) / rate
     sk = binding.skeleton
     J = sk.num_joints
-    # joint-major blocks, so each channel writes one contiguous stretch (writing a joint's column of
-    # a time-major array walks the whole array once per channel); the clip copies each into time
-    # order once
-    target = {}
+    # time-major arrays, as the clip keeps them (handed over read-only: the clip does not copy
+    # them). Where every joint has a channel of a kind, the channels fill a joint-major block
+    # (each a contiguous stretch) that is then copied into time order once; otherwise the
+    # array starts as the rest pose and channels write their joints' columns. FLOAT accessors
+    # are read as their float32 numbers and converted where they are put.
+    target, staged = {}, {}
     for path, rest in (("rotation", sk.rest_rotations), ("translation", sk.rest_translations),
                        ("scale", sk.rest_scales)):
-        a = target[path] = np.empty((J, n, rest.shape[-1]))
-        still = np.setdiff1d(np.arange(J), [j for _, j, p in chans if p == path])
-        a[still] = rest[still][:, None]  # the rest where no channel writes the whole joint below
+        if len({j for _, j, p in chans if p == path}) == J:
+            staged[path] = np.empty((J, n, rest.shape[-1]))
+        else:
+            target[path] = np.empty((n, J, rest.shape[-1]))
+            target[path][:] = rest
     snap = snap_time(rate)
     on_frames: dict[int, bool] = {}  # input accessor -> its keys are the frames
-    for c, j, path in chans:
-        times, values, interp = keys[c]
-        if accessor_of[c] not in on_frames:
-            on_frames[accessor_of[c]] = _keys_are_frames(times, at, snap)
-        if on_frames[accessor_of[c]]:  # baked keys: the values themselves, as sample_channel gives them, in place
-            vals = values[1::3] if interp == "CUBICSPLINE" else values
-            if path == "rotation":
-                _norm(vals, out=target[path][j])
+    with np.errstate(invalid="ignore"):  # a signalling NaN warns in the conversion; Clip.validate refuses NaN
+        for c, j, path in chans:
+            times, values, interp = keys[c]
+            if accessor_of[c] not in on_frames:
+                on_frames[accessor_of[c]] = _keys_are_frames(times, at, snap)
+            if on_frames[accessor_of[c]]:  # baked keys: the values themselves, as sample_channel gives them
+                vals = values[1::3] if interp == "CUBICSPLINE" else values
             else:
-                target[path][j] = vals
-        else:
-            target[path][j] = sample_channel(times, values, interp, at, path == "rotation", snap)
-    rot, tra, sca = (target[p].transpose(1, 0, 2) for p in ("rotation", "translation", "scale"))
+                vals = sample_channel(times, values.astype(np.float64, copy=False), interp, at, path == "rotation",
+                                      snap)
+            if path in staged:
+                staged[path][j] = vals
+                dst = staged[path][j]
+            else:
+                dst = target[path][:, j]
+                dst[:] = vals
+            if path == "rotation" and on_frames[accessor_of[c]]:
+                _norm(dst, out=dst)
+    for path, block in staged.items():
+        target[path] = _time_major(block)
+    rot, tra, sca = (target[p] for p in ("rotation", "translation", "scale"))
+    for a in (rot, tra, sca):
+        a.setflags(write=False)
     return Clip(sk, rate, rot, tra, sca, name=name, start_time=t0)
+
+
+def _time_major(block: np.ndarray) -> np.ndarray:
+    """``(J, T, C)`` float64 joint-major values as a C-contiguous ``(T, J, C)`` array.
+
+    Each joint's C numbers at a frame move as one record of 8C bytes: numpy's transposing
+    copy of records is about twice as fast as of single floats.
+    """
+    J, T, C = block.shape
+    record = np.dtype((np.void, 8 * C))
+    out = np.empty((T, J, C))
+    out.view(record).reshape(T, J)[:] = np.ascontiguousarray(block).view(record).reshape(J, T).T
+    return out
 
 
 def sample_morph_weights(doc: GltfFile, anim_index: int, clip: Clip, tokens: dict[int, list[tuple[str, str]]],
