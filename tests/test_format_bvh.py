@@ -290,6 +290,35 @@ def test_euler_channels_to_quat_matches_scipy_for_repeated_axes():
         assert quat_angle_deg(euler_channels_to_quat(a, axes), ref).max() < 1e-9
 
 
+def _euler_product_from_identity(angles_deg, axes):
+    """The twin of bvh._axis_product as it was: every component multiplied from the identity."""
+    half = np.radians(np.asarray(angles_deg, dtype=np.float64).T) * 0.5
+    c, s = np.cos(half), np.sin(half)
+    perms = {0: ([3, 2, 1, 0], [1, 1, -1, -1]), 1: ([2, 3, 0, 1], [-1, 1, 1, -1]), 2: ([1, 0, 3, 2], [1, -1, 1, -1])}
+    q = [np.zeros(half.shape[1]) for _ in range(3)] + [np.ones(half.shape[1])]
+    for i, a in enumerate(axes):
+        perm, sign = perms[a]
+        q = [q[k] * c[i] + sign[k] * (q[perm[k]] * s[i]) for k in range(4)]
+    return np.stack(q, axis=-1)
+
+
+def test_euler_product_skipping_zero_components_equals_the_product_from_the_identity():
+    """The reader multiplies only the components that are not zero: the same numbers (to the
+    bit, up to the sign of a zero) for 1 to 4 channels in every order, repeats included,
+    with angles of 0, +-90, +-180, +-360 and beyond."""
+    from usdhands.formats.bvh import euler_channels_to_quat
+
+    rng = np.random.default_rng(11)
+    special = np.array([0.0, 90.0, -90.0, 180.0, -180.0, 360.0, -360.0, 720.5, 1e-300, -1e-7])
+    for n in (1, 2, 3, 4):
+        for axes in itertools.product((0, 1, 2), repeat=n):
+            a = np.concatenate([rng.uniform(-400, 400, (200, n)), rng.choice(special, (60, n))])
+            got = euler_channels_to_quat(a, axes)
+            assert np.array_equal(got, _euler_product_from_identity(a, axes)), axes
+    big = rng.uniform(-180, 180, (20_000, 3))  # more rows than one chunk
+    assert np.array_equal(euler_channels_to_quat(big, (2, 0, 1)), _euler_product_from_identity(big, (2, 0, 1)))
+
+
 def test_names_with_spaces_and_crlf(tmp_path):
     p = tmp_path / "biped.bvh"
     p.write_bytes(b"HIERARCHY\r\nROOT Bip01 Pelvis\r\n{\r\n\tOFFSET 0 0 0\r\n\tCHANNELS 6 Xposition Yposition "
