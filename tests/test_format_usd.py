@@ -810,3 +810,27 @@ def test_clip_values_are_the_authored_samples(tmp_path):
         tr = np.array(anim.GetTranslationsAttr().Get(t), dtype=np.float64)
         assert np.array_equal(clip.rotations[f, order], q)
         assert np.array_equal(clip.translations[f, order], tr)
+
+
+@pytest.mark.parametrize("sampled", [False, True])
+def test_clip_scales_are_the_authored_scales(tmp_path, sampled):
+    """Scales without time samples are read once and hold at every frame; time-sampled
+    ones are read at every frame (both equal attribute.Get at that time)."""
+    p = build_stage(tmp_path / "anim.usda")
+    stage = Usd.Stage.Open(str(p))
+    anim = UsdSkel.Animation(stage.GetPrimAtPath("/Char/Skel/Anim"))
+    times = anim.GetRotationsAttr().GetTimeSamples()
+    K = len(anim.GetJointsAttr().Get())
+    attr = anim.GetScalesAttr()
+    if sampled:
+        for f, t in enumerate(times):
+            attr.Set(Vt.Vec3hArray([Gf.Vec3h(1 + 0.25 * f, 2 - 0.125 * k, 0.5) for k in range(K)]), t)
+    else:
+        attr.Set(Vt.Vec3hArray([Gf.Vec3h(0.5, 1.5, 2 + k) for k in range(K)]))
+    stage.Save()
+    clip = HANDLER.read(p).clip()
+    order = [clip.skeleton.joint_names.index(str(j)) for j in anim.GetJointsAttr().Get()]
+    assert clip.num_frames == len(times) > 1
+    for f, t in enumerate(times):
+        assert np.array_equal(clip.scales[f, order], np.array(attr.Get(t), dtype=np.float64))
+    assert (len(np.unique(clip.scales[:, order[0], 0])) > 1) == sampled

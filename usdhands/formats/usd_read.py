@@ -636,28 +636,53 @@ def _copy_components(anim_query, codes: list, K: int, out: tuple[np.ndarray, ...
     """Translations, rotations and scales of every frame into ``out`` ``((T, K, 3), (T, K, 4), (T, K, 3))``
     float32; ValueError when a frame lacks one or has another number of values than ``K``.
 
-    Each frame's arrays are copied as bytes into the rows (the numbers unchanged): a NumPy
-    assignment from a Vt array parses its buffer's layout every time (about 2 us, a
-    quarter of a read of 10,000 frames). The scales (half floats in USD) are copied into
-    a half-float array and converted once.
+    The values ``anim_query.ComputeJointLocalTransformComponents`` gives (it reads the
+    SkelAnimation's three attributes at the time), read through one ``Usd.AttributeQuery``
+    per attribute: scales that have no time samples are read once (the same value at
+    every frame). Each frame's arrays are copied as bytes into the rows (the numbers
+    unchanged): a NumPy assignment from a Vt array parses its buffer's layout every time
+    (about 2 us, a quarter of a read of 10,000 frames). Time-sampled scales (half floats
+    in USD) are copied into a half-float array and converted once. 10,000 frames of 65
+    joints: 36 ms of CPU against 50 ms through the animation query.
     """
-    rows = [np.empty(o.shape, dtype=np.float16) if k == 2 else o for k, o in enumerate(out)]
-    views = [memoryview(r).cast("B") for r in rows]
-    sizes = [r[0].nbytes if len(r) else 0 for r in rows]
-    formats = ("f", "f", "e")
-    for f, code in enumerate(codes):
-        values = anim_query.ComputeJointLocalTransformComponents(code)
-        if values is None or len(values) != 3:
-            raise ValueError
-        for k in range(3):
-            v = memoryview(values[k])
-            if len(values[k]) != K:  # (one value would broadcast)
+    anim = UsdSkel.Animation(anim_query.GetPrim())
+    attrs = (anim.GetTranslationsAttr(), anim.GetRotationsAttr(), anim.GetScalesAttr())
+    if not all(attrs):
+        raise ValueError
+    queries = [Usd.AttributeQuery(a) for a in attrs]
+    tq, rq, sq = queries
+    t_rows, r_rows = out[0], out[1]
+    tv, rv = memoryview(t_rows).cast("B"), memoryview(r_rows).cast("B")
+    ts, rs = (a[0].nbytes if len(a) else 0 for a in (t_rows, r_rows))
+    tshape, rshape = (K, 3), (K, 4)
+    for f, code in enumerate(codes):  # translations and rotations: what a read of 10,000 frames spends most in
+        tm, rm = memoryview(tq.Get(code)), memoryview(rq.Get(code))  # no value (None): TypeError
+        if tm.shape == tshape and rm.shape == rshape and tm.format == "f" and rm.format == "f":
+            tv[f * ts:(f + 1) * ts] = tm.cast("B")
+            rv[f * rs:(f + 1) * rs] = rm.cast("B")
+        else:
+            if len(tm.obj) != K or len(rm.obj) != K:  # (one value would broadcast)
                 raise ValueError
-            if v.format == formats[k] and v.nbytes == sizes[k] and v.c_contiguous:
-                views[k][f * sizes[k]:(f + 1) * sizes[k]] = v.cast("B")
-            else:
-                rows[k][f] = values[k]
-    out[2][:] = rows[2]
+            t_rows[f], r_rows[f] = tm.obj, rm.obj
+    if not sq.ValueMightBeTimeVarying():  # scales without time samples: one value, at every frame
+        if len(codes):
+            value = sq.Get(codes[0])
+            if value is None or len(value) != K:
+                raise ValueError
+            out[2][:] = np.asarray(value).astype(np.float32)
+        return
+    halves = np.empty(out[2].shape, dtype=np.float16)
+    view, size = memoryview(halves).cast("B"), halves[0].nbytes if len(halves) else 0
+    for f, code in enumerate(codes):
+        value = sq.Get(code)
+        if value is None or len(value) != K:
+            raise ValueError
+        v = memoryview(value)
+        if v.format == "e" and v.shape == (K, 3):
+            view[f * size:(f + 1) * size] = v.cast("B")
+        else:
+            halves[f] = value
+    out[2][:] = halves
 
 
 def _flattened(primvar: UsdGeom.Primvar, n_points: int, counts: np.ndarray, where: str, path: Path
