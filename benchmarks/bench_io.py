@@ -14,11 +14,19 @@ the ratio of wall-time medians (these machines are shared: wall time is noisier)
 
 The bare baselines, per format (``bare_read_*``, ``bare_write_*``):
 
-- USD (pxr): ``Usd.Stage.Open`` and ``Get`` of rotations and translations at every time
-  sample of every SkelAnimation (scales once); writing: one SkelAnimation per clip,
+- USD (pxr): ``Usd.Stage.Open``, ``Get`` of rotations and translations at every time
+  sample of every SkelAnimation (scales once) into ``(T, J, 4/3)`` float32 arrays, and
+  of what else the reader reads: every Skeleton's joints, bind and rest transforms,
+  every Mesh's points, faces, normals, UVs and joint influences (usdhands: float64
+  arrays, the hierarchy checked, the crate's structure checked before USD opens it, the
+  influences checked, skinning resolved; a generated file has no mesh); writing: one SkelAnimation per clip,
   ``Set`` of ``FromNumpy`` arrays per frame, ``Export``.
-- glTF (pygltflib + numpy): ``GLTF2.load`` and ``np.frombuffer`` of every channel's input
-  and output accessor, no sampling; writing: one node per joint, one input accessor
+- glTF (pygltflib + numpy): ``GLTF2.load``, ``np.frombuffer`` of every channel's input
+  and output accessor, and the outputs put into one time-major ``(T, nodes, 4 or 3)`` float32
+  array per path (rotation, translation), as a reader hands over arrays of that shape, and
+  every mesh's vertex attributes and indices and every skin's bind matrices; no sampling
+  (usdhands: float64, the rest pose where nothing is keyed, scales, the accessors'
+  bounds checked, the skeletons and meshes built); writing: one node per joint, one input accessor
   and a rotation and translation accessor per joint and clip (the float32 per-joint
   arrays made from the clip inside the timing), ``save_binary``.
 - BVH (numpy): ``np.loadtxt`` of the motion block; ``np.savetxt`` of the same numbers
@@ -100,12 +108,29 @@ def bare_write_usd(asset, path: Path) -> None:
 
 
 def bare_read_usd(path: Path) -> list:
-    """Rotations and translations ``(T, J, 4/3)`` float32 of every SkelAnimation."""
-    from pxr import Usd, UsdSkel
+    """Rotations and translations ``(T, J, 4/3)`` float32 of every SkelAnimation (scales once);
+    every Skeleton's joints, bind and rest transforms; every Mesh's points, faces, normals,
+    UVs and joint influences as numpy arrays."""
+    from pxr import Usd, UsdGeom, UsdSkel
 
     out = []
     stage = Usd.Stage.Open(str(path))
     for prim in stage.Traverse():
+        if prim.IsA(UsdSkel.Skeleton):
+            skel = UsdSkel.Skeleton(prim)
+            out.append((list(skel.GetJointsAttr().Get() or []),
+                        [np.asarray(a.Get()) for a in (skel.GetBindTransformsAttr(), skel.GetRestTransformsAttr())
+                         if a.HasValue()]))
+        elif prim.IsA(UsdGeom.Mesh):
+            mesh, api = UsdGeom.Mesh(prim), UsdGeom.PrimvarsAPI(prim)
+            binding = UsdSkel.BindingAPI(prim)
+            arrays = [np.asarray(a.Get()) for a in (mesh.GetPointsAttr(), mesh.GetFaceVertexCountsAttr(),
+                                                    mesh.GetFaceVertexIndicesAttr()) if a.HasValue()]
+            for pv in (api.GetPrimvar("normals"), api.GetPrimvar("st"), binding.GetJointIndicesPrimvar(),
+                       binding.GetJointWeightsPrimvar()):
+                if pv and pv.HasValue():
+                    arrays.append(np.asarray(pv.ComputeFlattened()))
+            out.append(arrays)
         if not prim.IsA(UsdSkel.Animation):
             continue
         anim = UsdSkel.Animation(prim)
@@ -163,7 +188,8 @@ def bare_write_gltf(asset, path: Path) -> None:
 
 
 def bare_read_gltf(path: Path) -> list:
-    """``GLTF2.load`` and every animation channel's key times and values as float32 arrays."""
+    """``GLTF2.load``, then per animation its key times and, per channel path, one time-major
+    ``(T, nodes, 4 or 3)`` float32 array with each channel's values in its node's column."""
     import pygltflib
 
     _SIZES = {"SCALAR": 1, "VEC3": 3, "VEC4": 4}
@@ -180,10 +206,46 @@ def bare_read_gltf(path: Path) -> list:
         start = (view.byteOffset or 0) + (acc.byteOffset or 0)
         return np.frombuffer(blob, dtype, acc.count * n, start).reshape(-1, n)
 
+    def read_any(index):
+        """Any accessor, strided views and integer types included, as a ``(count, n)`` array."""
+        acc = g.accessors[index]
+        if acc.bufferView is None:
+            return None
+        view = g.bufferViews[acc.bufferView]
+        dtype = np.dtype({5120: "i1", 5121: "u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}[acc.componentType])
+        n = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}[acc.type]
+        start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+        stride = view.byteStride or n * dtype.itemsize
+        rows = np.frombuffer(blob, np.uint8, (acc.count - 1) * stride + n * dtype.itemsize if acc.count else 0, start)
+        return np.lib.stride_tricks.as_strided(rows.view(np.uint8), (acc.count, n * dtype.itemsize), (stride, 1)) \
+            .copy().view(dtype)
+
+    for mesh in g.meshes:  # what else the reader reads: vertex data, indices, bind matrices
+        for prim in mesh.primitives:
+            attrs = prim.attributes
+            for index in (attrs.POSITION, attrs.NORMAL, attrs.TEXCOORD_0, attrs.JOINTS_0, attrs.WEIGHTS_0,
+                          prim.indices):
+                if index is not None:
+                    out.append(read_any(index))
+    for skin in g.skins:
+        if skin.inverseBindMatrices is not None:
+            out.append(read_any(skin.inverseBindMatrices))
     for anim in g.animations:
+        by_path: dict = {}  # path -> [(node, values)]
+        times = {}
         for ch in anim.channels:
             s = anim.samplers[ch.sampler]
-            out.append((ch.target.node, ch.target.path, read(s.input), read(s.output)))
+            if s.input not in times:
+                times[s.input] = read(s.input)
+            by_path.setdefault(ch.target.path, []).append((ch.target.node, read(s.output)))
+        arrays = {}
+        for what, chans in by_path.items():
+            column = {node: k for k, node in enumerate(dict.fromkeys(node for node, _ in chans))}
+            a = arrays[what] = np.empty((max(len(v) for _, v in chans), len(column), chans[0][1].shape[1]),
+                                        np.float32)
+            for node, v in chans:
+                a[:len(v), column[node]] = v
+        out.append((list(times.values()), arrays))
     return out
 
 
