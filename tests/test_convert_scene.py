@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import io
 import json
+import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -16,9 +18,11 @@ import pytest
 from pxr import Usd, UsdShade, UsdSkel
 
 from usdhands.formats.gltf_container import BinaryAppender, load_gltf, save_gltf
-from usdhands.formats.io import read_asset
+from usdhands.formats.io import read_asset, write_asset
 from usdhands.formats.usd_validate import usd_compliance_errors
 from usdhands.jobs.conversion import ConvertOptions, convert
+
+from hostile import check_promise, listing
 
 
 def _gltf_json(path: Path) -> dict:
@@ -524,3 +528,66 @@ def test_mesh_on_no_skeleton_comes_through_as_a_static_mesh(shared_assets, tmp_p
     assert gb["nodes"].index(node) in gb["scenes"][0]["nodes"] and "skin" not in node
     np.testing.assert_allclose(node["translation"], [2.0, 0.5, 0.0], atol=1e-9)
     np.testing.assert_allclose(node["scale"], [3.0, 3.0, 3.0], atol=1e-9)
+
+
+# -- texture files written atomically (issue 8) --------------------------------------------
+
+def test_two_threads_writing_one_usd_output_both_write_its_textures(tmp_path, monkeypatch):
+    """Textures went through the fixed temporary name .NAME.tmpPID: two threads of one process (stage
+    hooks, Dask with processes=False) writing the same output shared it, and the second rename found
+    no file (FileNotFoundError). Each texture's rename waits here until both writers reach it."""
+    src = tmp_path / "scene.glb"
+    truth = _scene(src)
+    asset = read_asset(src)
+    out = tmp_path / "out.usda"
+    together = threading.Barrier(2, timeout=60)
+    replace = os.replace
+
+    def replace_together(a, b):
+        if Path(b).suffix == ".png":
+            together.wait()
+        return replace(a, b)
+
+    monkeypatch.setattr(os, "replace", replace_together)
+    errors = []
+
+    def write():
+        try:
+            write_asset(asset, out)
+        except BaseException as e:  # noqa: BLE001  (reported by the assert below)
+            errors.append(e)
+
+    threads = [threading.Thread(target=write) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    folder = tmp_path / "out_textures"
+    assert listing(tmp_path) == sorted(["scene.glb", "out.usda", "out_textures",
+                                        *(f"out_textures/tex{i}.png" for i in range(5))])
+    assert [(folder / f"tex{i}.png").read_bytes() for i in range(5)] == [_png(c) for c in truth["colors"]]
+    assert len(read_asset(out).images) == 5
+
+
+def test_texture_writes_leave_a_file_named_like_their_old_temporary_alone(tmp_path):
+    """The fixed temporary name overwrote a user's file '.tex0.png.tmpPID' and renamed it away."""
+    src = tmp_path / "scene.glb"
+    _scene(src)
+    folder = tmp_path / "out_textures"
+    folder.mkdir()
+    keep = folder / f".tex0.png.tmp{os.getpid()}"
+    keep.write_text("the user's own file\n")
+    convert(src, tmp_path / "out.usda")
+    assert keep.read_text() == "the user's own file\n"
+    assert sorted(p.name for p in folder.iterdir()) == [keep.name, *(f"tex{i}.png" for i in range(5))]
+
+
+def test_texture_that_cannot_be_written_leaves_no_temporary(tmp_path):
+    """A folder where a texture goes: the rename failed and the temporary .tex0.png.tmpPID was left."""
+    src = tmp_path / "scene.glb"
+    _scene(src)
+    blocked = tmp_path / "out_textures" / "tex0.png"
+    blocked.mkdir(parents=True)
+    check_promise(["convert", src, tmp_path / "out.usda"], folder=tmp_path, inputs=[src], names=blocked,
+                  message="is a folder")

@@ -31,6 +31,7 @@ from typing import Sequence
 import numpy as np
 from pxr import Ar, Gf, Sdf, Usd, UsdGeom, UsdShade
 
+from usdhands.formats.registry import atomic_output
 from usdhands.model.material import ALPHA_MODES, Image, Material, TextureRef
 
 __all__ = ["write_materials", "bind_material", "MaterialReader", "texture_folder"]
@@ -80,9 +81,8 @@ def _write_images(images: Sequence[Image], final_path: Path, inputs: Sequence[Pa
             raise ValueError(f"texture {target} would overwrite an input")
         folder.mkdir(exist_ok=True)
         data = image.content() if image.data is None else image.data
-        tmp = folder / f".{name}.tmp{os.getpid()}"
-        tmp.write_bytes(data)
-        os.replace(tmp, target)
+        with atomic_output(target) as tmp:  # a fresh temporary name: threads of one process write side by side
+            tmp.write_bytes(data)
         paths.append(f"./{folder.name}/{name}")
     return paths
 
