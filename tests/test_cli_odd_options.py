@@ -222,3 +222,116 @@ def test_reduction_model_with_non_finite_numbers(ok_glb, tmp_path, capsys):
         code, err = run(capsys, "expand", ok_glb, "--model", path, "-o", tmp_path / "out.glb")
         assert (code, err) == (2, [f"usdhands: error: {path}: {message}"])
     assert not (tmp_path / "out.glb").exists()
+
+
+# -- options a command would not use (issue 8: command-line misuse) ----------------------------
+
+#: batch job -> the job options it reads (from each job's options class: what the job does with them)
+BATCH_READS = {
+    "synthesize": {"--animation", "--handmap", "--hands", "--db", "--k", "--config", "--finger-reference", "--props",
+                   "--margin", "--self", "--attach", "--prop-units", "--prop-up", "--interaction-config"},
+    "correct": {"--animation", "--handmap", "--props", "--margin", "--self", "--attach", "--prop-units", "--prop-up",
+                "--interaction-config"},
+    "reduce": {"--animation", "--handmap", "--hands", "--steps"},
+    "expand": {"--animation", "--model"},
+    "convert": {"--animation", "--to", "--fps", "--bvh-units"},
+    "check": {"--require-provenance", "--tolerance", "--props", "--self", "--attach", "--prop-units", "--prop-up",
+              "--interaction-config"},
+}
+#: every job option of batch -> the arguments it is given with (at the default value where it has one:
+#: given is given)
+BATCH_OPTION_ARGS = {
+    "--animation": ["0"], "--handmap": ["m.json"], "--hands": ["left"], "--db": ["db"], "--k": ["3"],
+    "--config": ["c.json"], "--finger-reference": ["rest"], "--steps": ["pca"], "--model": ["m.json"],
+    "--to": ["usda"], "--fps": ["30"], "--bvh-units": ["cm"], "--require-provenance": [], "--props": ["p.obj"],
+    "--margin": ["0"], "--self": [], "--attach": ["p=LeftHand"], "--prop-units": ["1"], "--prop-up": ["Y"],
+    "--interaction-config": ["i.json"], "--tolerance": ["0.5"],
+}
+
+
+def test_batch_job_options_are_the_ones_classified_here():
+    from usdhands.cli import build_parser
+
+    batch = build_parser()._subparsers._group_actions[0].choices["batch"]
+    [group] = [g for g in batch._action_groups if g.title == "job options"]
+    assert {a.option_strings[-1] for a in group._group_actions} == set(BATCH_OPTION_ARGS)
+    assert set(BATCH_READS) == set(batch._option_string_actions["--job"].choices)
+
+
+@pytest.mark.parametrize("job, option", [(j, o) for j in sorted(BATCH_READS) for o in BATCH_OPTION_ARGS
+                                         if o not in BATCH_READS[j]])
+def test_batch_refuses_an_option_its_job_does_not_use(job, option, ok_glb, tmp_path, capsys):
+    """`--job reduce --props x`, `--job convert --handmap m.json`... were accepted and did nothing."""
+    out = tmp_path / "out"
+    code, err = run(capsys, "batch", ok_glb, "--job", job, "--out", out, option, *BATCH_OPTION_ARGS[option])
+    assert (code, err) == (2, [f"usdhands: error: {option} is not an option of --job {job}"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.glb"]
+
+
+@pytest.mark.parametrize("job", sorted(BATCH_READS))
+def test_batch_takes_the_options_its_job_uses(job, tmp_path, capsys):
+    """Each option a job reads gets past that check (the run then stops at the missing input clip)."""
+    for option in sorted(BATCH_READS[job]):
+        code, err = run(capsys, "batch", tmp_path / "none.glb", "--job", job, "--out", tmp_path / "out", option,
+                        *BATCH_OPTION_ARGS[option])
+        assert code == 2 and len(err) == 1 and "is not an option of" not in err[0], (option, err)
+
+
+#: command line (without the prop options) -> the prop options it takes
+PROP_COMMANDS = {
+    "synthesize": (["synthesize", "{clip}", "-o", "{out}.glb"], PROP_OPTIONS := ["--self", "--interaction-config",
+                                                                                "--attach", "--prop-units",
+                                                                                "--prop-up", "--margin"]),
+    "db build": (["db", "build", "{clip}", "-o", "{out}_db"], PROP_OPTIONS),
+    "check": (["check", "{clip}"], [o for o in PROP_OPTIONS if o != "--margin"]),
+    "batch synthesize": (["batch", "{clip}", "--job", "synthesize", "--out", "{out}_batch"], PROP_OPTIONS),
+    "batch check": (["batch", "{clip}", "--job", "check", "--out", "{out}_batch"],
+                    [o for o in PROP_OPTIONS if o != "--margin"]),
+}
+PROP_VALUES = {"--self": [], "--interaction-config": ["{config}"], "--attach": ["p=LeftHand"], "--prop-units": ["1"],
+               "--prop-up": ["Y"], "--margin": ["2"]}
+
+
+@pytest.mark.parametrize("command, option", [(c, o) for c in sorted(PROP_COMMANDS) for o in PROP_COMMANDS[c][1]])
+def test_prop_options_without_props_refused(command, option, ok_glb, tmp_path, capsys):
+    """`--self` and `--interaction-config` without `--props` were accepted and did nothing (exit 0)."""
+    config = tmp_path / "interaction.json"
+    config.write_text('{"tip_fraction": 0.8}\n')
+    argv, _ = PROP_COMMANDS[command]
+    fill = {"clip": ok_glb, "out": tmp_path / "out", "config": config}
+    code, err = run(capsys, *[a.format(**fill) for a in argv + [option, *PROP_VALUES[option]]])
+    assert (code, err) == (2, [f"usdhands: error: {option} needs --props (nothing else reads it)"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["interaction.json", "ok.glb"]
+
+
+@pytest.mark.parametrize("command", sorted(PROP_COMMANDS))
+def test_a_missing_interaction_config_without_props_is_named(command, ok_glb, tmp_path, capsys):
+    argv, _ = PROP_COMMANDS[command]
+    missing = tmp_path / "missing.json"
+    code, err = run(capsys, *[a.format(clip=ok_glb, out=tmp_path / "out") for a in argv],
+                    "--interaction-config", missing)
+    assert code == 2 and len(err) == 1 and err[0].startswith(f"usdhands: error: {missing}: no such"), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.glb"]
+
+
+def test_jobs_refuse_prop_options_without_props(ok_glb, tmp_path):
+    """The same through the jobs API (a pipeline's script, batch's workers)."""
+    from usdhands.errors import UsdHandsError
+    from usdhands.jobs.database import BuildDbOptions, build_db
+    from usdhands.jobs.synthesis import SynthesizeOptions, synthesize
+    from pxr import Usd
+
+    from usdhands.formats.io import read_asset, write_asset
+    from usdhands.jobs.validation import CheckOptions, check
+    from usdhands.usd import check_stage
+
+    usda = tmp_path / "ok.usda"
+    write_asset(read_asset(ok_glb), usda)
+    calls = [lambda: synthesize(ok_glb, tmp_path / "o.glb", SynthesizeOptions(self_collision=True)),
+             lambda: build_db([ok_glb], tmp_path / "db", BuildDbOptions(self_collision=True)),
+             lambda: check([ok_glb], CheckOptions(self_collision=True)),
+             lambda: check_stage(Usd.Stage.Open(str(usda)), CheckOptions(self_collision=True))]
+    for call in calls:
+        with pytest.raises(UsdHandsError, match=r"^--self needs --props \(nothing else reads it\)$"):
+            call()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.glb", "ok.usda"]

@@ -60,10 +60,17 @@ SIDE_FILES: dict[str, dict[str, tuple[str, str | None]]] = {
     "expand": {"--model": ("json", "--model")},
     "correct": {"--handmap": ("json", None), "--interaction-config": ("json", None), "--props": ("mesh", "--props")},
     "check": {"--props": ("mesh", None), "--interaction-config": ("json", None)},
-    # batch refuses its side files before any clip runs (the content of props is read per clip)
+    # batch refuses its side files before any clip runs (the content of props is read per clip); each is
+    # given to a job that reads it (BATCH_JOB_OF)
     "batch": {"--handmap": ("json", None), "--config": ("json", None), "--model": ("json", None),
               "--interaction-config": ("json", None), "--props": ("file", None), "--db": ("folder", None)},
 }
+
+#: batch side-file option -> the job options (in place of the template's ``--job convert --to usda``) of a
+#: job that reads it: batch refuses an option its job does not use
+BATCH_JOB_OF = {"--handmap": ["--job", "reduce"], "--config": ["--job", "synthesize"], "--model": ["--job", "expand"],
+                "--interaction-config": ["--job", "correct", "--props", "{prop}"], "--props": ["--job", "check"],
+                "--db": ["--job", "synthesize"]}
 
 
 def _split_glb(raw: bytes) -> tuple[dict, bytes]:
@@ -252,7 +259,11 @@ def test_every_hostile_input_keeps_the_promise(command, corpus):
         expected.append((f"input {name}", path, message, _batch_out(cases[-1])))
     for option, (kind, replaces) in SIDE_FILES.get(command, {}).items():
         for name, (path, message) in corpus["side"][kind].items():
-            argv = _fill(COMMANDS[command], corpus, corpus["good"], out_folder / f"case{len(cases)}")
+            template = COMMANDS[command]
+            if command == "batch":
+                k = template.index("--job")
+                template = template[:k] + BATCH_JOB_OF[option] + template[k + 4:]
+            argv = _fill(template, corpus, corpus["good"], out_folder / f"case{len(cases)}")
             if replaces is not None:  # drop the template's option this one stands for
                 k = argv.index(replaces)
                 del argv[k:k + 2]

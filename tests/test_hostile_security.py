@@ -386,7 +386,9 @@ def test_output_never_lands_on_an_input(ok_glb, tmp_path, capsys, monkeypatch, c
     assert sha(side) == checksum and snapshot(tmp_path) == before
 
 
-BATCH_SIDE = ["--handmap", "--config", "--model", "--interaction-config"]
+#: batch side file -> the job options of a job that reads it
+BATCH_SIDE = {"--handmap": ["--job", "reduce"], "--config": ["--job", "synthesize"], "--model": ["--job", "expand"],
+              "--interaction-config": ["--job", "correct", "--props", "{clip}"]}
 
 
 @pytest.mark.parametrize("spelling", ["same", "symlink", "hard link"])
@@ -405,8 +407,8 @@ def test_batch_never_writes_its_own_files_over_a_side_file(ok_glb, tmp_path, cap
         os.link(side, out / written)
     checksum = sha(side)
     before = snapshot(tmp_path)
-    code, err = run(capsys, "batch", ok_glb, "--job", "convert", "--to", "usda", "--out", out, "--workers", "1",
-                    option, out / written)
+    code, err = run(capsys, "batch", ok_glb, *[a.format(clip=ok_glb) for a in BATCH_SIDE[option]], "--out", out,
+                    "--workers", "1", option, out / written)
     assert (code, err) == (2, [f"usdhands: error: {out / written}: batch writes {written} over the {option} file; "
                                "choose another --out folder"])
     assert sha(side) == checksum and snapshot(tmp_path) == before

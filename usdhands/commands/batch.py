@@ -8,6 +8,8 @@ others go on. See :mod:`usdhands.jobs.batch`.
 
 from __future__ import annotations
 
+import argparse
+import copy
 import os
 import sys
 import time
@@ -16,6 +18,18 @@ from pathlib import Path
 from usdhands.commands._common import add_prop_arguments, print_json, print_table
 
 BATCH_JOBS = ("synthesize", "correct", "reduce", "expand", "convert", "check")
+#: the prop options (:func:`add_prop_arguments`)
+PROP_FLAGS = ("--props", "--margin", "--self", "--attach", "--prop-units", "--prop-up", "--interaction-config")
+#: job -> the job options it reads; any other job option is refused (it would do nothing)
+JOB_FLAGS = {
+    "synthesize": ("--animation", "--handmap", "--hands", "--db", "--k", "--config", "--finger-reference",
+                   *PROP_FLAGS),
+    "correct": ("--animation", "--handmap", *PROP_FLAGS),
+    "reduce": ("--animation", "--handmap", "--hands", "--steps"),
+    "expand": ("--animation", "--model"),
+    "convert": ("--animation", "--to", "--fps", "--bvh-units"),
+    "check": ("--require-provenance", "--tolerance", *(f for f in PROP_FLAGS if f != "--margin")),
+}
 
 
 def register(sub) -> None:
@@ -49,7 +63,13 @@ def register(sub) -> None:
     add_prop_arguments(g, required=False)
     g.add_argument("--tolerance", type=float, default=0.5, metavar="MM",
                    help="check with --props: the deepest finger penetration let through, millimetres (default 0.5)")
-    p.set_defaults(func=run)
+    # a job option left out is missing from the parsed arguments (run() fills in its default), so
+    # one given at its default value is still seen as given
+    defaults = {}
+    for action in g._group_actions:
+        defaults[action.dest] = (action.option_strings[-1], action.default)
+        action.default = argparse.SUPPRESS
+    p.set_defaults(func=run, job_option_defaults=defaults)
 
 
 def job_options(args):
@@ -95,9 +115,24 @@ def _prop_options(args) -> dict:
             "interaction_config": args.interaction_config}
 
 
+def _job_options_given(args) -> list[str]:
+    """The job options given on the command line (in the parser's order); fills in the others' defaults."""
+    given = []
+    for dest, (flag, default) in args.job_option_defaults.items():
+        if hasattr(args, dest):
+            given.append(flag)
+        else:
+            setattr(args, dest, copy.copy(default))
+    return given
+
+
 def run(args) -> int:
+    from usdhands.errors import UsdHandsError
     from usdhands.jobs.batch import BatchOptions, check_side_files, run_batch
 
+    for flag in _job_options_given(args):
+        if flag not in JOB_FLAGS[args.job]:
+            raise UsdHandsError(f"{flag} is not an option of --job {args.job}")
     # every side file given is checked, also those the job does not read
     check_side_files({"--handmap": args.handmap, "--config": args.config, "--model": args.model,
                       "--interaction-config": args.interaction_config, "--props": args.props, "--db": args.db},

@@ -183,6 +183,10 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
         if not getattr(job_options, "props", ()):
             raise UsdHandsError("--job correct needs --props PROP...")
         check_correct_options(job_options)
+    if options.job in JOBS and hasattr(job_options, "props"):  # --self, --interaction-config...: nothing reads them
+        from usdhands.jobs.props import refuse_prop_options_without_props
+
+        refuse_prop_options_without_props(job_options)
     extensions = ANIMATION_EXTENSIONS
     pairs = []
     out = Path(options.out)

@@ -140,9 +140,9 @@ def build_db(inputs: Sequence[str | os.PathLike], output: str | os.PathLike,
                  "--interaction-config": options.interaction_config},
                 replaced_folders={"-o": output})
     cfg = load_config(options.config)
-    from usdhands.jobs.props import check_interaction_config
+    from usdhands.jobs.props import refuse_prop_options_without_props
 
-    check_interaction_config(options)
+    refuse_prop_options_without_props(options)
     if options.props:
         from usdhands.jobs.props import check_prop_options
 

@@ -63,13 +63,32 @@ def check_prop_options(options) -> None:
     parse_attachments(options.attach)
 
 
-def check_interaction_config(options) -> None:
-    """Refuse a bad ``interaction_config`` before any work, also when no ``props`` are given
-    (nothing reads it then, but a missing or broken file named on the command line is an error)."""
-    if options.interaction_config is not None and not options.props:
+#: prop option -> (its flag, its value when not given): nothing reads them without ``props``
+_NEED_PROPS = {"self_collision": ("--self", False), "interaction_config": ("--interaction-config", None),
+               "attach": ("--attach", ()), "prop_units": ("--prop-units", None), "prop_up": ("--prop-up", None),
+               "margin": ("--margin", 0.0)}
+
+
+def refuse_prop_options_without_props(options) -> None:
+    """Refuse, before any work, prop options given without ``props`` (nothing would read them).
+
+    A given ``interaction_config`` file is read first, so a missing or broken one is named.
+
+    Raises
+    ------
+    UsdHandsError
+        One line: ``--self needs --props (nothing else reads it)``, or the file's error.
+    """
+    if options.props:
+        return
+    if getattr(options, "interaction_config", None) is not None:
         from usdhands.algorithms.interaction.finger_geometry import load_interaction_config
 
         load_interaction_config(options.interaction_config)
+    for name, (flag, unset) in _NEED_PROPS.items():
+        value = getattr(options, name, unset)
+        if (len(value) > 0 if isinstance(unset, tuple) else value is not None and value != unset):
+            raise UsdHandsError(f"{flag} needs --props (nothing else reads it)")
 
 
 def read_scene_props(options, clip, world=None):

@@ -175,9 +175,9 @@ def synthesize(source: str | os.PathLike, output: str | os.PathLike, options: Sy
     source, output = Path(source), Path(output)
     progress = progress or _no_progress
     _check_output(source, output, options)
-    from usdhands.jobs.props import check_interaction_config
+    from usdhands.jobs.props import refuse_prop_options_without_props
 
-    check_interaction_config(options)
+    refuse_prop_options_without_props(options)
     if options.props:
         from usdhands.jobs.props import check_prop_options
 

@@ -147,11 +147,11 @@ def check_usd_stage(stage, options: CheckOptions = CheckOptions()) -> list[Findi
     """The rules on an open ``Usd.Stage`` as it composes now (unsaved edits included)."""
     from usdhands.formats.usd_audit import audit_stage
 
+    _check_options(options)
     findings = audit_stage(stage, require_provenance=options.require_provenance)
     if options.props and not _unsound(findings):
         from usdhands.formats.usd_read import read_stage
 
-        _check_options(options)
         from usdhands.formats.usd_schema_data import read_hand_map
         from usdhands.model.hand_detection import detect_hands
 
@@ -210,9 +210,9 @@ def _prop_options(options: CheckOptions):
 
 
 def _check_options(options: CheckOptions) -> None:
-    from usdhands.jobs.props import check_interaction_config
+    from usdhands.jobs.props import refuse_prop_options_without_props
 
-    check_interaction_config(options)
+    refuse_prop_options_without_props(options)
     if not options.props:
         return
     from usdhands.jobs.correction import check_correct_options
