@@ -583,11 +583,33 @@ def test_texture_writes_leave_a_file_named_like_their_old_temporary_alone(tmp_pa
     assert sorted(p.name for p in folder.iterdir()) == [keep.name, *(f"tex{i}.png" for i in range(5))]
 
 
-def test_texture_that_cannot_be_written_leaves_no_temporary(tmp_path):
-    """A folder where a texture goes: the rename failed and the temporary .tex0.png.tmpPID was left."""
+@pytest.mark.parametrize("blocked", ["tex0.png", "tex3.png"])
+def test_texture_that_cannot_be_written_leaves_nothing(tmp_path, blocked):
+    """A folder where a texture goes: the rename failed and the temporary .tex0.png.tmpPID was left; the
+    textures written before it (tex0-tex2) stayed beside the output that was not written."""
     src = tmp_path / "scene.glb"
     _scene(src)
-    blocked = tmp_path / "out_textures" / "tex0.png"
+    blocked = tmp_path / "out_textures" / blocked
     blocked.mkdir(parents=True)
+    (tmp_path / "out_textures" / "notes.txt").write_text("the user's own file\n")
     check_promise(["convert", src, tmp_path / "out.usda"], folder=tmp_path, inputs=[src], names=blocked,
                   message="is a folder")
+
+
+def test_a_failed_usd_write_takes_the_texture_folder_it_made_with_it(tmp_path, monkeypatch):
+    """An error after the textures were written (here: saving the layer) left them, and their folder,
+    beside an output that was never written."""
+    from pxr import Sdf
+
+    src = tmp_path / "scene.glb"
+    _scene(src)
+    asset = read_asset(src)
+
+    def refuse(self, *args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(Sdf.Layer, "Export", refuse)
+    monkeypatch.setattr(Sdf.Layer, "Save", refuse)
+    with pytest.raises(OSError, match="disk full"):
+        write_asset(asset, tmp_path / "out.usda")
+    assert listing(tmp_path) == ["scene.glb"]

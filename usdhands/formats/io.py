@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from pathlib import Path
 
 from usdhands.errors import AssetReadError, NoSkeletonError
 from usdhands.input_files import check_regular_file
-from usdhands.formats.registry import atomic_output, check_output_path, handler_for
+from usdhands.formats.registry import atomic_output, check_output_path, handler_for, new_files_removed_on_failure
 from usdhands.model.asset import Asset
 from usdhands.model.clip import Clip
 
@@ -71,9 +72,14 @@ def write_asset(asset: Asset, path: str | os.PathLike, *, inputs: tuple = (), **
     handler = handler_for(path, "write")
     for clip in asset.clips:
         clip.validate(str(path))
+    textures = contextlib.nullcontext()
     if asset.images and handler.name in ("usd", "gltf"):  # textures are placed relative to the final file
         options = {**options, "final_path": path}
-    with atomic_output(path) as tmp:
+        if handler.name == "usd":  # image files beside the output: gone with it when it fails
+            from usdhands.formats.usd_materials import texture_folder
+
+            textures = new_files_removed_on_failure(texture_folder(path))
+    with textures, atomic_output(path) as tmp:
         handler.write(asset, tmp, **options)
     return path
 

@@ -29,7 +29,7 @@ from usdhands.errors import AssetReadError, OutputPathError
 
 __all__ = [
     "FormatHandler", "BuiltinFormat", "BUILTIN_FORMATS", "handlers", "handler_for", "atomic_output",
-    "check_output_path", "register_handler", "same_file",
+    "check_output_path", "register_handler", "same_file", "new_files_removed_on_failure",
 ]
 
 ENTRY_POINT_GROUP = "usdhands.formats"
@@ -244,3 +244,23 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         raise
     finally:
         deferred.restore()
+
+
+@contextlib.contextmanager
+def new_files_removed_on_failure(folder: str | os.PathLike) -> Iterator[None]:
+    """On any exception in the ``with`` block, remove the files it made in ``folder`` (and the folder
+    when the block made it): the files an output writes beside itself (a USD output's textures) go
+    with the output when it fails. Files that were there before are left."""
+    folder = Path(folder)
+    existed = folder.is_dir()
+    before = set(os.listdir(folder)) if existed else set()
+    try:
+        yield
+    except BaseException:
+        with contextlib.suppress(OSError):
+            for name in set(os.listdir(folder)) - before:
+                with contextlib.suppress(FileNotFoundError):
+                    (folder / name).unlink()
+            if not existed:
+                folder.rmdir()
+        raise
