@@ -133,7 +133,7 @@ def run(args) -> int:
     for flag in _job_options_given(args):
         if flag not in JOB_FLAGS[args.job]:
             raise UsdHandsError(f"{flag} is not an option of --job {args.job}")
-    # every side file given is checked, also those the job does not read
+    # every side file given (the job reads each: the others were refused above) is checked before any clip runs
     check_side_files({"--handmap": args.handmap, "--config": args.config, "--model": args.model,
                       "--interaction-config": args.interaction_config, "--props": args.props, "--db": args.db},
                      args.out)
