@@ -675,6 +675,37 @@ def test_sigint_mid_write_leaves_nothing(target, sample_assets, tmp_path):
     assert interrupted >= 1
 
 
+@pytest.mark.parametrize("signal_name, code, line", [("SIGTERM", 143, "usdhands: terminated"),
+                                                     ("SIGINT", 130, "usdhands: interrupted")])
+def test_a_signal_whose_exception_c_code_replaced_still_ends_the_run_as_the_signal(signal_name, code, line, ok_glb,
+                                                                                   tmp_path, capsys, monkeypatch):
+    """SIGTERM during db build over a database (full suite under load 12): exit 1 and a traceback,
+    'TypeError: expected str, bytes or os.PathLike object, not BufferedWriter' from numpy's tofile,
+    which replaces an exception raised while it writes (18 of 3,000 timer signals). Here the job is
+    signalled, and the exception replaced, as numpy did."""
+    import signal
+
+    from cli_helpers import run
+    from usdhands.jobs import conversion
+
+    def write_like_numpy(*args, **kwargs):
+        try:
+            signal.raise_signal(getattr(signal, signal_name))
+        except BaseException:
+            raise TypeError("expected str, bytes or os.PathLike object, not BufferedWriter") from None
+
+    monkeypatch.setattr(conversion, "convert", write_like_numpy)
+    # SIGINT's default disposition, as a terminal gives it (a shell running jobs in the background ignores it)
+    saved = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        before = signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)
+        assert run(capsys, "convert", ok_glb, tmp_path / "out.usda") == (code, [line])
+        assert (signal.getsignal(signal.SIGTERM), signal.getsignal(signal.SIGINT)) == before
+    finally:
+        signal.signal(signal.SIGINT, saved)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ok.glb"]
+
+
 def test_parallel_runs_writing_one_output(sample_assets, tmp_path):
     """Four conversions of two different takes into one output at once: every run succeeds, no
     temporary file is left, and the output is whole: byte for byte one of the two conversions."""

@@ -44,8 +44,18 @@ class Terminated(KeyboardInterrupt):
     """Raised by the SIGTERM handler: unwinds like Ctrl-C, so every ``atomic_output`` removes its temporary file."""
 
 
-def _on_sigterm(signum, frame):
-    raise Terminated()
+class _SignalHandler:
+    """SIGTERM raises :class:`Terminated`, SIGINT ``KeyboardInterrupt``; each signal is recorded, so
+    that one whose exception C code replaced on its way up is still known (numpy's ``tofile``
+    turns an exception raised while it writes into ``TypeError: expected str, bytes or
+    os.PathLike object``: 18 of 3,000 timer signals)."""
+
+    def __init__(self):
+        self.received: list[int] = []
+
+    def __call__(self, signum, frame):
+        self.received.append(signum)
+        raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 class _Parser(argparse.ArgumentParser):
@@ -159,11 +169,21 @@ def _logging_to_stderr(level: int):
 def _run(args) -> int:
     from usdhands.commands._common import compile_progress
 
-    previous = signal.signal(signal.SIGTERM, _on_sigterm) if _main_thread() else None
+    handler = _SignalHandler()
+    previous = {}
+    if _main_thread():
+        previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, handler)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # an ignored SIGINT stays ignored
+            previous[signal.SIGINT] = signal.signal(signal.SIGINT, handler)
     try:
-        with compile_progress(), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # numpy's overflow/invalid: checks refuse the values
-            return int(args.func(args) or 0)
+        try:
+            with compile_progress(), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # numpy's overflow/invalid: checks refuse the values
+                return int(args.func(args) or 0)
+        except Exception:
+            if handler.received:  # the signal's exception was replaced on its way up: it is still the signal
+                raise Terminated() if handler.received[0] == signal.SIGTERM else KeyboardInterrupt() from None
+            raise
     except UsdHandsError as e:
         print(f"usdhands: error: {one_line(str(e))}", file=sys.stderr)
         return EXIT_USER_ERROR
@@ -181,8 +201,8 @@ def _run(args) -> int:
         print(f"usdhands: error: {one_line(str(where))}: {e.strerror or e}", file=sys.stderr)
         return EXIT_USER_ERROR
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for sig, before in previous.items():
+            signal.signal(sig, before)
 
 
 def _main_thread() -> bool:
