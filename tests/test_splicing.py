@@ -14,7 +14,7 @@ from splice_synth import body_handside, hand_session, leap_handside, make_case, 
 from usdhands.algorithms.dtw import Band, Constraint
 from usdhands.algorithms.splicing.markers import MarkerOffsets, default_marker_offsets, markers_from_joints
 from usdhands.algorithms.splicing.costs import (
-    FirstPassInput, direction_angle_band_cost, direction_angle_cost, first_pass_band_cost, first_pass_cost,
+    FirstPassInput, _first_pass_runs, direction_angle_band_cost, direction_angle_cost, first_pass_band_cost, first_pass_cost,
     first_pass_cost_naive, fit_rotation, hand_angle_cost, hand_angle_cost_naive, hand_directions, sign_features, window_yaw_naive,
 )
 from usdhands.algorithms.splicing.splice import (
@@ -95,6 +95,9 @@ def test_first_pass_cost_is_the_same_whatever_cells_are_asked(trunk):
     assert np.array_equal(first_pass_cost(inp, rows, cols), full[rows, cols])
     band = Band(lo, hi, 26)  # the same cells asked as a band's rows
     assert np.array_equal(first_pass_band_cost(inp, band), full[rows, cols])
+    if not trunk:  # the kernel keeps eq. 7's products for a few rows only: runs come row after row
+        with pytest.raises(ValueError, match="row after row"):
+            _first_pass_runs(inp, np.array([5, 4]), np.array([0, 0]), np.array([3, 3]))
     ub, uh = rng.normal(size=(19, 3)), rng.normal(size=(26, 3))
     ub /= np.linalg.norm(ub, axis=1, keepdims=True)
     uh /= np.linalg.norm(uh, axis=1, keepdims=True)

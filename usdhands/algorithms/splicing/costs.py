@@ -121,7 +121,8 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
     """Eq. 6 (with eq. 7's angle, or the trunk angles) on runs of cells along rows.
 
     Run ``r`` is the cells ``(run_row[r], run_col[r] + t)`` for ``t < run_len[r]``; the
-    costs come out run after run (a band's rows are its runs).
+    costs come out run after run (a band's rows are its runs). The runs come row after
+    row (``run_row`` non-decreasing; ValueError otherwise).
 
     Eq. 7's window sums run along diagonals: the cell ``(i, j)`` adds the per-frame-pair
     products ``f(i + k, j + k)`` (``|k| <= half``, both frames inside their clips), so
@@ -131,9 +132,12 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
     centring terms) are the same for every cell whose window is whole: they are summed
     once per frame, in the order the cells near the ends add them (the same bits).
     Each cell's value depends on that cell alone (not on which other cells are asked
-    or in what order). Eq. 6 is accumulated marker by marker in contiguous slices of a
-    run, which the compiler vectorises (``error_model="numpy"``: no zero-division
-    checks in the loops, none can divide by zero).
+    or in what order). The products are made frame after frame as the rows reach them
+    and kept only for the ``2 * half + 1`` frames a row's windows span (a few rows of
+    the hand's length: no band-sized buffers to fault in on every call). Eq. 6 is
+    accumulated marker by marker in contiguous slices of a run, which the compiler
+    vectorises (``error_model="numpy"``: no zero-division checks in the loops, none
+    can divide by zero).
     """
     R = run_row.shape[0]
     n = P.shape[0]
@@ -188,13 +192,15 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
         for b in range(half, m - half):
             WXh[b] += SXh[b + k]
             WZh[b] += SZh[b + k]
-    # eq. 7's products of frame pairs: f(a, b) for b in need_lo[a] .. need_hi[a], stored
-    # row after row from foff[a]
+    # eq. 7's products of frame pairs: f(a, b) for b in need_lo[a] .. need_hi[a], the columns
+    # the asked cells' windows reach in frame a
     need_lo = np.full(n, m, dtype=np.int64)
     need_hi = np.full(n, -1, dtype=np.int64)
     if not use_trunk:
         for r in range(R):
             i = run_row[r]
+            if r and i < run_row[r - 1]:
+                raise ValueError("runs must come row after row")
             for k in range(-half, half + 1):
                 a = i + k
                 if a < 0 or a >= n:
@@ -207,26 +213,12 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
                     need_lo[a] = b0
                 if b1 > need_hi[a]:
                     need_hi[a] = b1
-    foff = np.zeros(n + 1, dtype=np.int64)
-    for a in range(n):
-        foff[a + 1] = foff[a] + max(need_hi[a] - need_lo[a] + 1, 0)
-    FXZ = np.zeros(foff[n])
-    FXX = np.zeros(foff[n])
-    for a in range(n):
-        lo_a = need_lo[a]
-        w = need_hi[a] - lo_a + 1
-        if w <= 0:
-            continue
-        fxz = FXZ[foff[a]:foff[a] + w]
-        fxx = FXX[foff[a]:foff[a] + w]
-        for mk in range(K):
-            xa = X[a, mk]
-            za = Z[a, mk]
-            xs = XhT[mk, lo_a:lo_a + w]
-            zs = ZhT[mk, lo_a:lo_a + w]
-            for u in range(w):
-                fxz[u] += xa * zs[u] - xs[u] * za
-                fxx[u] += xa * xs[u] + za * zs[u]
+    # ... kept for the 2 * half + 1 frames a row's windows span: frame a's products in
+    # slot a % H, from column need_lo[a] on (small enough to stay in cache)
+    H = 2 * half + 1
+    FXZ = np.empty((H, m))
+    FXX = np.empty((H, m))
+    next_a = 0  # the frames before it have their products in (or already out of) the slots
     sxz = np.empty(Lmax)
     sxx = np.empty(Lmax)
     co = np.empty(Lmax)
@@ -238,6 +230,26 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
         i = run_row[r]
         j0 = run_col[r]
         L = run_len[r]
+        while not use_trunk and next_a <= i + half and next_a < n:
+            a = next_a
+            next_a += 1
+            lo_a = need_lo[a]
+            w = need_hi[a] - lo_a + 1
+            if w <= 0:
+                continue
+            fxz = FXZ[a % H, :w]
+            fxx = FXX[a % H, :w]
+            for u in range(w):
+                fxz[u] = 0.0
+                fxx[u] = 0.0
+            for mk in range(K):
+                xa = X[a, mk]
+                za = Z[a, mk]
+                xs = XhT[mk, lo_a:lo_a + w]
+                zs = ZhT[mk, lo_a:lo_a + w]
+                for u in range(w):
+                    fxz[u] += xa * zs[u] - xs[u] * za
+                    fxx[u] += xa * xs[u] + za * zs[u]
         if use_trunk:
             for t in range(L):
                 th = yaw_b[i] - yaw_h[j0 + t]
@@ -257,9 +269,9 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
                 if t_lo >= t_hi:
                     continue
                 w = t_hi - t_lo
-                base = foff[a] + j0 + k + t_lo - need_lo[a]
-                f_xz = FXZ[base:base + w]
-                f_xx = FXX[base:base + w]
+                base = j0 + k + t_lo - need_lo[a]
+                f_xz = FXZ[a % H, base:base + w]
+                f_xx = FXX[a % H, base:base + w]
                 s_xz = sxz[t_lo:t_hi]
                 s_xx = sxx[t_lo:t_hi]
                 for u in range(w):
@@ -407,8 +419,13 @@ def band_runs(band) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def first_pass_cost(inp: FirstPassInput, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """Eq. 6 on the given cells (numba); see :func:`first_pass_cost_naive` for the definition."""
-    return _first_pass_runs(inp, *cell_runs(rows, cols))
+    """Eq. 6 on the given cells, in any order (numba); see :func:`first_pass_cost_naive` for the definition."""
+    rows = np.asarray(rows, np.int64)
+    cols = np.asarray(cols, np.int64)
+    order = np.lexsort((cols, rows))  # the kernel takes runs row after row
+    out = np.empty(len(order))
+    out[order] = _first_pass_runs(inp, *cell_runs(rows[order], cols[order]))
+    return out
 
 
 def first_pass_band_cost(inp: FirstPassInput, band) -> np.ndarray:
