@@ -26,6 +26,24 @@ def test_banded_dtw_equals_naive_full_matrix_dtw_on_random_costs():
         assert fast.cost == pytest.approx(cost[path[:, 0], path[:, 1]].sum())
 
 
+def test_banded_dtw_breaks_ties_as_the_naive_twin_on_integer_costs():
+    """Small integer costs (as eq. 6's sign counts) tie everywhere: the steps the kernel
+    records while accumulating must pick diagonal, then up, then left, as the backtrack
+    over the whole matrix of the naive twin does."""
+    rng = np.random.default_rng(11)
+    for _ in range(80):
+        n, m = (int(v) for v in rng.integers(1, 40, 2))
+        cost = rng.integers(0, 3, (n, m)).astype(float)
+        band = Band.diagonal(n, m, float(rng.choice([0.05, 0.2, np.inf])))
+        fast = dtw(cost, band)
+        path, total = dtw_naive(cost, band.mask())
+        assert fast.cost == total
+        np.testing.assert_array_equal(fast.path, path)
+    flat = dtw(np.zeros((30, 40)))  # every path costs 0: the diagonal first, then up
+    np.testing.assert_array_equal(flat.path, dtw_naive(np.zeros((30, 40)))[0])
+    assert (np.diff(flat.path, axis=0) == [1, 1]).all(axis=1).sum() == 29
+
+
 def test_constrained_dtw_equals_naive_with_the_same_mask():
     for rng, n, m, cost, width in _random_cases(60, seed=1):
         if n < 8 or m < 8:

@@ -296,44 +296,62 @@ def _cells(lo, hi, off):  # pragma: no cover - compiled
 
 @njit(cache=True)
 def _accumulate(vals, off, lo, hi):  # pragma: no cover - compiled
-    """``γ`` of every band cell: ``D(i, j) + min(γ(i-1, j-1), γ(i-1, j), γ(i, j-1))``.
+    """``γ(n-1, m-1)`` and, for every band cell, the step the optimal path takes into it.
 
-    Each row in two sweeps: the cells above (diagonal and up, independent of each
-    other) first, then the left-to-right chain; the minimum of the same three values,
-    so the same numbers as cell by cell.
+    ``γ(i, j) = D(i, j) + min(γ(i-1, j-1), γ(i-1, j), γ(i, j-1))``, each row in two sweeps:
+    the cells above (diagonal and up, independent of each other) first, then the
+    left-to-right chain. Only two rows of ``γ`` are kept; the step into each cell
+    (int8: 0 diagonal, 1 up, 2 left) is the first of diagonal, up, left whose ``γ`` is
+    the smallest, the choice :func:`_backtrack_steps` follows (the tie-breaking of
+    :func:`dtw_naive`).
     """
     n = lo.shape[0]
-    acc = np.empty_like(vals)
-    up = np.empty(max(hi.max() - lo.min() + 1, 1) if n else 1)
+    width = max(hi.max() - lo.min() + 1, 1) if n else 1
+    prev = np.empty(width)
+    cur = np.empty(width)
+    up = np.empty(width)
+    steps = np.empty(vals.shape[0], dtype=np.int8)
+    total = np.inf
     for i in range(n):
         base = off[i]
         l_i = lo[i]
         w = hi[i] - l_i + 1
+        st = steps[base:base + max(w, 0)]
         if i == 0:
             for t in range(w):
                 up[t] = np.inf
+                st[t] = 0
             if l_i == 0 and w > 0:
                 up[0] = 0.0
         else:
             pl = lo[i - 1]
             ph = hi[i - 1]
-            pb = off[i - 1]
             for t in range(w):
                 j = l_i + t
-                a = acc[pb + j - 1 - pl] if pl <= j - 1 <= ph else np.inf
-                b = acc[pb + j - pl] if pl <= j <= ph else np.inf
+                a = prev[j - 1 - pl] if pl <= j - 1 <= ph else np.inf
+                b = prev[j - pl] if pl <= j <= ph else np.inf
                 up[t] = a if a < b else b
+                st[t] = 0 if a <= b else 1
         left = np.inf
         for t in range(w):
-            best = up[t] if up[t] < left else left
+            u = up[t]
+            if u <= left:
+                best = u
+            else:
+                best = left
+                st[t] = 2
             v = vals[base + t] + best
-            acc[base + t] = v
+            cur[t] = v
             left = v
-    return acc
+        if w > 0:
+            total = cur[w - 1]
+        prev, cur = cur, prev
+    return total, steps
 
 
 @njit(cache=True)
-def _backtrack(acc, off, lo, hi):  # pragma: no cover - compiled
+def _backtrack_steps(steps, off, lo, hi):  # pragma: no cover - compiled
+    """The path from ``(0, 0)`` to ``(n-1, hi[n-1])`` following :func:`_accumulate`'s steps, ``(K, 2)``."""
     n = lo.shape[0]
     i = n - 1
     j = hi[n - 1]
@@ -343,30 +361,14 @@ def _backtrack(acc, off, lo, hi):  # pragma: no cover - compiled
     out[k, 1] = j
     k += 1
     while i > 0 or j > 0:
-        # candidates in the order diagonal, up, left (ties go to the first)
-        best = np.inf
-        bi = -1
-        bj = -1
-        if i > 0 and j > 0 and lo[i - 1] <= j - 1 <= hi[i - 1]:
-            v = acc[off[i - 1] + j - 1 - lo[i - 1]]
-            if v < best:
-                best = v
-                bi = i - 1
-                bj = j - 1
-        if i > 0 and lo[i - 1] <= j <= hi[i - 1]:
-            v = acc[off[i - 1] + j - lo[i - 1]]
-            if v < best:
-                best = v
-                bi = i - 1
-                bj = j
-        if j > lo[i]:
-            v = acc[off[i] + j - 1 - lo[i]]
-            if v < best:
-                best = v
-                bi = i
-                bj = j - 1
-        i = bi
-        j = bj
+        s = steps[off[i] + j - lo[i]]
+        if s == 0:
+            i -= 1
+            j -= 1
+        elif s == 1:
+            i -= 1
+        else:
+            j -= 1
         out[k, 0] = i
         out[k, 1] = j
         k += 1
@@ -429,11 +431,11 @@ def dtw(cost: np.ndarray | Callable, band: Band | None = None,
         rows, cols = band.cells()
         vals = np.ascontiguousarray(cost[rows, cols])
     off = band.offsets
-    acc = _accumulate(vals, off, band.lo, band.hi)
-    total = float(acc[-1])
+    total, steps = _accumulate(vals, off, band.lo, band.hi)
+    total = float(total)
     if not np.isfinite(total):
         raise ValueError("no path of finite cost through the band")
-    path = _backtrack(acc, off, band.lo, band.hi)
+    path = _backtrack_steps(steps, off, band.lo, band.hi)
     return WarpResult(path=path, cost=total, band=band, cell_costs=vals)
 
 
