@@ -21,7 +21,8 @@ from usdhands.algorithms.splicing.splice import (
     SpliceOptions, align_hands, median_alignment, pair_finger_joints, phase_boundaries, splice_clips, transfer_fingers,
 )
 from usdhands.model import Clip, HandSide
-from usdhands.model.rotations import quat_angle_deg
+from usdhands.model.rotations import quat_angle_deg, trs_to_xform
+from usdhands.algorithms.splicing.kinematics import chain_xforms, local_xforms, partial_world_xforms
 
 SIDES = ("left", "right")
 
@@ -149,6 +150,35 @@ def test_direction_angle_cost_is_the_angle_in_degrees():
 
 
 # -- markers -----------------------------------------------------------------------------
+def test_chain_xforms_are_the_clips_world_transforms_to_the_bit(case, leap_case):
+    """The compiled local transforms repeat trs_to_xform's arithmetic in its order, and the
+    chain's products are NumPy's: the same bits as the whole character's forward kinematics."""
+    rng = np.random.default_rng(5)
+    for clip in (case.body, case.hands, leap_case.hands):
+        sk = clip.skeleton
+        q = rng.normal(size=clip.rotations.shape)  # not unit: the normalisation is part of it
+        varied = Clip(sk, clip.fps, q, clip.translations, rng.uniform(0.5, 2.0, clip.translations.shape))
+        for c in (clip, varied):
+            joints = list(range(sk.num_joints))
+            loc = trs_to_xform(c.translations, c.rotations, c.scales)
+            assert np.array_equal(local_xforms(c, joints), loc.transpose(1, 0, 2, 3))
+            world = c.world_xforms()
+            some = [sk.num_joints - 1, sk.num_joints // 2]
+            chains = chain_xforms(c, some)
+            assert set(chains) == {a for j in some for a in sk.chain_to_root(j)}
+            for j, x in chains.items():
+                assert np.array_equal(x, world[:, j]), sk.joint_names[j]
+            part = partial_world_xforms(c, some)
+            assert np.array_equal(part[:, sorted(chains)], world[:, sorted(chains)])
+            assert not part[:, [j for j in range(sk.num_joints) if j not in chains]].any()
+    q = np.array(case.hands.rotations)
+    q[3, 2] = 0.0  # a zero quaternion (Clip.validate refuses it; the clip itself holds it)
+    with pytest.raises(ValueError, match="Found zero norm quaternions"):
+        trs_to_xform(np.zeros(3), q[3, 2])
+    with pytest.raises(ValueError, match="Found zero norm quaternions"):
+        local_xforms(Clip(case.hands.skeleton, 30.0, q), [1, 2])
+
+
 def test_default_markers_sit_on_wrist_knuckle_and_towards_the_elbow(case):
     sk = case.body.skeleton
     side = body_handside(sk, "right")

@@ -512,12 +512,15 @@ def hand_directions(clip: Clip, side: HandSide, offsets: MarkerOffsets | None = 
     sk = clip.skeleton
     offsets = default_marker_offsets(sk, side) if offsets is None else offsets
     world = clip.world_xforms() if world is None else world
-    w = sk.index(side.wrist)
-    fa = sk.index(side.forearm)
+    return hand_directions_from_xforms(world[:, sk.index(side.wrist)], world[:, sk.index(side.forearm)], offsets)
+
+
+def hand_directions_from_xforms(wrist: np.ndarray, forearm: np.ndarray, offsets: MarkerOffsets) -> np.ndarray:
+    """:func:`hand_directions` from the wrist's and the forearm's world transforms, two ``(T, 4, 4)``."""
     o = offsets.as_array()
     hv = o[3] - 0.5 * (o[0] + o[1])  # in the wrist frame
-    Rw = _rot_only(world[:, w, :3, :3])
-    Rf = _rot_only(world[:, fa, :3, :3])
+    Rw = _rot_only(wrist[:, :3, :3])
+    Rf = _rot_only(forearm[:, :3, :3])
     u = np.einsum("tji,tjk,k->ti", Rf, Rw, hv)
     return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
 

@@ -216,19 +216,27 @@ def markers_from_joints(clip: Clip, side: HandSide, offsets: MarkerOffsets | Non
     sk = clip.skeleton
     offsets = default_marker_offsets(sk, side) if offsets is None else offsets
     world = clip.world_xforms() if world is None else world
-    w = sk.index(side.wrist)
-    fa = sk.index(side.forearm)
+    return markers_from_xforms(world[:, sk.index(side.wrist)], world[:, sk.index(side.forearm)], offsets, sk)
+
+
+def markers_from_xforms(wrist: np.ndarray, forearm: np.ndarray, offsets: MarkerOffsets, skeleton) -> np.ndarray:
+    """:func:`markers_from_joints` from the wrist's and the forearm's world transforms, two ``(T, 4, 4)``."""
     off = np.concatenate([offsets.as_array(), np.ones((4, 1))], axis=1)  # (4, 4)
-    frames = np.stack([world[:, w], world[:, w], world[:, fa], world[:, w]], axis=1)  # (T, 4, 4, 4)
+    frames = np.stack([wrist, wrist, forearm, wrist], axis=1)  # (T, 4, 4, 4)
     pts = np.einsum("tkab,kb->tka", frames, off)[..., :3]
-    return _to_yup_cm(pts, sk)
+    return _to_yup_cm(pts, skeleton)
 
 
 def trunk_yaw_deg(clip: Clip, joint: int, world: np.ndarray | None = None) -> np.ndarray:
     """Heading of a joint (the hips) about the vertical axis relative to its rest, ``(T,)`` degrees."""
-    sk = clip.skeleton
     world = clip.world_xforms() if world is None else world
-    R = world[:, joint, :3, :3]
+    return trunk_yaw_from_xforms(world[:, joint], clip.skeleton, joint)
+
+
+def trunk_yaw_from_xforms(xforms: np.ndarray, skeleton, joint: int) -> np.ndarray:
+    """:func:`trunk_yaw_deg` from the joint's world transforms ``(T, 4, 4)``."""
+    sk = skeleton
+    R = xforms[:, :3, :3]
     R = R / np.linalg.norm(R, axis=-2, keepdims=True)
     rest = sk.rest_world_xforms()[joint, :3, :3]
     rest = rest / np.linalg.norm(rest, axis=-2, keepdims=True)

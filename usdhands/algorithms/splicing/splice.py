@@ -48,15 +48,16 @@ import numpy as np
 from usdhands.algorithms.dtw import Band, Constraint, WarpResult, check_constraints, dtw
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import FINGERS, HandSide
-from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_slerp, trs_to_xform
+from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_slerp
 from usdhands.algorithms.splicing.markers import (
-    transfer_axes, choose_transfer, default_marker_offsets, yup_cm_positions,
-    markers_from_joints, trunk_yaw_deg,
+    transfer_axes, choose_transfer, default_marker_offsets, _to_yup_cm,
+    markers_from_xforms, trunk_yaw_from_xforms,
 )
 from usdhands.algorithms.splicing.costs import (
     sign_features, FirstPassInput, first_pass_band_cost, forearm_hand_vectors,
-    hand_directions, forearm_rest_basis, fit_rotation, direction_angle_band_cost, hand_angle_cost,
+    hand_directions_from_xforms, forearm_rest_basis, fit_rotation, direction_angle_band_cost, hand_angle_cost,
 )
+from usdhands.algorithms.splicing.kinematics import chain_xforms, partial_world_xforms
 
 _log = logging.getLogger(__name__)
 
@@ -504,8 +505,9 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         raise ValueError(f"Expected clips at the same frame rate, got {body.fps} and {hands.fps}")
     if set(body_sides) != set(hand_sides) or not body_sides:
         raise ValueError(f"Expected the same non-empty sides, got {sorted(body_sides)} and {sorted(hand_sides)}")
-    wb = partial_world_xforms(body, [j for s in body_sides.values() for j in _side_joints(body.skeleton, s)])
-    wh = partial_world_xforms(hands, [j for s in hand_sides.values() for j in _side_joints(hands.skeleton, s)])
+    # forward kinematics once for both hands, only the joints read below and their ancestors
+    wb = chain_xforms(body, [j for s in body_sides.values() for j in _side_joints(body.skeleton, s)])
+    wh = chain_xforms(hands, [j for s in hand_sides.values() for j in _side_joints(hands.skeleton, s)])
     out = body
     sides, transfers, pairs_all, bun, hun, modes, ranges = {}, {}, {}, {}, {}, {}, {}
     order = [s for s in ("left", "right") if s in body_sides]
@@ -513,22 +515,23 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         bs, hs = body_sides[s], hand_sides[s]
         bo = (body_offsets or {}).get(s) or default_marker_offsets(body.skeleton, bs)
         ho = (hand_offsets or {}).get(s) or default_marker_offsets(hands.skeleton, hs)
+        bw, bf = wb[body.skeleton.index(bs.wrist)], wb[body.skeleton.index(bs.forearm)]
+        hw, hf = wh[hands.skeleton.index(hs.wrist)], wh[hands.skeleton.index(hs.forearm)]
         bm = _given_markers(body_markers, s, body.num_frames, "body") if body_markers and s in body_markers \
-            else markers_from_joints(body, bs, bo, wb)
+            else markers_from_xforms(bw, bf, bo, body.skeleton)
         hm = _given_markers(hand_markers, s, hands.num_frames, "hand") if hand_markers and s in hand_markers \
-            else markers_from_joints(hands, hs, ho, wh)
+            else markers_from_xforms(hw, hf, ho, hands.skeleton)
         bref = _ref(body, bs, wb)
         href = _ref(hands, hs, wh)
         yb = yh = None
         if options.yaw == "trunk":
             # a root counts as a trunk only on rigs with a shoulder (a hand-only rig's root is its forearm)
-            yb = (trunk_yaw_deg(body, body.skeleton.index(bs.root), wb) if bs.root and bs.shoulder
-                  else np.zeros(body.num_frames))
-            yh = trunk_yaw_deg(hands, hands.skeleton.index(hs.root), wh) if hs.root and hs.shoulder else None
+            yb = (_trunk_yaw(body, bs.root, wb) if bs.root and bs.shoulder else np.zeros(body.num_frames))
+            yh = _trunk_yaw(hands, hs.root, wh) if hs.root and hs.shoulder else None
         al = align_hands(bm, hm, body.fps, body_ref=bref, hand_ref=href, constraints=constraints,
                          options=options, body_yaw_deg=yb, hand_yaw_deg=yh,
-                         body_hand_dirs=hand_directions(body, bs, bo, wb),
-                         hand_hand_dirs=hand_directions(hands, hs, ho, wh),
+                         body_hand_dirs=hand_directions_from_xforms(bw, bf, bo),
+                         hand_hand_dirs=hand_directions_from_xforms(hw, hf, ho),
                          frame_rotation=forearm_rest_basis(body.skeleton, bs, bo)
                          @ forearm_rest_basis(hands.skeleton, hs, ho).T, side=s)
         sides[s] = al
@@ -580,35 +583,26 @@ def _given_markers(markers: dict, side: str, frames: int, what: str) -> np.ndarr
     return m
 
 
-def partial_world_xforms(clip: Clip, joints: Sequence[int]) -> np.ndarray:
-    """World transforms ``(T, J, 4, 4)`` computed only for ``joints`` and their ancestors.
-
-    Other joints are left zero; pass the result as ``world=`` to the marker functions
-    (forward kinematics of a whole 60-joint character costs more than the alignment).
-    The array is a joint-major block seen time-major: each joint's transforms are
-    contiguous, so only the computed joints' pages are ever written (a 65-joint clip
-    of 600 frames would otherwise fault in and clear 2.5 MB for a few joints).
-    """
-    sk = clip.skeleton
-    need = sorted({a for j in joints for a in sk.chain_to_root(int(j))})
-    local = trs_to_xform(clip.translations[:, need], clip.rotations[:, need], clip.scales[:, need])
-    world = np.zeros((sk.num_joints, clip.num_frames, 4, 4))
-    for k, j in enumerate(need):  # parents come before children
-        p = int(sk.parents[j])
-        if p < 0:
-            world[j] = local[:, k]
-        else:
-            np.matmul(world[p], local[:, k], out=world[j])
-    return world.transpose(1, 0, 2, 3)
-
-
 def _side_joints(skeleton, side: HandSide) -> list[int]:
     names = [side.wrist, side.forearm, side.shoulder, side.root]
     return [skeleton.index(n) for n in names if n is not None]
 
 
-def _ref(clip: Clip, side: HandSide, world: np.ndarray) -> np.ndarray | None:
-    """Shoulder positions (cm, Y up), or None for a rig without a shoulder (still trunk)."""
+def _ref(clip: Clip, side: HandSide, world: dict) -> np.ndarray | None:
+    """The shoulder's position at the first frame, ``(1, 3)`` (cm, Y up), or None for a rig
+    without a shoulder (still trunk). ``world``: :func:`chain_xforms` of the clip.
+
+    What splicing has subtracted so far: it asked ``yup_cm_positions(clip, [j], world)[:, 0]``,
+    and ``world[:, [j], :3, 3]`` puts the joint axis first, so ``[:, 0]`` is frame 0, not
+    every frame. Kept as it is so the alignments stay the same; subtracting the shoulder
+    at every frame (the paper's intent) is a change of results, left to decide apart.
+    """
     if side.shoulder is None:
         return None
-    return yup_cm_positions(clip, [clip.skeleton.index(side.shoulder)], world)[:, 0]
+    return _to_yup_cm(world[clip.skeleton.index(side.shoulder)][:1, :3, 3], clip.skeleton)
+
+
+def _trunk_yaw(clip: Clip, root: str, world: dict) -> np.ndarray:
+    """:func:`trunk_yaw_deg` of the joint ``root`` from :func:`chain_xforms` of the clip."""
+    j = clip.skeleton.index(root)
+    return trunk_yaw_from_xforms(world[j], clip.skeleton, j)
