@@ -21,7 +21,8 @@ from usdhands.algorithms.splicing.splice import (
     SpliceOptions, align_hands, median_alignment, pair_finger_joints, phase_boundaries, splice_clips, transfer_fingers,
 )
 from usdhands.model import Clip, HandSide
-from usdhands.model.rotations import quat_angle_deg, trs_to_xform
+from usdhands.model.rotations import quat_angle_deg, quat_conjugate, quat_multiply, quat_slerp, trs_to_xform
+from usdhands.algorithms.splicing.sampling import one_hemisphere, relative_rotations, rest_times, sample_rotations
 from usdhands.algorithms.splicing.kinematics import chain_xforms, local_xforms, partial_world_xforms
 
 SIDES = ("left", "right")
@@ -177,6 +178,36 @@ def test_chain_xforms_are_the_clips_world_transforms_to_the_bit(case, leap_case)
         trs_to_xform(np.zeros(3), q[3, 2])
     with pytest.raises(ValueError, match="Found zero norm quaternions"):
         local_xforms(Clip(case.hands.skeleton, 30.0, q), [1, 2])
+
+
+def test_transfer_sampling_equals_the_numpy_expressions_to_the_bit(case):
+    """The compiled steps of the finger transfer against the NumPy they replace: rotations
+    relative to rest and back, one hemisphere by cumprod of signs, slerp at fractional frames
+    (ends, exact frames, and pairs on opposite hemispheres and nearly equal)."""
+    rng = np.random.default_rng(8)
+    q = rng.normal(size=(120, 7, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    q[10:14, 2] = q[9, 2]  # held: slerp between equal quaternions (the small-angle branch)
+    q[20, 3] = -q[19, 3]
+    rest = rng.normal(size=(7, 4))
+    rest /= np.linalg.norm(rest, axis=-1, keepdims=True)
+    assert np.array_equal(relative_rotations(q, rest), quat_multiply(quat_conjugate(rest)[None], q))
+    assert np.array_equal(rest_times(rest, q), quat_multiply(rest[None], q))
+    rel = np.array(q)
+    step = np.where(np.sum(rel[1:] * rel[:-1], axis=-1) < 0, -1.0, 1.0)
+    rel[1:] *= np.cumprod(step, axis=0)[..., None]
+    mine = np.array(q)
+    one_hemisphere(mine)
+    assert np.array_equal(mine, rel) and not np.array_equal(mine, q)
+    t = np.concatenate([[0.0, 119.0, 130.0, -2.0, 12.5, 20.0], rng.uniform(0, 119, 300)])
+    tc = np.clip(t, 0.0, 119)
+    i0 = np.minimum(np.floor(tc).astype(int), 118)
+    w = (tc - i0)[:, None] * np.ones(7)
+    for r in (q, rel):  # with and without opposite neighbours
+        assert np.array_equal(sample_rotations(r, t), quat_slerp(r[i0], r[i0 + 1], w))
+    one = sample_rotations(q[:1], np.array([0.0, 0.7]))  # a one-frame clip: that frame
+    assert np.array_equal(one, quat_slerp(q[[0, 0]], q[[0, 0]], np.zeros((2, 7))))
+    np.testing.assert_allclose(one, np.repeat(q[:1], 2, axis=0), atol=1e-15)
 
 
 def test_default_markers_sit_on_wrist_knuckle_and_towards_the_elbow(case):

@@ -58,6 +58,7 @@ from usdhands.algorithms.splicing.costs import (
     hand_directions_from_xforms, forearm_rest_basis, fit_rotation, direction_angle_band_cost, hand_angle_cost,
 )
 from usdhands.algorithms.splicing.kinematics import chain_xforms, partial_world_xforms
+from usdhands.algorithms.splicing.sampling import one_hemisphere, relative_rotations, rest_times, sample_rotations
 
 _log = logging.getLogger(__name__)
 
@@ -352,16 +353,6 @@ class FingerTransfer:
     seams: np.ndarray
 
 
-def _sample(rel: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """``rel (m, k, 4)`` at fractional frames ``t (n,)`` by slerp."""
-    m = rel.shape[0]
-    t = np.clip(t, 0.0, m - 1)
-    i0 = np.minimum(np.floor(t).astype(int), max(m - 2, 0))
-    i1 = np.minimum(i0 + 1, m - 1)
-    w = (t - i0)[:, None] * np.ones(rel.shape[1])
-    return quat_slerp(rel[i0], rel[i1], w)
-
-
 def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], alignment: np.ndarray, *,
                      blend_window: int = 4, jump_frames: float = 2.0, mode: str = "local",
                      axes: np.ndarray | None = None) -> FingerTransfer:
@@ -402,12 +393,9 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
         return FingerTransfer([], np.zeros((n, 0, 4)), np.zeros(0, np.int64))
     rel = np.array(hands.rotations[:, hj])
     if mode != "copy":
-        rel = quat_multiply(quat_conjugate(hands.skeleton.rest_rotations[hj])[None], rel)
-    # keep consecutive quaternions in one hemisphere so slerp and blends take short arcs
-    if rel.shape[0] > 1:
-        step = np.where(np.sum(rel[1:] * rel[:-1], axis=-1) < 0, -1.0, 1.0)
-        rel[1:] *= np.cumprod(step, axis=0)[..., None]
-    out = _sample(rel, a)
+        rel = relative_rotations(rel, hands.skeleton.rest_rotations[hj])
+    one_hemisphere(rel)  # so slerp and blends take short arcs
+    out = sample_rotations(rel, a)
     rate = (hands.num_frames - 1) / max(n - 1, 1)
     steps = np.diff(a)
     seams = np.nonzero(steps > rate + jump_frames)[0]
@@ -420,8 +408,8 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
             right_t = np.where(t >= s + 1, a[t], a[s + 1] - (s + 1 - t) * rate)
             alpha = (t - lo + 1) / (hi - lo + 2)
             alpha = alpha * alpha * (3 - 2 * alpha)  # smoothstep
-            ql = _sample(rel, left_t)
-            qr = _sample(rel, right_t)
+            ql = sample_rotations(rel, left_t)
+            qr = sample_rotations(rel, right_t)
             out[t] = quat_slerp(ql, qr, alpha[:, None] * np.ones(len(pairs)))
     if mode == "copy":
         return FingerTransfer(bj, out, seams.astype(np.int64))
@@ -430,7 +418,7 @@ def transfer_fingers(body: Clip, hands: Clip, pairs: Sequence[tuple[str, str]], 
         if c.shape != (len(pairs), 4):
             raise ValueError(f"Expected axes of shape ({len(pairs)}, 4), got {c.shape}")
         out = quat_multiply(quat_multiply(c[None], out), quat_conjugate(c)[None])
-    rots = quat_multiply(body.skeleton.rest_rotations[bj][None], out)
+    rots = rest_times(body.skeleton.rest_rotations[bj], out)
     return FingerTransfer(bj, rots, seams.astype(np.int64))
 
 
