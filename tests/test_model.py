@@ -131,6 +131,17 @@ def test_forward_kinematics_of_bent_chain():
     assert np.allclose(clip.world_positions_cm()[0, 2], [-1, 1, 0])  # centimetre units
 
 
+def test_rest_world_xforms_are_computed_once_and_handed_out_as_copies():
+    sk = chain_skeleton(3)
+    first = sk.rest_world_xforms()
+    np.testing.assert_allclose(first[:, :3, 3], [[0, 0, 0], [0, 1, 0], [0, 2, 0]])
+    first[2, :3, 3] = 7.0  # the caller's copy
+    again = sk.rest_world_xforms()
+    assert again is not first and again.flags.writeable
+    np.testing.assert_allclose(again[:, :3, 3], [[0, 0, 0], [0, 1, 0], [0, 2, 0]])
+    np.testing.assert_allclose(sk.rest_world_positions()[2], [0, 2, 0])
+
+
 def test_clip_arrays_are_read_only_copies():
     sk = chain_skeleton(2)
     rot = np.tile([0, 0, 0, 1.0], (4, 2, 1))

@@ -178,8 +178,15 @@ class Skeleton:
         return trs_to_xform(self.rest_translations, self.rest_rotations, self.rest_scales)
 
     def rest_world_xforms(self) -> np.ndarray:
-        """World rest transforms ``(J, 4, 4)`` by forward kinematics of the rest pose."""
-        return forward_kinematics(self.parents, self.rest_local_xforms()[None])[0]
+        """World rest transforms ``(J, 4, 4)`` by forward kinematics of the rest pose.
+
+        Computed once per skeleton (its arrays are read-only); each call returns a copy.
+        """
+        rest = self.__dict__.get("_rest_world")
+        if rest is None:
+            rest = readonly(forward_kinematics(self.parents, self.rest_local_xforms()[None])[0])
+            object.__setattr__(self, "_rest_world", rest)
+        return rest.copy()
 
     def rest_world_positions(self) -> np.ndarray:
         """World rest positions ``(J, 3)``, asset units."""
