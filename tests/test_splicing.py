@@ -12,10 +12,13 @@ import pytest
 from splice_synth import body_handside, hand_session, leap_handside, make_case, reaxis
 
 from usdhands.algorithms.dtw import Band, Constraint
-from usdhands.algorithms.splicing.markers import MarkerOffsets, default_marker_offsets, markers_from_joints
+from usdhands.algorithms.splicing.markers import (
+    MarkerOffsets, default_marker_offsets, markers_from_joints, markers_from_xforms,
+)
 from usdhands.algorithms.splicing.costs import (
     FirstPassInput, _first_pass_runs, direction_angle_band_cost, direction_angle_cost, first_pass_band_cost, first_pass_cost,
-    first_pass_cost_naive, fit_rotation, hand_angle_cost, hand_angle_cost_naive, hand_directions, sign_features, window_yaw_naive,
+    first_pass_cost_naive, fit_rotation, hand_angle_cost, hand_angle_cost_naive, hand_directions,
+    hand_directions_from_xforms, hand_directions_numpy, sign_features, window_yaw_naive,
 )
 from usdhands.algorithms.splicing.splice import (
     SpliceOptions, align_hands, median_alignment, pair_finger_joints, phase_boundaries, splice_clips, transfer_fingers,
@@ -178,6 +181,28 @@ def test_chain_xforms_are_the_clips_world_transforms_to_the_bit(case, leap_case)
         trs_to_xform(np.zeros(3), q[3, 2])
     with pytest.raises(ValueError, match="Found zero norm quaternions"):
         local_xforms(Clip(case.hands.skeleton, 30.0, q), [1, 2])
+
+
+def test_markers_and_hand_directions_equal_their_numpy_expressions_to_the_bit(case, leap_case):
+    """The compiled markers and forearm-frame hand vectors against the einsum expressions
+    they replace, on the synthetic rigs and on scaled, sheared random transforms."""
+    rng = np.random.default_rng(9)
+    for clip, side in ((case.body, "left"), (case.hands, "right"), (leap_case.hands, "right")):
+        sides = _sides(leap_case, partial=True)[1] if clip is leap_case.hands else _sides(case)[0]
+        hs = sides[side]
+        sk = clip.skeleton
+        w = chain_xforms(clip, [sk.index(hs.wrist), sk.index(hs.forearm)])
+        off = default_marker_offsets(sk, hs)
+        pairs = [(w[sk.index(hs.wrist)], w[sk.index(hs.forearm)])]
+        pairs.append(tuple(np.concatenate([rng.normal(size=(50, 3, 4)), np.tile([0, 0, 0, 1.0], (50, 1, 1))], 1)
+                           for _ in range(2)))
+        for wrist, forearm in pairs:
+            frames = np.stack([wrist, wrist, forearm, wrist], axis=1)
+            o4 = np.concatenate([off.as_array(), np.ones((4, 1))], axis=1)
+            want = np.einsum("tkab,kb->tka", frames, o4)[..., :3] * (sk.meters_per_unit * 100.0)
+            assert np.array_equal(markers_from_xforms(wrist, forearm, off, sk), want)
+            assert np.array_equal(hand_directions_from_xforms(wrist, forearm, off),
+                                  hand_directions_numpy(wrist, forearm, off))
 
 
 def test_transfer_sampling_equals_the_numpy_expressions_to_the_bit(case):

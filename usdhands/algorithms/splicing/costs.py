@@ -516,13 +516,66 @@ def hand_directions(clip: Clip, side: HandSide, offsets: MarkerOffsets | None = 
 
 
 def hand_directions_from_xforms(wrist: np.ndarray, forearm: np.ndarray, offsets: MarkerOffsets) -> np.ndarray:
-    """:func:`hand_directions` from the wrist's and the forearm's world transforms, two ``(T, 4, 4)``."""
+    """:func:`hand_directions` from the wrist's and the forearm's world transforms, two ``(T, 4, 4)``.
+
+    Compiled; the same bits as :func:`hand_directions_numpy` (a test holds them together).
+    """
     o = offsets.as_array()
     hv = o[3] - 0.5 * (o[0] + o[1])  # in the wrist frame
+    out = np.empty((wrist.shape[0], 3))
+    _hand_directions_kernel(np.ascontiguousarray(wrist, dtype=np.float64),
+                            np.ascontiguousarray(forearm, dtype=np.float64), hv, out)
+    return out
+
+
+def hand_directions_numpy(wrist: np.ndarray, forearm: np.ndarray, offsets: MarkerOffsets) -> np.ndarray:
+    """:func:`hand_directions_from_xforms` in NumPy (the twin the tests hold it to)."""
+    o = offsets.as_array()
+    hv = o[3] - 0.5 * (o[0] + o[1])
     Rw = _rot_only(wrist[:, :3, :3])
     Rf = _rot_only(forearm[:, :3, :3])
     u = np.einsum("tji,tjk,k->ti", Rf, Rw, hv)
     return u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-12)
+
+
+@njit(cache=True)
+def _hand_directions_kernel(wrist, forearm, hv, out):  # pragma: no cover - compiled
+    """``u = Rfᵀ Rw hv`` normalised, per frame, with ``Rw, Rf`` the 3x3 blocks divided by
+    their column norms (``_rot_only``). NumPy's order: column norms as sums of squares left
+    to right; einsum's sum over ``j`` of partial sums over ``k``, products ``(Rf Rw) hv``."""
+    Rw = np.empty((3, 3))
+    Rf = np.empty((3, 3))
+    for t in range(wrist.shape[0]):
+        for c in range(3):
+            nw = np.sqrt(wrist[t, 0, c] * wrist[t, 0, c] + wrist[t, 1, c] * wrist[t, 1, c]
+                         + wrist[t, 2, c] * wrist[t, 2, c])
+            nf = np.sqrt(forearm[t, 0, c] * forearm[t, 0, c] + forearm[t, 1, c] * forearm[t, 1, c]
+                         + forearm[t, 2, c] * forearm[t, 2, c])
+            nw = max(nw, 1e-12)
+            nf = max(nf, 1e-12)
+            for r in range(3):
+                Rw[r, c] = wrist[t, r, c] / nw
+                Rf[r, c] = forearm[t, r, c] / nf
+        u0 = 0.0
+        u1 = 0.0
+        u2 = 0.0
+        for i in range(3):
+            s = 0.0
+            for j in range(3):
+                acc = 0.0
+                for k in range(3):
+                    acc += Rf[j, i] * Rw[j, k] * hv[k]
+                s += acc
+            if i == 0:
+                u0 = s
+            elif i == 1:
+                u1 = s
+            else:
+                u2 = s
+        nrm = max(np.sqrt(u0 * u0 + u1 * u1 + u2 * u2), 1e-12)
+        out[t, 0] = u0 / nrm
+        out[t, 1] = u1 / nrm
+        out[t, 2] = u2 / nrm
 
 
 def forearm_rest_basis(skeleton, side: HandSide, offsets: MarkerOffsets | None = None) -> np.ndarray:
