@@ -205,8 +205,8 @@ def main() -> None:
     wh = partial_world_xforms(hands, joints(sk_h))
     bm = markers_from_joints(body, side, world=wb)
     hm = markers_from_joints(hands, side, world=wh)
-    bref = yup_cm_positions(body, [sk_b.index(side.shoulder)], wb)[:, 0]  # (1, 3): frame 0, as splice_clips
-    href = yup_cm_positions(hands, [sk_h.index(side.shoulder)], wh)[:, 0]
+    bref = yup_cm_positions(body, [sk_b.index(side.shoulder)], wb)[:1, 0]  # (1, 3): frame 0, as splice_clips
+    href = yup_cm_positions(hands, [sk_h.index(side.shoulder)], wh)[:1, 0]
     ub, uh = hand_directions(body, side, world=wb), hand_directions(hands, side, world=wh)
     inputs = (bm, hm, bref, href, ub, uh)
     t_base, _, (base_align, base_first) = median_of(lambda: baseline(*inputs, body.fps), 1)

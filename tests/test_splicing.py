@@ -13,7 +13,7 @@ from splice_synth import body_handside, hand_session, leap_handside, make_case, 
 
 from usdhands.algorithms.dtw import Band, Constraint
 from usdhands.algorithms.splicing.markers import (
-    MarkerOffsets, default_marker_offsets, markers_from_joints, markers_from_xforms,
+    MarkerOffsets, default_marker_offsets, markers_from_joints, markers_from_xforms, yup_cm_positions,
 )
 from usdhands.algorithms.splicing.costs import (
     FirstPassInput, _first_pass_runs, direction_angle_band_cost, direction_angle_cost, first_pass_band_cost, first_pass_cost,
@@ -181,6 +181,17 @@ def test_chain_xforms_are_the_clips_world_transforms_to_the_bit(case, leap_case)
         trs_to_xform(np.zeros(3), q[3, 2])
     with pytest.raises(ValueError, match="Found zero norm quaternions"):
         local_xforms(Clip(case.hands.skeleton, 30.0, q), [1, 2])
+
+
+def test_yup_cm_positions_are_time_major(case):
+    """(T, len(joints), 3): NumPy puts a list index that a slice separates from another
+    index first, which once gave (len(joints), T, 3) here."""
+    sk = case.body.skeleton
+    joints = [sk.index("RightArm"), sk.index("Hips"), sk.index("LeftHand")]
+    world = case.body.world_xforms()
+    got = yup_cm_positions(case.body, joints, world)
+    assert got.shape == (case.body.num_frames, 3, 3)
+    np.testing.assert_array_equal(got[7, 1], world[7, joints[1], :3, 3] * (sk.meters_per_unit * 100.0))
 
 
 def test_markers_and_hand_directions_equal_their_numpy_expressions_to_the_bit(case, leap_case):

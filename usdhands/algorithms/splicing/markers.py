@@ -192,7 +192,7 @@ def _to_yup_cm(points: np.ndarray, skeleton) -> np.ndarray:
 def yup_cm_positions(clip: Clip, joints: Sequence[int], world: np.ndarray | None = None) -> np.ndarray:
     """World positions ``(T, len(joints), 3)`` of joints in centimetres with Y up."""
     world = clip.world_xforms() if world is None else world
-    return _to_yup_cm(world[:, list(joints), :3, 3], clip.skeleton)
+    return _to_yup_cm(world[:, list(joints)][:, :, :3, 3], clip.skeleton)
 
 
 def markers_from_joints(clip: Clip, side: HandSide, offsets: MarkerOffsets | None = None,

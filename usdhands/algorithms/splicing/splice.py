@@ -581,7 +581,7 @@ def _ref(clip: Clip, side: HandSide, world: dict) -> np.ndarray | None:
     without a shoulder (still trunk). ``world``: :func:`chain_xforms` of the clip.
 
     What splicing has subtracted so far: it asked ``yup_cm_positions(clip, [j], world)[:, 0]``,
-    and ``world[:, [j], :3, 3]`` puts the joint axis first, so ``[:, 0]`` is frame 0, not
+    and ``world[:, [j], :3, 3]`` put the joint axis first, so ``[:, 0]`` was frame 0, not
     every frame. Kept as it is so the alignments stay the same; subtracting the shoulder
     at every frame (the paper's intent) is a change of results, left to decide apart.
     """
