@@ -39,6 +39,10 @@ def test_banded_dtw_breaks_ties_as_the_naive_twin_on_integer_costs():
         path, total = dtw_naive(cost, band.mask())
         assert fast.cost == total
         np.testing.assert_array_equal(fast.path, path)
+        counts = dtw(lambda b: cost[b.cells()].astype(np.uint8), band, shape=(n, m), on_band=True)
+        assert counts.cell_costs.dtype == np.uint8  # kept as they are (splicing's first pass)
+        assert counts.cost == total
+        np.testing.assert_array_equal(counts.path, path)
     flat = dtw(np.zeros((30, 40)))  # every path costs 0: the diagonal first, then up
     np.testing.assert_array_equal(flat.path, dtw_naive(np.zeros((30, 40)))[0])
     assert (np.diff(flat.path, axis=0) == [1, 1]).all(axis=1).sum() == 29

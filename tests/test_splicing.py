@@ -57,9 +57,9 @@ def _finger_error_deg(result, case):
 
 
 # -- cost functions against their naive twins ------------------------------------------
-def _random_pass_one(rng, n, m, trunk, half=2):
-    P = rng.normal(size=(n, 4, 3)) * 10
-    Q = rng.normal(size=(m, 4, 3)) * 10
+def _random_pass_one(rng, n, m, trunk, half=2, markers=4):
+    P = rng.normal(size=(n, markers, 3)) * 10
+    Q = rng.normal(size=(m, markers, 3)) * 10
     vb, ab, evb, eab = sign_features(np.cumsum(P, 0), 30.0)
     vh, ah, evh, eah = sign_features(np.cumsum(Q, 0), 30.0)
     yb = rng.uniform(-180, 180, n) if trunk else None
@@ -80,6 +80,19 @@ def test_first_pass_cost_equals_naive_eq6(trunk, n, m, half):
     np.testing.assert_allclose(fast, full, atol=1e-9)
     # values are counts of sign disagreements: 0, 1 or 4 per component
     assert set(np.unique(full)) <= set(range(0, 97))
+
+
+def test_first_pass_costs_are_uint8_counts_up_to_ten_markers():
+    """Eq. 6 counts up to 24 per marker: uint8 holds them for 10 markers, float64 beyond."""
+    rng = np.random.default_rng(4)
+    i, j = np.mgrid[0:12, 0:14]
+    for markers, dtype in ((4, np.uint8), (10, np.uint8), (11, np.float64)):
+        inp = _random_pass_one(rng, 12, 14, False, markers=markers)
+        fast = first_pass_cost(inp, i.ravel(), j.ravel())
+        assert fast.dtype == dtype
+        naive = first_pass_cost_naive(inp).ravel()
+        np.testing.assert_array_equal(fast, naive)
+        assert naive.max() > 24  # counts of several markers
 
 
 @pytest.mark.parametrize("trunk", [False, True])

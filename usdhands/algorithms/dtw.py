@@ -263,8 +263,9 @@ class WarpResult:
         Total cost ``γ(n-1, m-1)``: the sum of the cell costs along the path.
     band : Band
         The band searched.
-    cell_costs : (num_cells,) float64
-        ``D`` on every band cell, flat order of :meth:`Band.cells`.
+    cell_costs : (num_cells,) float64, or uint8
+        ``D`` on every band cell, flat order of :meth:`Band.cells` (uint8 when the cost
+        function gave uint8 counts, as splicing's first pass does).
     """
 
     path: np.ndarray
@@ -384,7 +385,8 @@ def dtw(cost: np.ndarray | Callable, band: Band | None = None,
     cost : (n, m) float array, or callable
         The distance ``D(i, j)`` (any unit, >= 0 not required). A callable is called
         once as ``cost(rows, cols)`` with two ``(num_cells,)`` int64 arrays of the band
-        cells and must return ``(num_cells,)`` floats; ``shape`` is then required.
+        cells and must return ``(num_cells,)`` floats, or uint8 counts (kept as they
+        are: an eighth of the memory); ``shape`` is then required.
     band : Band, optional
         Cells allowed; the full matrix when omitted.
     shape : (int, int), optional
@@ -419,11 +421,11 @@ def dtw(cost: np.ndarray | Callable, band: Band | None = None,
     band.check_connected()
     if callable(cost):
         if on_band:
-            vals = np.ascontiguousarray(cost(band), dtype=np.float64)
+            vals = _cost_values(cost(band))
             want = (band.num_cells,)
         else:
             rows, cols = band.cells()
-            vals = np.ascontiguousarray(cost(rows, cols), dtype=np.float64)
+            vals = _cost_values(cost(rows, cols))
             want = rows.shape
         if vals.shape != want:
             raise ValueError(f"Expected the cost function to return shape {want}, got {vals.shape}")
@@ -437,6 +439,12 @@ def dtw(cost: np.ndarray | Callable, band: Band | None = None,
         raise ValueError("no path of finite cost through the band")
     path = _backtrack_steps(steps, off, band.lo, band.hi)
     return WarpResult(path=path, cost=total, band=band, cell_costs=vals)
+
+
+def _cost_values(values) -> np.ndarray:
+    """A cost function's values as a contiguous array: uint8 counts as they are, anything else as float64."""
+    values = np.asarray(values)
+    return np.ascontiguousarray(values, dtype=np.uint8 if values.dtype == np.uint8 else np.float64)
 
 
 def dtw_naive(cost: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, float]:

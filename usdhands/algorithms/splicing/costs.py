@@ -117,11 +117,12 @@ def _sgn(x, eps):  # pragma: no cover - compiled
 
 @njit(cache=True, error_model="numpy")
 def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, eps_ab, eps_vh, eps_ah,
-                       half, use_trunk, yaw_b, yaw_h):  # pragma: no cover - compiled
+                       half, use_trunk, yaw_b, yaw_h, out):  # pragma: no cover - compiled
     """Eq. 6 (with eq. 7's angle, or the trunk angles) on runs of cells along rows.
 
     Run ``r`` is the cells ``(run_row[r], run_col[r] + t)`` for ``t < run_len[r]``; the
-    costs come out run after run (a band's rows are its runs). The runs come row after
+    costs go into ``out`` (``(sum(run_len),)``, float64 or uint8: they are whole numbers
+    up to ``24 K``) run after run (a band's rows are its runs). The runs come row after
     row (``run_row`` non-decreasing; ValueError otherwise).
 
     Eq. 7's window sums run along diagonals: the cell ``(i, j)`` adds the per-frame-pair
@@ -143,12 +144,9 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
     n = P.shape[0]
     m = Q.shape[0]
     K = P.shape[1]
-    N = 0
     Lmax = 1
     for r in range(R):
-        N += run_len[r]
         Lmax = max(Lmax, run_len[r])
-    out = np.empty(N)
     X = np.ascontiguousarray(P[:, :, 0])
     Z = np.ascontiguousarray(P[:, :, 2])
     Xh = np.ascontiguousarray(Q[:, :, 0])
@@ -220,6 +218,7 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
     FXX = np.empty((H, m))
     next_a = 0  # the frames before it have their products in (or already out of) the slots
     sxz = np.empty(Lmax)
+    acc = np.empty(Lmax)  # a run's costs, summed in float64, then stored in out
     sxx = np.empty(Lmax)
     co = np.empty(Lmax)
     si = np.empty(Lmax)
@@ -326,7 +325,7 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
                 rr = rad + r0
                 co[t] = den / rr + r0
                 si[t] = num / rr
-        dl = out[c:c + L]
+        dl = acc[:L]
         for t in range(L):
             dl[t] = 0.0
         cs = co[:L]
@@ -367,8 +366,10 @@ def _first_pass_kernel(run_row, run_col, run_len, P, Q, vb, ab, vh, ah, eps_vb, 
                 dd += e1 * e1
                 dd += e4 * e4
                 dl[t] = dd
+        oc = out[c:c + L]
+        for t in range(L):
+            oc[t] = dl[t]
         c += L
-    return out
 
 
 @dataclass(frozen=True)
@@ -419,17 +420,25 @@ def band_runs(band) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def first_pass_cost(inp: FirstPassInput, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """Eq. 6 on the given cells, in any order (numba); see :func:`first_pass_cost_naive` for the definition."""
+    """Eq. 6 on the given cells, in any order (numba); see :func:`first_pass_cost_naive` for the definition.
+
+    ``(N,)``, uint8 (float64 for more than 10 markers): the costs are counts, 0 to ``24 K``.
+    """
     rows = np.asarray(rows, np.int64)
     cols = np.asarray(cols, np.int64)
     order = np.lexsort((cols, rows))  # the kernel takes runs row after row
-    out = np.empty(len(order))
-    out[order] = _first_pass_runs(inp, *cell_runs(rows[order], cols[order]))
+    costs = _first_pass_runs(inp, *cell_runs(rows[order], cols[order]))
+    out = np.empty_like(costs)
+    out[order] = costs
     return out
 
 
 def first_pass_band_cost(inp: FirstPassInput, band) -> np.ndarray:
-    """Eq. 6 on every cell of a band, in its flat row-major order (for ``dtw(..., on_band=True)``)."""
+    """Eq. 6 on every cell of a band, in its flat row-major order (for ``dtw(..., on_band=True)``).
+
+    ``(num_cells,)`` uint8 (float64 for more than 10 markers), as :func:`first_pass_cost`:
+    an eighth of the memory of float64 costs, which ``dtw`` keeps as they are.
+    """
     return _first_pass_runs(inp, *band_runs(band))
 
 
@@ -437,8 +446,10 @@ def _first_pass_runs(inp: FirstPassInput, run_row, run_col, run_len) -> np.ndarr
     use_trunk = inp.yaw_b is not None
     yb = np.radians(inp.yaw_b) if use_trunk else np.zeros(1)
     yh = np.radians(inp.yaw_h) if use_trunk else np.zeros(1)
-    return _first_pass_kernel(run_row, run_col, run_len, inp.P, inp.Q, inp.vb, inp.ab, inp.vh, inp.ah, *inp.eps,
-                              inp.half, use_trunk, yb, yh)
+    out = np.empty(int(np.sum(run_len)), dtype=np.uint8 if 24 * inp.P.shape[1] <= 255 else np.float64)
+    _first_pass_kernel(run_row, run_col, run_len, inp.P, inp.Q, inp.vb, inp.ab, inp.vh, inp.ah, *inp.eps,
+                       inp.half, use_trunk, yb, yh, out)
+    return out
 
 
 def window_yaw_naive(P: np.ndarray, Q: np.ndarray, i: int, j: int, half: int = 2) -> float:

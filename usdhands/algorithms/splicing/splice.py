@@ -496,7 +496,7 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
     # forward kinematics once for both hands, only the joints read below and their ancestors
     wb = chain_xforms(body, [j for s in body_sides.values() for j in _side_joints(body.skeleton, s)])
     wh = chain_xforms(hands, [j for s in hand_sides.values() for j in _side_joints(hands.skeleton, s)])
-    out = body
+    rot = None
     sides, transfers, pairs_all, bun, hun, modes, ranges = {}, {}, {}, {}, {}, {}, {}
     order = [s for s in ("left", "right") if s in body_sides]
     for k, s in enumerate(order):
@@ -543,14 +543,17 @@ def splice_clips(body: Clip, hands: Clip, body_sides: dict, hand_sides: dict, *,
         modes[s] = mode
         tr = transfer_fingers(body, hands, pairs, al.alignment, blend_window=options.blend_window,
                               jump_frames=options.jump_frames, mode=mode, axes=axes)
-        if tr.joints:
-            out = out.with_joint_rotations(tr.joints, tr.rotations)
+        if tr.joints:  # both hands' fingers written into one copy of the rotations
+            if rot is None:
+                rot = np.array(body.rotations)
+            rot[:, tr.joints] = tr.rotations
         transfers[s], pairs_all[s], bun[s], hun[s] = tr, pairs, bu, hu
         _log.info("%s hand: timing from the %s hand, %d finger joint pair(s), transfer %r, %d body / %d hand "
                   "finger joint(s) unpaired", s, timing[s], len(pairs), mode, len(bu), len(hu))
     sides = {s: sides[timing[s]] for s in order}
     if progress is not None:
         progress(len(order) + 1, len(order) + 1, "fingers")
+    out = body if rot is None else body.replace(rotations=rot)
     return SpliceResult(out, sides, transfers, pairs_all, bun, hun, modes, timing, ranges)
 
 
