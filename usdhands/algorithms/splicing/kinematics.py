@@ -104,11 +104,13 @@ def chain_xforms(clip: Clip, joints: Sequence[int]) -> dict[int, np.ndarray]:
     """
     sk = clip.skeleton
     need = sorted({a for j in joints for a in sk.chain_to_root(int(j))})  # parents come before children
-    local = local_xforms(clip, need)
+    xf = local_xforms(clip, need)  # turned into world transforms in place, parents first
     world: dict[int, np.ndarray] = {}
     for k, j in enumerate(need):
         p = int(sk.parents[j])
-        world[j] = local[k] if p < 0 else np.matmul(world[p], local[k])
+        if p >= 0:
+            np.matmul(world[p], xf[k], out=xf[k])
+        world[j] = xf[k]
     return world
 
 

@@ -75,37 +75,33 @@ def _hemisphere_kernel(rel):  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _slerp_ends(rel, i0, i1, dot, b):  # pragma: no cover - compiled
-    """``quat_slerp``'s first steps on ``a = rel[i0]``, ``b = rel[i1]``: ``b`` turned into
-    ``a``'s hemisphere (into ``b``), ``clip(|a . b|, -1, 1)`` (into ``dot``), ``(n, k)``."""
+def _slerp_cos(rel, i0, i1, dot):  # pragma: no cover - compiled
+    """``quat_slerp``'s first steps on ``a = rel[i0]``, ``b = rel[i1]``: ``clip(|a . b|, -1, 1)``
+    into ``dot (n, k)`` (the sign of ``a . b`` says whether ``b`` is turned into ``a``'s
+    hemisphere; :func:`_slerp_mix` computes it again)."""
     n = i0.shape[0]
     K = rel.shape[1]
     for f in range(n):
         for k in range(K):
             a = rel[i0[f], k]
             c = rel[i1[f], k]
-            d = a[0] * c[0] + a[1] * c[1] + a[2] * c[2] + a[3] * c[3]
-            if d < 0:
-                for e in range(4):
-                    b[f, k, e] = -c[e]
-            else:
-                for e in range(4):
-                    b[f, k, e] = c[e]
-            d = abs(d)
+            d = abs(a[0] * c[0] + a[1] * c[1] + a[2] * c[2] + a[3] * c[3])
             if d > 1.0:
                 d = 1.0
             dot[f, k] = d
 
 
 @njit(cache=True)
-def _slerp_mix(rel, i0, b, w, sin_theta, sin_a, sin_b, out):  # pragma: no cover - compiled
-    """``quat_slerp``'s last steps: the weights of ``a`` and ``b`` (``sin_a``, ``sin_b`` the
-    sines of ``(1 - w) θ`` and ``w θ``), their sum, normalised."""
+def _slerp_mix(rel, i0, i1, w, sin_theta, sin_a, sin_b, out):  # pragma: no cover - compiled
+    """``quat_slerp``'s last steps: ``b`` into ``a``'s hemisphere, the weights of ``a`` and
+    ``b`` (``sin_a``, ``sin_b`` the sines of ``(1 - w) θ`` and ``w θ``), their sum, normalised."""
     n = i0.shape[0]
     K = rel.shape[1]
     for f in range(n):
         for k in range(K):
             a = rel[i0[f], k]
+            b = rel[i1[f], k]
+            flip = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] < 0
             s = sin_theta[f, k]
             t = w[f, k]
             if s < 1e-6:
@@ -114,10 +110,16 @@ def _slerp_mix(rel, i0, b, w, sin_theta, sin_a, sin_b, out):  # pragma: no cover
             else:
                 wa = sin_a[f, k] / s
                 wb = sin_b[f, k] / s
-            o0 = wa * a[0] + wb * b[f, k, 0]
-            o1 = wa * a[1] + wb * b[f, k, 1]
-            o2 = wa * a[2] + wb * b[f, k, 2]
-            o3 = wa * a[3] + wb * b[f, k, 3]
+            if flip:
+                o0 = wa * a[0] + wb * -b[0]
+                o1 = wa * a[1] + wb * -b[1]
+                o2 = wa * a[2] + wb * -b[2]
+                o3 = wa * a[3] + wb * -b[3]
+            else:
+                o0 = wa * a[0] + wb * b[0]
+                o1 = wa * a[1] + wb * b[1]
+                o2 = wa * a[2] + wb * b[2]
+                o3 = wa * a[3] + wb * b[3]
             nrm = np.sqrt(o0 * o0 + o1 * o1 + o2 * o2 + o3 * o3)
             out[f, k, 0] = o0 / nrm
             out[f, k, 1] = o1 / nrm
@@ -158,9 +160,8 @@ def sample_rotations(rel: np.ndarray, t: np.ndarray) -> np.ndarray:
     n = len(t)
     rel = np.ascontiguousarray(rel, dtype=np.float64)
     dot = np.empty((n, k))
-    b = np.empty((n, k, 4))
-    _slerp_ends(rel, i0, i1, dot, b)
+    _slerp_cos(rel, i0, i1, dot)
     theta = np.arccos(dot)
     out = np.empty((n, k, 4))
-    _slerp_mix(rel, i0, b, w, np.sin(theta), np.sin((1.0 - w) * theta), np.sin(w * theta), out)
+    _slerp_mix(rel, i0, i1, w, np.sin(theta), np.sin((1.0 - w) * theta), np.sin(w * theta), out)
     return out
