@@ -101,7 +101,15 @@ def _slerp_mix(rel, i0, i1, w, sin_theta, sin_a, sin_b, out):  # pragma: no cove
         for k in range(K):
             a = rel[i0[f], k]
             b = rel[i1[f], k]
-            flip = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] < 0
+            b0 = b[0]
+            b1 = b[1]
+            b2 = b[2]
+            b3 = b[3]
+            if a[0] * b0 + a[1] * b1 + a[2] * b2 + a[3] * b3 < 0:
+                b0 = -b0
+                b1 = -b1
+                b2 = -b2
+                b3 = -b3
             s = sin_theta[f, k]
             t = w[f, k]
             if s < 1e-6:
@@ -110,16 +118,10 @@ def _slerp_mix(rel, i0, i1, w, sin_theta, sin_a, sin_b, out):  # pragma: no cove
             else:
                 wa = sin_a[f, k] / s
                 wb = sin_b[f, k] / s
-            if flip:
-                o0 = wa * a[0] + wb * -b[0]
-                o1 = wa * a[1] + wb * -b[1]
-                o2 = wa * a[2] + wb * -b[2]
-                o3 = wa * a[3] + wb * -b[3]
-            else:
-                o0 = wa * a[0] + wb * b[0]
-                o1 = wa * a[1] + wb * b[1]
-                o2 = wa * a[2] + wb * b[2]
-                o3 = wa * a[3] + wb * b[3]
+            o0 = wa * a[0] + wb * b0
+            o1 = wa * a[1] + wb * b1
+            o2 = wa * a[2] + wb * b2
+            o3 = wa * a[3] + wb * b3
             nrm = np.sqrt(o0 * o0 + o1 * o1 + o2 * o2 + o3 * o3)
             out[f, k, 0] = o0 / nrm
             out[f, k, 1] = o1 / nrm
