@@ -77,9 +77,12 @@ def main() -> None:
     cols = Colliders([mesh_collider(mug, clip.times)])
     out, report = correct_clip(clip, hm, cols, measure=False)
     correct_s, correct_cpu = time.perf_counter() - t0, time.process_time() - c0
+    correct_queries = exact_queries(cols)
     t0 = time.perf_counter()
-    out, report = correct_clip(clip, hm, Colliders([mesh_collider(mug, clip.times)]))
+    cols = Colliders([mesh_collider(mug, clip.times)])
+    out, report = correct_clip(clip, hm, cols)
     measured_s = time.perf_counter() - t0
+    measured_queries = exact_queries(cols)
     posers = chain_posers(clip, hm, InteractionConfig())
     mesh = trimesh.Trimesh(np.asarray(mug.vertices), np.asarray(mug.faces), process=False)
     sample = np.linspace(0, clip.num_frames - 1, args.naive_frames).round().astype(int)
@@ -94,8 +97,8 @@ def main() -> None:
     print(f"frames corrected {d['frames_corrected']}, jitter {d['jitter_before']:.1f} -> {d['jitter_after']:.1f} "
           f"deg/s^2, max change {d['max_change_deg']:.1f} deg")
     print(f"usdhands correct (collider build + correction incl. smoothing): {correct_s:.2f} s wall, "
-          f"{correct_cpu:.2f} s CPU  (target < 2 s)")
-    print(f"  with the before/after measure: {measured_s:.2f} s")
+          f"{correct_cpu:.2f} s CPU, {correct_queries} exact distance queries  (target < 2 s)")
+    print(f"  with the before/after measure: {measured_s:.2f} s, {measured_queries} queries")
     print(f"naive trimesh signed_distance detection, 1 mm axis samples, scaled from {len(sample)} frames: "
           f"{naive_s:.1f} s")
     print(f"ratio naive / usdhands: {naive_s / correct_s:.0f}x  (target >= 100x)")
@@ -108,11 +111,19 @@ def main() -> None:
               f"{parts['synthesis']['cpu']:.2f}, correction of the result with its report "
               f"{parts['correction']['cpu']:.2f}), ratio {total['wall'] / plain['wall']:.2f}x wall, "
               f"{total['cpu'] / plain['cpu']:.2f}x CPU  (target <= 2x)")
+        print(f"  exact distance queries: set up {parts['setup']['queries']}, synthesis {parts['synthesis']['queries']}, "
+              f"correction {parts['correction']['queries']}, total "
+              f"{sum(v['queries'] for v in parts.values())}")
         plain_job, props_job = synthesize_job_times(clip, mug, args.repeat)
         print(f"synthesize job end to end (read .glb, synthesize, write .glb): plain {plain_job['wall']:.2f} s wall / "
               f"{plain_job['cpu']:.2f} s CPU, --props {props_job['wall']:.2f} / {props_job['cpu']:.2f}, ratio "
               f"{props_job['wall'] / plain_job['wall']:.2f}x wall, {props_job['cpu'] / plain_job['cpu']:.2f}x CPU "
               f"(best of {args.repeat})")
+
+
+def exact_queries(colliders) -> int:
+    """Points measured exactly so far by the mesh colliders of ``colliders``."""
+    return sum(getattr(c, "exact_queries", 0) for c in colliders.items)
 
 
 def _timed(fn, repeat: int = 1) -> tuple[dict, object]:
@@ -173,8 +184,11 @@ def synthesis_times(clip, hm, mug) -> tuple[dict, dict]:
                                             world=world)
 
     parts["setup"], (world, (factory, cols)) = _timed(setup)
+    parts["setup"]["queries"] = exact_queries(cols)
     parts["synthesis"], result = _timed(lambda: synthesize_clip(clip, hm, db, cfg, interaction=factory))
+    parts["synthesis"]["queries"] = exact_queries(cols) - parts["setup"]["queries"]
     parts["correction"], _ = _timed(lambda: correct_clip(result.clip, hm, cols, world=world))
+    parts["correction"]["queries"] = exact_queries(cols) - parts["setup"]["queries"] - parts["synthesis"]["queries"]
     return plain, parts
 
 

@@ -34,6 +34,7 @@ import numpy as np
 from usdhands.algorithms.interaction.clearance import axis_clearance
 from usdhands.algorithms.interaction.finger_geometry import FingerChain, InteractionConfig, finger_chains
 from usdhands.algorithms.interaction.ik import ChainPoser
+from usdhands.algorithms.interaction.known_distances import ChainDistances
 from usdhands.algorithms.interaction.smoothing import bounded_smooth, rts_smooth, smoothness_weight
 from usdhands.model.clip import Clip
 from usdhands.model.finger_dofs import finger_curves
@@ -222,20 +223,27 @@ def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolu
     return depth
 
 
-def _chain_depth_mm(clip: Clip, poser: ChainPoser, colliders, resolution_mm: float = 0.05) -> np.ndarray:
-    """Deepest penetration of one chain's capsules per frame, ``(T,)`` mm (:func:`penetration_depth_mm`)."""
+def _chain_depth_mm(clip: Clip, poser: ChainPoser, colliders, resolution_mm: float = 0.05,
+                    known: ChainDistances | None = None, angles: np.ndarray | None = None) -> np.ndarray:
+    """Deepest penetration of one chain's capsules per frame, ``(T,)`` mm (:func:`penetration_depth_mm`);
+    ``known``: what was measured on the chain, one row per frame (the same depths, fewer queries);
+    ``angles``: the chain's :func:`finger_angles` when the caller has them."""
     mm = 0.001 / clip.skeleton.meters_per_unit
     depth = np.zeros(clip.num_frames)
     frames = _near_frames(poser, colliders, 0.0)
     if len(frames) == 0:
         return depth
-    angles = _chain_angles(clip, poser.chain)
+    angles = _chain_angles(clip, poser.chain) if angles is None else angles
     a, b = poser.capsules(frames, angles[frames])
-    n = a.shape[1]
-    need = np.tile(poser.chain.radii, len(frames))
-    lower, _ = axis_clearance(colliders, np.repeat(frames, n), a.reshape(-1, 3), b.reshape(-1, 3), need,
-                              resolution_mm * mm, find_depth=True)
-    depth[frames] = np.maximum(need - lower, 0.0).reshape(len(frames), n).max(axis=1) / mm
+    K, n = a.shape[:2]
+    need = np.tile(poser.chain.radii, (K, 1))
+    if known is not None:
+        lower, _ = known.axis_bounds(colliders, frames, frames, a, b, need, resolution_mm * mm, find_depth=True)
+    else:
+        lower, _ = axis_clearance(colliders, np.repeat(frames, n), a.reshape(-1, 3), b.reshape(-1, 3),
+                                  need.reshape(-1), resolution_mm * mm, find_depth=True)
+        lower = lower.reshape(K, n)
+    depth[frames] = np.maximum(need - lower, 0.0).max(axis=1) / mm
     return depth
 
 
@@ -277,7 +285,8 @@ def _running_max(x: np.ndarray, h: int) -> np.ndarray:
 
 def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.ndarray, bound: np.ndarray,
                     weight: float, margin: float, resolution: float, via: np.ndarray | None = None,
-                    hold: int = 0, rounds: int = 6) -> tuple[np.ndarray, np.ndarray]:
+                    hold: int = 0, rounds: int = 6,
+                    known: ChainDistances | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The smoothed opening ``u`` ``(K,)`` above ``bound`` and its poses ``(K, n, 3)``, every frame clear.
 
     Opening further than the bound can touch something else (clearance along the path need
@@ -295,12 +304,13 @@ def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.n
         u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0), target=floor)
         changed = np.nonzero(u > bound)[0]
         v = None if via is None else via[changed]
-        ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed], v), margin, resolution)
+        ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed], v), margin, resolution,
+                         known=known)
         bad = changed[~ok]
         if len(bad) == 0 or r == rounds - 1:
             break
         upper[bad] = poser.clear_below(colliders, frames[bad], base[bad], bound[bad], u[bad], margin, resolution,
-                                       via=None if via is None else via[bad])
+                                       via=None if via is None else via[bad], known=known)
     u[bad] = bound[bad]  # every other frame passed the last test
     new = poser.angles(base, u, via)
     return u, new
@@ -348,12 +358,16 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     unresolved, corrected = [], []
     opened = np.zeros(T, dtype=bool)
     weight = smoothness_weight(clip.fps, cfg.smoothing_s) if smooth else 0.0
+    # per chain, what was measured at each frame: the tests below, the report's depths before and after
+    known = {p.chain.name: ChainDistances(T, len(p.chain.joints) + 1) for p in posers}
+    input_angles = {}
     for poser in posers:
         near = _near_frames(poser, colliders, margin)
         if len(near) == 0:
             continue
-        angles = _chain_angles(clip, poser.chain)
-        ok = poser.clear(colliders, near, angles[near], margin, resolution)
+        seen = known[poser.chain.name]
+        angles = input_angles[poser.chain.name] = _chain_angles(clip, poser.chain)
+        ok = poser.clear(colliders, near, angles[near], margin, resolution, known=seen)
         if ok.all():
             continue
         corrected.append(poser.chain.name)
@@ -374,17 +388,18 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         if cfg.ik == "ccd":
             # cyclic coordinate descent where the pose penetrates, smoothed over twice the time scale
             # (its choice of joint can change from one frame to the next); the path goes through it
-            touching = np.nonzero(~poser.clear(colliders, frames, base, margin, resolution))[0]
+            touching = np.nonzero(~poser.clear(colliders, frames, base, margin, resolution, known=seen))[0]
             via = np.clip(base, lo, hi)
-            via[touching], _ = poser.ccd(colliders, frames[touching], via[touching], margin, resolution)
+            via[touching], _ = poser.ccd(colliders, frames[touching], via[touching], margin, resolution, known=seen)
             if smoothing:
                 via = rts_smooth(via.reshape(T, -1), clip.fps, 2 * cfg.smoothing_s).reshape(T, n, 3)
                 via = np.clip(via, lo, hi)
-        bound, resolved = poser.least_opening(colliders, frames, base, margin, resolution, iterations, via=via)
+        bound, resolved = poser.least_opening(colliders, frames, base, margin, resolution, iterations, via=via,
+                                              known=seen)
         for f in frames[~resolved]:
             unresolved.append((poser.chain.name, int(f)))
         u, new = _smooth_opening(poser, colliders, frames, base, bound, weight, margin, resolution, via=via,
-                                 hold=int(round(HOLD_OF_TIME_SCALE * cfg.smoothing_s * clip.fps)))
+                                 hold=int(round(HOLD_OF_TIME_SCALE * cfg.smoothing_s * clip.fps)), known=seen)
         opened[frames[bound > 0]] = True
         q = poser.local_rotations(new)
         rotations[np.ix_(frames, list(poser.chain.joints))] = q
@@ -402,10 +417,11 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
             hands = HandMap(**{p.chain.side: handmap[p.chain.side] for p in changed})
             after = {p.chain.name: p for p in chain_posers(out, hands, cfg, with_fingers_posed(out, hands, world))}
         for poser in posers:
-            d = _chain_depth_mm(clip, poser, colliders)
+            seen = known[poser.chain.name]
+            d = _chain_depth_mm(clip, poser, colliders, known=seen, angles=input_angles.get(poser.chain.name))
             np.maximum(depth_before, d, out=depth_before)
             if poser.chain.name in corrected:
-                d = _chain_depth_mm(out, after[poser.chain.name], colliders)
+                d = _chain_depth_mm(out, after[poser.chain.name], colliders, known=seen)
             np.maximum(depth_after, d, out=depth_after)
     jitter_before = jitter_after = 0.0
     if T >= 3 and finger_joints:

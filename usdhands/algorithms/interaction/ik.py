@@ -18,6 +18,7 @@ import numpy as np
 
 from usdhands.algorithms.interaction.clearance import axis_clearance
 from usdhands.algorithms.interaction.finger_geometry import FingerChain
+from usdhands.algorithms.interaction.known_distances import ChainDistances, joint_cutoffs
 from usdhands.model.rotations import DEFAULT_EULER_ORDER, euler_deg_to_quat, quat_multiply, trs_to_xform
 
 __all__ = ["ChainPoser", "opening_weights"]
@@ -99,7 +100,8 @@ class ChainPoser:
         return np.clip(start + w * (target - start), lo, hi)
 
     def ccd(self, colliders, frames: np.ndarray, base: np.ndarray, margin: float, resolution: float,
-            passes: int = 2, iterations: int = 7) -> tuple[np.ndarray, np.ndarray]:
+            passes: int = 2, iterations: int = 7,
+            known: ChainDistances | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Cyclic coordinate descent: each joint, tip to root, turned about its flexion axis
         toward extension by the least angle (bisection to ``2**-iterations`` of the way to its
         limit) that brings its segment and the ones after it clear of the colliders; a joint
@@ -111,6 +113,8 @@ class ChainPoser:
         frames : (K,) int
         base : (K, n, 3) float
             Poses within the limits, Euler degrees.
+        known : ChainDistances, optional
+            :meth:`clear`, one row per frame.
 
         Returns
         -------
@@ -122,12 +126,13 @@ class ChainPoser:
         frames = np.asarray(frames, dtype=np.int64)
         pose = np.array(base, dtype=np.float64)
         n = pose.shape[1]
-        todo = np.nonzero(~self.clear(colliders, frames, pose, margin, resolution))[0]
+        todo = np.nonzero(~self.clear(colliders, frames, pose, margin, resolution, known=known))[0]
         for _ in range(passes):
             if len(todo) == 0:
                 break
             for k in range(n - 1, -1, -1):
-                work = todo[~self.clear(colliders, frames[todo], pose[todo], margin, resolution, first=k)]
+                work = todo[~self.clear(colliders, frames[todo], pose[todo], margin, resolution, first=k,
+                                        known=known)]
                 if len(work) == 0:
                     continue
                 ax = int(self.chain.axes[k, 0])
@@ -140,18 +145,19 @@ class ChainPoser:
                     return p
 
                 sel = np.arange(len(work))
-                sel = sel[self.clear(colliders, frames[work], turned(sel, 1.0), margin, resolution, first=k)]
+                sel = sel[self.clear(colliders, frames[work], turned(sel, 1.0), margin, resolution, first=k,
+                                     known=known)]
                 if len(sel) == 0:
                     continue
                 lo_t, hi_t = np.zeros(len(sel)), np.ones(len(sel))
                 for _ in range(iterations):
                     mid = 0.5 * (lo_t + hi_t)
                     ok = self.clear(colliders, frames[work[sel]], turned(sel, mid), margin, resolution,
-                                    first=k)
+                                    first=k, known=known)
                     hi_t = np.where(ok, mid, hi_t)
                     lo_t = np.where(ok, lo_t, mid)
                 pose[work[sel]] = turned(sel, hi_t)
-            todo = todo[~self.clear(colliders, frames[todo], pose[todo], margin, resolution)]
+            todo = todo[~self.clear(colliders, frames[todo], pose[todo], margin, resolution, known=known)]
         done = np.ones(len(frames), dtype=bool)
         done[todo] = False
         return pose, done
@@ -178,9 +184,14 @@ class ChainPoser:
         return pts[:, :-1], pts[:, 1:]
 
     def clear(self, colliders, frames: np.ndarray, angles: np.ndarray, margin: float,
-              resolution: float, first: int = 0) -> np.ndarray:
+              resolution: float, first: int = 0, known: ChainDistances | None = None,
+              rows: np.ndarray | None = None) -> np.ndarray:
         """Whether every capsule of the chain (from segment ``first`` on) clears the colliders by
-        ``margin`` (up to ``resolution / 2``), ``(K,)`` bool."""
+        ``margin`` (up to ``resolution / 2``), ``(K,)`` bool.
+
+        ``known``: what was measured on this chain before (rows ``rows``, default ``frames``), reused
+        and added to; the answer is the same with it or without.
+        """
         frames = np.asarray(frames, dtype=np.int64)
         K = len(frames)
         if K == 0:
@@ -188,23 +199,26 @@ class ChainPoser:
         a, b = self.capsules(frames, angles)
         a, b = a[:, first:], b[:, first:]
         n = a.shape[1]
-        need = np.tile(self.chain.radii[first:] + margin, K)
-        # the joints are measured once: each is the end of one segment and the start of the next
-        joints = np.concatenate([a, b[:, -1:]], axis=1)  # (K, n + 1, 3)
-        length = np.linalg.norm(b - a, axis=2)
-        cut = np.full((K, n + 1), -np.inf)
-        cut[:, :-1] = need.reshape(K, n) + length
-        cut[:, 1:] = np.maximum(cut[:, 1:], need.reshape(K, n) + length)
-        d = colliders.signed_distance(np.repeat(frames, n + 1), joints.reshape(-1, 3), cut.reshape(-1))
-        d = d.reshape(K, n + 1)
-        f = np.repeat(frames, n)
-        lower, upper = axis_clearance(colliders, f, a.reshape(-1, 3), b.reshape(-1, 3), need, resolution,
-                                      end_distances=(d[:, :-1].reshape(-1), d[:, 1:].reshape(-1)))
+        need = np.tile(self.chain.radii[first:] + margin, (K, 1))
+        if known is not None:
+            lower, upper = known.axis_bounds(colliders, frames if rows is None else rows, frames, a, b, need,
+                                             resolution, first)
+        else:
+            # the joints are measured once: each is the end of one segment and the start of the next
+            joints = np.concatenate([a, b[:, -1:]], axis=1)  # (K, n + 1, 3)
+            cut = joint_cutoffs(need, np.linalg.norm(b - a, axis=2))
+            d = colliders.signed_distance(np.repeat(frames, n + 1), joints.reshape(-1, 3), cut.reshape(-1))
+            d = d.reshape(K, n + 1)
+            lower, upper = axis_clearance(colliders, np.repeat(frames, n), a.reshape(-1, 3), b.reshape(-1, 3),
+                                          need.reshape(-1), resolution,
+                                          end_distances=(d[:, :-1].reshape(-1), d[:, 1:].reshape(-1)))
+            lower, upper = lower.reshape(K, n), upper.reshape(K, n)
         ok = (lower >= need - 0.5 * resolution) & (upper >= need)
-        return ok.reshape(K, n).all(axis=1)
+        return ok.all(axis=1)
 
     def least_opening(self, colliders, frames: np.ndarray, base: np.ndarray, margin: float, resolution: float,
-                      iterations: int = 9, via: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      iterations: int = 9, via: np.ndarray | None = None, known: ChainDistances | None = None,
+                      rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The least path parameter clear of the colliders at each frame, by bisection.
 
         Parameters
@@ -214,6 +228,8 @@ class ChainPoser:
             The poses to open, Euler degrees.
         via : (K, n, 3) float, optional
             IK poses the path passes through (:meth:`angles`).
+        known, rows : optional
+            What was measured on the chain and the memo row of each frame (:meth:`clear`).
 
         Returns
         -------
@@ -224,16 +240,18 @@ class ChainPoser:
             False where even the fully open pose touches (the palm or wrist is inside a prop).
         """
         frames = np.asarray(frames, dtype=np.int64)
+        rows = frames if rows is None else np.asarray(rows, dtype=np.int64)
         K = len(frames)
         u = np.zeros(K)
         resolved = np.ones(K, dtype=bool)
-        bad = ~self.clear(colliders, frames, base, margin, resolution)
+        bad = ~self.clear(colliders, frames, base, margin, resolution, known=known, rows=rows)
         if not bad.any():
             return u, resolved
         idx = np.nonzero(bad)[0]
         ones = np.ones(len(idx))
         v = None if via is None else via[idx]
-        open_ok = self.clear(colliders, frames[idx], self.angles(base[idx], ones, v), margin, resolution)
+        open_ok = self.clear(colliders, frames[idx], self.angles(base[idx], ones, v), margin, resolution,
+                             known=known, rows=rows[idx])
         u[idx] = 1.0
         resolved[idx[~open_ok]] = False
         idx = idx[open_ok]
@@ -242,7 +260,8 @@ class ChainPoser:
         hi = np.ones(len(idx))
         for _ in range(iterations):
             mid = 0.5 * (lo + hi)
-            ok = self.clear(colliders, frames[idx], self.angles(base[idx], mid, v), margin, resolution)
+            ok = self.clear(colliders, frames[idx], self.angles(base[idx], mid, v), margin, resolution,
+                            known=known, rows=rows[idx])
             hi = np.where(ok, mid, hi)
             lo = np.where(ok, lo, mid)
         u[idx] = hi
@@ -250,14 +269,15 @@ class ChainPoser:
 
     def clear_below(self, colliders, frames: np.ndarray, base: np.ndarray, clear_u: np.ndarray,
                     blocked_u: np.ndarray, margin: float, resolution: float, iterations: int = 6,
-                    via: np.ndarray | None = None) -> np.ndarray:
+                    via: np.ndarray | None = None, known: ChainDistances | None = None) -> np.ndarray:
         """A clear path parameter between ``clear_u`` (clear) and ``blocked_u`` (not), as near ``blocked_u``
-        as ``iterations`` bisection steps find, ``(K,)`` (clear by the test; ``clear_u`` at worst)."""
+        as ``iterations`` bisection steps find, ``(K,)`` (clear by the test; ``clear_u`` at worst); ``known``:
+        :meth:`clear`, one row per frame."""
         lo = np.array(clear_u, dtype=np.float64)
         hi = np.array(blocked_u, dtype=np.float64)
         for _ in range(iterations):
             mid = 0.5 * (lo + hi)
-            ok = self.clear(colliders, frames, self.angles(base, mid, via), margin, resolution)
+            ok = self.clear(colliders, frames, self.angles(base, mid, via), margin, resolution, known=known)
             lo = np.where(ok, mid, lo)
             hi = np.where(ok, hi, mid)
         return lo
