@@ -162,3 +162,29 @@ def test_check_stage_measures_the_fingers_the_stage_draws(hand_on_a_ledge):
     write_asset(read_asset(src), usda)
     findings = usdhands.usd.check_stage(pxr.Usd.Stage.Open(str(usda)), CheckOptions(props=(prop,)))
     assert not [f for f in findings if f.rule == "props"]
+
+
+@pytest.mark.parametrize("config, deepest_mm", [({}, 0.0), ({"mesh_radii": False}, 2.0)])
+def test_db_build_corrects_the_fingers_the_file_draws(hand_on_a_ledge, config, deepest_mm, tmp_path):
+    """``db build --props`` measures with the skinned mesh's radii as ``correct`` does: the 5 mm tubes
+    clear the ledge and go into the database as they are; the table's 9 mm capsule is 2 mm into it
+    (the finger already straight: nothing to open, so it stays there)."""
+    from usdhands.algorithms.synthesis.database import load_database
+    from usdhands.formats.io import read_asset, write_asset
+    from usdhands.jobs.database import BuildDbOptions, build_db
+
+    src, prop, folder = hand_on_a_ledge
+    asset = read_asset(src)
+    (clip,) = asset.clips
+    long = Clip(clip.skeleton, 30.0, np.tile(clip.rotations[:1], (90, 1, 1)), name="rest")  # 3 s to segment
+    held = tmp_path / "held.glb"
+    write_asset(Asset("hand", asset.skeletons, (long,), asset.meshes), held)
+    cfg = tmp_path / "config.json"
+    cfg.write_text(json.dumps(config))
+    result = build_db([held], tmp_path / "db", BuildDbOptions(props=(prop,), interaction_config=cfg))
+    (note,) = [text for kind, text in result.messages if "corrected against the props" in text]
+    before = float(note.split("(penetration ")[1].split(" ->")[0])
+    assert before == pytest.approx(deepest_mm, abs=0.06)
+    build_db([held], tmp_path / "plain", BuildDbOptions())
+    same = np.array_equal(load_database(tmp_path / "db").fingers, load_database(tmp_path / "plain").fingers)
+    assert same == (deepest_mm == 0.0)

@@ -160,13 +160,18 @@ def build_db(inputs: Sequence[str | os.PathLike], output: str | os.PathLike,
         else:
             read = read_labelled(paths, label_of, None, options.handmap, options.animation, reading)
         items = []
+        held = (None, None)  # with --props: the file last read again for its skinned meshes, and its asset
         for p, label, clip, handmap in read:
             if not any(h.finger_joints for h in handmap.sides):
                 raise UsdHandsError("no finger joints found: a database needs clips with finger animation", path=p)
             if options.props:  # interaction clips: the database holds their corrected fingers
-                from usdhands.jobs.props import corrected_for_props
+                from usdhands.formats.io import read_asset
+                from usdhands.jobs.props import corrected_for_props, hand_meshes
 
-                clip, summary = corrected_for_props(options, p, clip, handmap)
+                # the finger capsules of the hand the file draws, as correct measures them
+                if held[0] != p:  # once per file, not per animation
+                    held = (p, read_asset(p))
+                clip, summary = corrected_for_props(options, p, clip, handmap, hand_meshes(held[1], clip))
                 after = summary["penetration_after_mm"]
                 messages.append(("note", f"{p}: corrected against the props, {summary['frames_corrected']} frames "
                                          f"(penetration {summary['penetration_before_mm']['max']:.2f} -> "

@@ -187,15 +187,15 @@ def with_mesh_radii(config, clip, handmap, meshes):
     return config.with_mesh_radii(measured)
 
 
-def corrected_for_props(options, path, clip, handmap):
-    """``clip`` corrected against ``--props`` (``db build --props``): the report's dict and the clip."""
-    from usdhands.algorithms.interaction.correction import correct_clip
-    from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
+def corrected_for_props(options, path, clip, handmap, meshes=()):
+    """``clip`` corrected against ``--props`` (``db build --props``): the clip and the report's dict.
 
-    config = load_interaction_config(options.interaction_config) if options.interaction_config else InteractionConfig()
-    props = read_scene_props(options, clip)
-    colliders, _ = build_colliders(options, clip, handmap, props, path=path)
-    fixed, report = correct_clip(clip, handmap, colliders, margin_mm=options.margin, config=config)
+    ``meshes``: the meshes of its file skinned to the clip's skeleton, whose vertices give the
+    finger capsules' radii as they do for ``correct`` (:func:`hand_meshes`).
+    """
+    from usdhands.jobs.correction import correct_loaded
+
+    fixed, report, _, _ = correct_loaded(clip, handmap, options, path, meshes)
     return fixed, report.to_dict()
 
 
