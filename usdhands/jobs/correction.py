@@ -127,8 +127,8 @@ class CorrectResult:
         if not self.unresolved:
             return ()
         chains = sorted({c for c, _ in self.unresolved})
-        return (f"{len(self.unresolved)} chain frames touch even with the finger open ({', '.join(chains)}): "
-                f"the palm or wrist is in a prop there and only body motion could clear it",)
+        return (f"{len(self.unresolved)} chain frames touch even with the finger open, or are the palm in a prop "
+                f"({', '.join(chains)}): the palm or wrist is in a prop there and only body motion could clear it",)
 
     def to_json(self) -> dict:
         """The ``usdhands correct --json`` report."""

@@ -224,8 +224,8 @@ def _check_options(options: CheckOptions) -> None:
 
 
 def prop_findings(name: str, clips, options: CheckOptions, handmap_of=None, asset=None) -> list[Finding]:
-    """The ``props`` rule on ``clips`` (of the file or stage ``name``): a finding per finger and
-    prop that goes deeper than ``options.penetration_tolerance_mm`` into the prop.
+    """The ``props`` rule on ``clips`` (of the file or stage ``name``): a finding per finger (and per
+    palm) and prop that goes deeper than ``options.penetration_tolerance_mm`` into the prop.
 
     ``handmap_of(clip)``: the clip's hand map (default: the one the file records, or detection).
     ``asset``: the file read, whose meshes skinned to the hand give the finger capsules' radii
@@ -237,6 +237,7 @@ def prop_findings(name: str, clips, options: CheckOptions, handmap_of=None, asse
     from usdhands.algorithms.interaction.colliders import Colliders
     from usdhands.algorithms.interaction.correction import chain_posers, penetration_depth_mm
     from usdhands.algorithms.interaction.finger_geometry import InteractionConfig, load_interaction_config
+    from usdhands.algorithms.interaction.palm import palm_depth_mm
     from usdhands.errors import NoHandsError
     from usdhands.jobs.inputs import handmap_for
     from usdhands.jobs.props import build_colliders, hand_meshes, read_scene_props, with_mesh_radii
@@ -253,16 +254,26 @@ def prop_findings(name: str, clips, options: CheckOptions, handmap_of=None, asse
         props = read_scene_props(prop_options, clip)
         colliders, _ = build_colliders(prop_options, clip, handmap, props, path=name)
         meshes = hand_meshes(asset, clip) if asset is not None else ()
-        for poser in chain_posers(clip, handmap, with_mesh_radii(config, clip, handmap, meshes)):
+        measured = with_mesh_radii(config, clip, handmap, meshes)
+        world = clip.world_xforms()
+        posers = chain_posers(clip, handmap, measured, world)
+        # each finger, then each palm (wrist to the long fingers' bases), against each collider
+        parts = [(f"the {p.chain.name} finger", p.chain.joints[0], lambda one, p=p: penetration_depth_mm(clip, [p], one))
+                 for p in posers]
+        parts += [(f"the {hand.side} palm", clip.skeleton.index(hand.wrist),
+                   lambda one, hand=hand: palm_depth_mm(world, clip.skeleton, hand, [p.chain for p in posers], one,
+                                                        measured))
+                  for hand in handmap.sides]
+        for what, joint, depth_of in parts:
             for item in colliders.items:
-                depth = penetration_depth_mm(clip, [poser], Colliders([item]))
+                depth = depth_of(Colliders([item]))
                 deep = depth > options.penetration_tolerance_mm
                 if not deep.any():
                     continue
-                joint = clip.skeleton.joint_names[poser.chain.joints[0]]
-                where = clip.name if clip.name.startswith("/") else joint.rsplit("/", 1)[-1]
+                joint_name = clip.skeleton.joint_names[joint]
+                where = clip.name if clip.name.startswith("/") else joint_name.rsplit("/", 1)[-1]
                 out.append(Finding(name, where, "props",
-                                   f"the {poser.chain.name} finger penetrates {item.name} by up to "
+                                   f"{what} penetrates {item.name} by up to "
                                    f"{depth.max():.2f} mm in {int(deep.sum())} frame(s), deepest at frame "
                                    f"{int(depth.argmax())} (tolerance {options.penetration_tolerance_mm:g} mm)"))
     return out

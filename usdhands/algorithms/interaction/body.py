@@ -50,10 +50,12 @@ def body_collider(clip: Clip, handmap: HandMap) -> CapsuleCollider | None:
     up = 1 if sk.up_axis == "Y" else 2
     height = float(np.ptp(rest[:, up])) or 1.0
     parts: list[tuple[int, int | np.ndarray, float]] = []  # joint a, joint b (or offset), radius
+    names: list[str] = []
 
-    def add(a, b, part):
+    def add(a, b, part, name=None):
         if a is not None and b is not None and a != b:
             parts.append((a, b, RADIUS_OF_HEIGHT[part] * height))
+            names.append(name or part)
 
     hips = next((sk.index(h.root) for h in handmap.sides if h.root), None)
     neck = _find(sk, _NAMES["neck"])
@@ -62,13 +64,14 @@ def body_collider(clip: Clip, handmap: HandMap) -> CapsuleCollider | None:
     if head is not None:
         top = _first_child(sk, head)
         parts.append((head, top if top is not None else -1, RADIUS_OF_HEIGHT["head"] * height))
+        names.append("head")
     for hand in handmap.sides:
         if hand.shoulder and hand.forearm:
-            add(sk.index(hand.shoulder), sk.index(hand.forearm), "upper arm")
+            add(sk.index(hand.shoulder), sk.index(hand.forearm), "upper arm", f"{hand.side} upper arm")
     for side in ("left", "right"):
         thigh = _find(sk, _NAMES[f"{side} thigh"])
         if thigh is not None:
-            add(thigh, _first_child(sk, thigh), "thigh")
+            add(thigh, _first_child(sk, thigh), "thigh", f"{side} thigh")
     if not parts:
         return None
     T = clip.num_frames
@@ -84,4 +87,4 @@ def body_collider(clip: Clip, handmap: HandMap) -> CapsuleCollider | None:
         else:
             b[:, k] = world[:, jb]
         radii[k] = r
-    return CapsuleCollider("body", a, b, radii)
+    return CapsuleCollider("body", a, b, radii, tuple(names))

@@ -99,12 +99,25 @@ class CapsuleCollider:
         Axis end points of the K capsules at each frame, clip units.
     radii : (K,) float
         Radii, clip units.
+    parts : tuple of str, optional
+        What each capsule is (``"torso"``, ``"left upper arm"``, ...).
     """
 
     name: str
     a: np.ndarray
     b: np.ndarray
     radii: np.ndarray
+    parts: tuple = ()
+
+    def without(self, parts) -> "CapsuleCollider | None":
+        """These capsules but the ``parts`` named (None when nothing is left)."""
+        keep = [k for k in range(len(self.radii)) if k >= len(self.parts) or self.parts[k] not in parts]
+        if len(keep) == len(self.radii):
+            return self
+        if not keep:
+            return None
+        return CapsuleCollider(self.name, self.a[:, keep], self.b[:, keep], self.radii[keep],
+                               tuple(self.parts[k] for k in keep))
 
     def signed_distance(self, frames: np.ndarray, points: np.ndarray, cutoff: np.ndarray | float = np.inf) -> np.ndarray:
         """Signed distance ``(N,)`` to the union of the capsules (exact for one capsule, a lower bound
@@ -136,6 +149,13 @@ class Colliders:
         for c in self.items:
             out = np.minimum(out, c.signed_distance(frames, points, cutoff))
         return out
+
+    def without_parts(self, parts) -> "Colliders":
+        """The same colliders without the body capsules named in ``parts`` (``CapsuleCollider.parts``)."""
+        items = [c.without(parts) if isinstance(c, CapsuleCollider) else c for c in self.items]
+        if all(c is d for c, d in zip(items, self.items)):
+            return self
+        return Colliders([c for c in items if c is not None])
 
     def bbox_gap(self, frames: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """Distance ``(N,)`` from boxes ``lo``-``hi`` ``(N, 3)`` at ``frames`` ``(N,)`` to the nearest collider's box."""

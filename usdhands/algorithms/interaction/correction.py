@@ -35,6 +35,7 @@ from usdhands.algorithms.interaction.clearance import axis_clearance
 from usdhands.algorithms.interaction.finger_geometry import FingerChain, InteractionConfig, finger_chains
 from usdhands.algorithms.interaction.ik import ChainPoser
 from usdhands.algorithms.interaction.known_distances import ChainDistances
+from usdhands.algorithms.interaction.palm import palm_depth_mm
 from usdhands.algorithms.interaction.smoothing import bounded_smooth, rts_smooth, smoothness_weight
 from usdhands.model.clip import Clip
 from usdhands.model.finger_dofs import finger_curves
@@ -52,8 +53,9 @@ class CorrectionReport:
     Attributes
     ----------
     penetration_before_mm, penetration_after_mm : (T,) float
-        Deepest finger penetration into any collider per frame, mm (0 where clear),
-        measured along the capsule axes to 0.05 mm (an upper bound).
+        Deepest penetration of a finger or the palm (:mod:`~usdhands.algorithms.interaction.palm`)
+        into any collider per frame, mm (0 where clear), measured along the capsule axes to
+        0.05 mm (an upper bound).
     frames_corrected : int
         Frames where the IK pushed some finger out (the smoothing also changes the other
         frames of a corrected finger, by less).
@@ -62,7 +64,9 @@ class CorrectionReport:
     max_change_deg : float
         Largest change of a finger joint's rotation, degrees.
     unresolved : list of (str, int)
-        Chain and frame where even the open finger touches (the palm or wrist is inside a prop).
+        Chain and frame where even the open finger touches (the palm or wrist is inside a prop),
+        and, with the report measured, ``("left palm", frame)`` where the palm itself is in a
+        collider deeper than half of ``tolerance_mm`` (the correction never moves it).
     chains_corrected : list of str
     """
 
@@ -423,6 +427,11 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
             if poser.chain.name in corrected:
                 d = _chain_depth_mm(out, after[poser.chain.name], colliders, known=seen)
             np.maximum(depth_after, d, out=depth_after)
+        for hand in handmap.sides:  # the palm: body joints, the same before and after
+            palm = palm_depth_mm(world, clip.skeleton, hand, [p.chain for p in posers], colliders, cfg)
+            np.maximum(depth_before, palm, out=depth_before)
+            np.maximum(depth_after, palm, out=depth_after)
+            unresolved.extend((f"{hand.side} palm", int(f)) for f in np.nonzero(palm > 0.5 * cfg.tolerance_mm)[0])
     jitter_before = jitter_after = 0.0
     if T >= 3 and finger_joints:
         sums = _jitter_sums(clip, finger_joints)

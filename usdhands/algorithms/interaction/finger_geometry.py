@@ -76,6 +76,10 @@ class InteractionConfig:
         Where the animation file has a mesh skinned to the hand, take each segment's radius
         from the vertices it drives (:func:`mesh_radii`); ``radii_mm`` then applies only
         where the mesh has too few of them.
+    palm_radius_mm : float
+        Radius of the palm's capsules (wrist to each long finger's base), mm: about half an
+        adult palm's thickness. Measured, never moved (:mod:`usdhands.algorithms.interaction.palm`);
+        ``joint_radii_mm`` naming the wrist joint overrides it.
     ik : str
         ``"opening"``: each chain opens along one path toward its rest pose, distal joints
         first in overlapping ramps, and the least clear opening is the bound (continuous in
@@ -92,6 +96,7 @@ class InteractionConfig:
     joint_radii_mm: dict = field(default_factory=dict)
     mesh_radii: bool = True
     ik: str = "opening"
+    palm_radius_mm: float = 12.0
 
     @classmethod
     def from_dict(cls, d: dict) -> "InteractionConfig":
@@ -102,7 +107,8 @@ class InteractionConfig:
         limits = json.loads(json.dumps(base.limits_deg))
         for finger, roles in d.get("limits_deg", {}).items():
             limits[finger].update(roles)
-        rest = {k: d[k] for k in ("tip_fraction", "tolerance_mm", "smoothing_s", "mesh_radii", "ik") if k in d}
+        rest = {k: d[k] for k in ("tip_fraction", "tolerance_mm", "smoothing_s", "mesh_radii", "ik", "palm_radius_mm")
+                if k in d}
         return cls(radii_mm=radii, limits_deg=limits, joint_radii_mm=dict(d.get("joint_radii_mm", {})), **rest)
 
     def with_mesh_radii(self, measured_mm: dict) -> "InteractionConfig":
