@@ -82,8 +82,8 @@ def test_correction_with_reused_distances_equals_measuring_everything(case, ik, 
 
 
 def test_candidates_sharing_a_frame_keep_their_own_rows():
-    """The collision term's use: many poses at the same frame, one memo row each; the bisection with
-    the memo equals the one without, and a memo keyed by frame (rows shared) is still right."""
+    """Many poses at the same frame (candidates, as the collision term has them), one memo row each:
+    the bisection with the memo equals the one without; a memo keyed by frame (rows shared) too."""
     clip, prop = _cylinder()
     hm = humanoid_handmap(clip.skeleton)
     cols = colliders_for(clip, prop)

@@ -362,14 +362,14 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     unresolved, corrected = [], []
     opened = np.zeros(T, dtype=bool)
     weight = smoothness_weight(clip.fps, cfg.smoothing_s) if smooth else 0.0
-    # per chain, what was measured at each frame: the tests below, the report's depths before and after
-    known = {p.chain.name: ChainDistances(T, len(p.chain.joints) + 1) for p in posers}
+    # per chain near a collider, what was measured at each frame: the tests below, the report's depths
+    known = {}
     input_angles = {}
     for poser in posers:
         near = _near_frames(poser, colliders, margin)
         if len(near) == 0:
             continue
-        seen = known[poser.chain.name]
+        seen = known[poser.chain.name] = ChainDistances(T, len(poser.chain.joints) + 1)
         angles = input_angles[poser.chain.name] = _chain_angles(clip, poser.chain)
         ok = poser.clear(colliders, near, angles[near], margin, resolution, known=seen)
         if ok.all():
@@ -421,7 +421,7 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
             hands = HandMap(**{p.chain.side: handmap[p.chain.side] for p in changed})
             after = {p.chain.name: p for p in chain_posers(out, hands, cfg, with_fingers_posed(out, hands, world))}
         for poser in posers:
-            seen = known[poser.chain.name]
+            seen = known.get(poser.chain.name)
             d = _chain_depth_mm(clip, poser, colliders, known=seen, angles=input_angles.get(poser.chain.name))
             np.maximum(depth_before, d, out=depth_before)
             if poser.chain.name in corrected:

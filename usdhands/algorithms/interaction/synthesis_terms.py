@@ -23,7 +23,6 @@ import numpy as np
 from usdhands.algorithms.interaction.correction import chain_posers, rest_branch
 from usdhands.algorithms.interaction.finger_geometry import InteractionConfig
 from usdhands.algorithms.interaction.ik import ChainPoser
-from usdhands.algorithms.interaction.known_distances import ChainDistances
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import HandMap, HandSide
 from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_euler_deg
@@ -200,9 +199,7 @@ class InteractionTerms:
                 continue
             rel = quat_multiply(quat_conjugate(poser.rest_rotations)[None], local[near][:, cols])
             base = rest_branch(quat_to_euler_deg(rel, poser.order))
-            known = ChainDistances(len(near), len(poser.chain.joints) + 1)  # a row per candidate frame
-            u, _ = poser.least_opening(self.colliders, frames[near], base, margin, resolution, iterations=5,
-                                       known=known, rows=np.arange(len(near)))
+            u, _ = poser.least_opening(self.colliders, frames[near], base, margin, resolution, iterations=5)
             moved = u > 0
             if not moved.any():
                 continue
