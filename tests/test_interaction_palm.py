@@ -79,3 +79,29 @@ def test_check_finds_the_palm_in_a_prop(tmp_path):
                           colliders_for(clip, block))
     assert depth.max() > RISE_MM
     assert findings[0].message.startswith(f"the left palm penetrates block by up to {depth.max():.2f} mm in 5 frame(s)")
+
+
+def test_with_self_a_palm_is_not_measured_against_its_own_upper_arm():
+    """The scratch_head sample folds the right elbow: the palm's wrist end passes 27 mm into the right
+    upper arm's capsule, which stands for the whole arm's flesh, and is not counted; every other
+    body capsule is."""
+    from usdhands.algorithms.interaction.body import body_collider
+    from usdhands.algorithms.interaction.colliders import CapsuleCollider, Colliders
+    from usdhands.samples.interaction import scratch_head_clip
+
+    clip = scratch_head_clip()
+    hm = humanoid_handmap(clip.skeleton)
+    body = body_collider(clip, hm)
+    assert body.parts == ("torso", "head", "left upper arm", "right upper arm", "left thigh", "right thigh")
+    world = clip.world_xforms()
+    hand = hm["right"]
+    chains = finger_chains(clip.skeleton, hand)
+    assert not palm_depth_mm(world, clip.skeleton, hand, chains, Colliders([body])).any()
+    anonymous = CapsuleCollider("body", body.a, body.b, body.radii)  # no part names: every capsule counts
+    folded = palm_depth_mm(world, clip.skeleton, hand, chains, Colliders([anonymous]))
+    assert folded.max() > 20.0 and np.count_nonzero(folded) <= 5
+    # the upper arm alone, under another name, is measured
+    arm = body.parts.index("right upper arm")
+    renamed = CapsuleCollider("arm", body.a[:, arm:arm + 1], body.b[:, arm:arm + 1], body.radii[arm:arm + 1],
+                              ("left upper arm",))
+    np.testing.assert_array_equal(palm_depth_mm(world, clip.skeleton, hand, chains, Colliders([renamed])), folded)
