@@ -580,17 +580,12 @@ def _side_joints(skeleton, side: HandSide) -> list[int]:
 
 
 def _ref(clip: Clip, side: HandSide, world: dict) -> np.ndarray | None:
-    """The shoulder's position at the first frame, ``(1, 3)`` (cm, Y up), or None for a rig
+    """The shoulder's position at every frame, ``(T, 3)`` (cm, Y up), or None for a rig
     without a shoulder (still trunk). ``world``: :func:`chain_xforms` of the clip.
-
-    What splicing has subtracted so far: it asked ``yup_cm_positions(clip, [j], world)[:, 0]``,
-    and ``world[:, [j], :3, 3]`` put the joint axis first, so ``[:, 0]`` was frame 0, not
-    every frame. Kept as it is so the alignments stay the same; subtracting the shoulder
-    at every frame (the paper's intent) is a change of results, left to decide apart.
     """
     if side.shoulder is None:
         return None
-    return _to_yup_cm(world[clip.skeleton.index(side.shoulder)][:1, :3, 3], clip.skeleton)
+    return _to_yup_cm(world[clip.skeleton.index(side.shoulder)][:, :3, 3], clip.skeleton)
 
 
 def _trunk_yaw(clip: Clip, root: str, world: dict) -> np.ndarray:
