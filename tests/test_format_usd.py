@@ -834,3 +834,27 @@ def test_clip_scales_are_the_authored_scales(tmp_path, sampled):
     for f, t in enumerate(times):
         assert np.array_equal(clip.scales[f, order], np.array(attr.Get(t), dtype=np.float64))
     assert (len(np.unique(clip.scales[:, order[0], 0])) > 1) == sampled
+
+
+@pytest.mark.parametrize("case", ["equal", "round alike", "differ"])
+def test_written_scales_are_one_value_when_their_half_floats_are(tmp_path, case):
+    """Scales are written as one default value when every frame's half floats are the same
+    (the same numbers, or numbers that round alike), else one time sample per frame."""
+    rng = np.random.default_rng(4)
+    T, J = 6, 3
+    sk = Skeleton(["a", "a/b", "a/b/c"], [-1, 0, 1], rng.normal(size=(J, 3)), np.tile([0.0, 0, 0, 1], (J, 1)))
+    q = rng.normal(size=(T, J, 4))
+    scales = np.tile([[1.5, 2.0, 0.75]], (T, J, 1))
+    if case == "round alike":
+        scales[3] += 1e-6  # below half a half-float step
+    elif case == "differ":
+        scales[3, 1, 2] = 3.0
+    clip = Clip(sk, 24.0, q / np.linalg.norm(q, axis=-1, keepdims=True), rng.normal(size=(T, J, 3)), scales,
+                name="Anim")
+    out = write_asset(Asset("s", (sk,), (clip,)), tmp_path / "s.usda")
+    stage = Usd.Stage.Open(str(out))
+    anim = next(UsdSkel.Animation(p) for p in stage.Traverse() if p.IsA(UsdSkel.Animation))
+    attr = anim.GetScalesAttr()
+    assert attr.GetNumTimeSamples() == (T if case == "differ" else 0)
+    back = read_asset(out).clip()
+    assert np.array_equal(back.scales, clip.scales.astype(np.float16).astype(np.float64))
