@@ -682,3 +682,25 @@ def test_a_property_pygltflib_types_as_required_missing_reads_without_warnings(t
     want = read_clip(path)
     np.testing.assert_array_equal(clip.rotations, want.rotations)
     np.testing.assert_array_equal(clip.translations, want.translations)
+
+
+def test_continuous_quaternions_equal_the_frame_by_frame_flips():
+    """The writer's sign flips (one exclusive-or pass over the neighbours that point apart)
+    against flipping frame by frame; unit checks and lengths as before."""
+    from usdhands.formats.gltf_write import _continuous
+
+    rng = np.random.default_rng(8)
+    for T, J, scale in ((1, 3, 1.0), (2, 1, 1.0), (50, 4, 1.0), (40, 2, 3.0)):
+        q = rng.normal(size=(T, J, 4))
+        q /= np.linalg.norm(q, axis=-1, keepdims=True)
+        q *= scale
+        want = q / np.linalg.norm(q, axis=-1, keepdims=True) if scale != 1.0 else q.copy()
+        for t in range(1, T):
+            for j in range(J):
+                a, b = want[t, j], want[t - 1, j]
+                if a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] < 0:
+                    want[t, j] = -a
+        got = _continuous(q)
+        assert np.array_equal(got, want)
+        if T >= 40:  # random neighbours point apart about half the time: flips were made
+            assert (np.sign(got[1:, :, 0]) != np.sign(q[1:, :, 0])).any()

@@ -465,8 +465,8 @@ class BinaryAppender:
             self.parts.append(b"\0" * pad)
             self.size += pad
 
-    def add_view(self, data: bytes, target: int | None = None, byte_stride: int | None = None) -> int:
-        """Append ``data`` as a new buffer view; returns its index."""
+    def add_view(self, data: bytes | memoryview, target: int | None = None, byte_stride: int | None = None) -> int:
+        """Append ``data`` (bytes, or a flat memoryview of bytes) as a new buffer view; returns its index."""
         self._align()
         view = pygltflib.BufferView(buffer=self.buffer_index, byteOffset=self.size, byteLength=len(data),
                                     target=target, byteStride=byte_stride)

@@ -539,10 +539,13 @@ def channel_keys(doc: GltfFile, anim_index: int, channel_index: int,
     width = {"rotation": 4, "translation": 3, "scale": 3, "weights": targets}[ch.target.path]
     if values.shape[1] != width:
         raise doc.error(f"{ch.target.path} output has {values.shape[1]} components, expected {width}", where)
-    if not np.isfinite(times).all():
-        raise doc.error("sampler input times are not finite", where)
-    if times.size and np.any(np.diff(times) < 0):
-        raise doc.error("sampler input times decrease", where)
+    checked = ("increasing times", smp.input)  # channels usually share one input: checked once
+    if checked not in doc._cache:
+        if not np.isfinite(times).all():
+            raise doc.error("sampler input times are not finite", where)
+        if times.size and np.any(np.diff(times) < 0):
+            raise doc.error("sampler input times decrease", where)
+        doc._cache[checked] = True
     return times, values, interp
 
 

@@ -72,6 +72,15 @@ def _continuous(q: np.ndarray) -> np.ndarray:
     glTF requires unit rotations: a USD quaternion of magnitude 1e38 was written as it was
     and failed the Khronos validator.
     """
+    q, signs = _continuous_signs(q)
+    if signs is None:
+        return q
+    return q * signs[..., None]
+
+
+def _continuous_signs(q: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`_continuous` as the unit quaternions and the sign ``(T, ...)`` (+-1.0) each frame
+    is multiplied by (None: no flip), for a writer that applies them as it converts."""
     q = np.asarray(q)
     square = np.einsum("...i,...i->...", q, q)
     # |n² - 1| <= 1e-6 means |n - 1| < 1e-6: the norms themselves are needed only otherwise
@@ -80,15 +89,19 @@ def _continuous(q: np.ndarray) -> np.ndarray:
         if np.abs(norms - 1.0).max(initial=0.0) > 1e-6:  # unit ones are written as they are (same bytes as before)
             q = q / norms
     if q.shape[0] < 2:
-        return q
+        return q, None
     a, b = q[1:], q[:-1]
-    d = a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2] + a[..., 3] * b[..., 3]  # np.sum's order
+    d = a[..., 0] * b[..., 0]  # summed left to right, as np.sum does (in place: no temporaries)
+    for k in (1, 2, 3):
+        d += a[..., k] * b[..., k]
     if not (d < 0).any():
-        return q
-    flips = np.cumprod(np.where(d < 0, -1.0, 1.0), axis=0)
-    out = q.copy()
-    out[1:] *= flips[..., None]
-    return out
+        return q, None
+    # the sign of frame t: -1 where an odd number of neighbours up to it point apart (the products
+    # of +-1 that np.cumprod gave, as one exclusive-or pass over booleans)
+    signs = np.empty(q.shape[:-1])
+    signs[0] = 1.0
+    signs[1:] = np.where(np.logical_xor.accumulate(d < 0, axis=0), -1.0, 1.0)
+    return q, signs
 
 
 def _key_times(clip: Clip) -> np.ndarray:
@@ -141,7 +154,7 @@ class _AnimationWriter:
             sampler=self._sampler(acc), target=pygltflib.AnimationChannelTarget(node=node, path="weights")))
 
     def add(self, path: str, joints: list[int], nodes: list[int], values: np.ndarray,
-            replace: dict[tuple[int, str], int] | None = None) -> None:
+            replace: dict[tuple[int, str], int] | None = None, signs: np.ndarray | None = None) -> None:
         """Channels for ``joints`` (indices into ``values`` axis 1) targeting ``nodes``.
 
         Parameters
@@ -149,15 +162,24 @@ class _AnimationWriter:
         values : (T, J, C) float
         replace : dict (node, path) -> channel index
             Existing channels to point at the new samplers instead of appending.
+        signs : (T, J) float, optional
+            +-1.0 each value is multiplied by (:func:`_continuous_signs`), applied to the
+            float32 values (no float64 copy of the flipped values).
         """
         if not joints:
             return
         every = len(joints) == values.shape[1] and joints == list(range(values.shape[1]))
-        data = (values if every else values[:, joints]).transpose(1, 0, 2).astype(np.float32, order="C")
+        chosen = values if every else values[:, joints]
+        if signs is None:
+            data = chosen.transpose(1, 0, 2).astype(np.float32, order="C")
+        else:  # rounding to float32 and flipping a sign commute: the bytes of the flipped values rounded
+            flipped = chosen.astype(np.float32)
+            flipped *= (signs if every else signs[:, joints]).astype(np.float32)[..., None]
+            data = np.ascontiguousarray(flipped.transpose(1, 0, 2))
         if self.interpolation == "CUBICSPLINE":
             data = np.ascontiguousarray(_cubic_values(data.transpose(1, 0, 2), self.times).transpose(1, 0, 2))
         T, C = data.shape[1], data.shape[2]
-        view = self.app.add_view(data.tobytes())
+        view = self.app.add_view(memoryview(data).cast("B"))  # the array's bytes, not a copy of them
         type_ = {3: "VEC3", 4: "VEC4"}[C]
         for k, node in enumerate(nodes):
             acc = self.app.add_accessor(data[k], type_, view=view, byte_offset=k * T * C * 4)
@@ -299,7 +321,8 @@ def write_gltf(asset: Asset, path: str | os.PathLike, *, provenance: dict | None
         w = _AnimationWriter(app, anim, _key_times(c)[sel], kind)
         J = sk.num_joints
         nodes = skel_nodes[si]
-        w.add("rotation", list(range(J)), nodes, _continuous(c.rotations)[sel])
+        q, signs = _continuous_signs(c.rotations)
+        w.add("rotation", list(range(J)), nodes, q[sel], signs=None if signs is None else signs[sel])
         for path_, values, rest, tol in (("translation", c.translations, sk.rest_translations, TRANSLATION_TOLERANCE_M),
                                          ("scale", c.scales, sk.rest_scales, SCALE_TOLERANCE)):
             moving = [j for j in np.nonzero(_differs_from_rest(values, rest, tol))[0]]

@@ -76,6 +76,8 @@ def clip_to(clip: Clip, skeleton: Skeleton) -> Clip:
     if not np.array_equal(turned.view(np.uint64), r[:, roots].view(np.uint64)):  # the same up axis: nothing turns
         r = np.array(r)
         r[:, roots] = turned
+    for a in (r, t):  # made here and handed over: the clip keeps them without a copy
+        a.setflags(write=False)
     return clip.replace(skeleton=skeleton, rotations=r, translations=t)
 
 
