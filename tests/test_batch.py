@@ -12,6 +12,7 @@ import pytest
 import usdhands
 import usdhands.cli
 from usdhands.errors import UsdHandsError
+from usdhands.jobs import batch
 from usdhands.jobs.batch import BatchOptions, collect_inputs, run_batch
 
 
@@ -166,7 +167,6 @@ def test_workers_run_kernels_on_one_thread_and_the_callers_process_is_untouched(
     numba = pytest.importorskip("numba")
     if scheduler:
         pytest.importorskip("distributed")
-    import usdhands.jobs.batch as batch
 
     threads, env = numba.get_num_threads(), dict(os.environ)
     report = run_batch([clips / "ok_00.glb"], BatchOptions(
@@ -243,6 +243,16 @@ def dask_cluster(tmp_path):
         log.close()
 
 
+def test_dask_tasks_hold_up_to_8_clips_and_a_short_batch_one_clip_each():
+    todo = [(f"in{i}", f"out{i}") for i in range(200)]
+    chunks = batch.dask_chunks(todo, 2)
+    assert [len(c) for c in chunks] == [8] * 25 and [p for c in chunks for p in c] == todo
+    assert [len(c) for c in batch.dask_chunks(todo[:20], 2)] == [2] * 10
+    assert [len(c) for c in batch.dask_chunks(todo[:7], 2)] == [1] * 7
+    assert [len(c) for c in batch.dask_chunks(todo[:10], 64)] == [1] * 10
+    assert [len(c) for c in batch.dask_chunks(todo[:30], 2)] == [3] * 10
+
+
 def test_remote_scheduler_runs_the_batch_and_a_killer_clip_fails_alone(clips, tmp_path, dask_cluster):
     shutil.copy(clips / "ok_00.glb", clips / "die_00.glb")
     (clips / "sub" / "broken.glb").unlink()
@@ -261,6 +271,20 @@ def test_remote_scheduler_runs_the_batch_and_a_killer_clip_fails_alone(clips, tm
         client.wait_for_workers(2, timeout=180)  # the nanny restarts the killer's worker: it may still be joining
         flags = client.run(lambda: __import__("usdhands.jobs.batch").jobs.batch._own_worker_process)
     assert sorted(flags.values()) == [True, True]
+    # a longer batch goes in tasks of several clips: the task holding the killer dies twice, then its
+    # clips run alone; the killer fails, its task mates and every other clip are done
+    many = tmp_path / "many"
+    many.mkdir()
+    for i in range(15):
+        shutil.copy(clips / "ok_00.glb", many / f"ok_{i:02d}.glb")
+    shutil.copy(clips / "ok_00.glb", many / "die_07.glb")
+    todo = sorted(many.iterdir())
+    assert [len(c) for c in batch.dask_chunks(todo, 2)] == [2] * 8
+    report = run_batch([many], BatchOptions(job="batch_dying_job:convert_or_die", out=tmp_path / "many_out",
+                                            workers=2, scheduler=dask_cluster, job_options=usdhands.ConvertOptions()))
+    statuses = {os.path.basename(c.file): c.status for c in report.clips}
+    assert statuses == {**{f"ok_{i:02d}.glb": "done" for i in range(15)}, "die_07.glb": "failed"}
+    assert next(c for c in report.clips if c.status == "failed").error.startswith("KilledWorker")
     # and through the command line, with --scheduler ADDRESS
     code = usdhands.cli.main(["batch", str(clips / "ok_01.glb"), "--job", "convert", "--to", "usda",
                               "--out", str(tmp_path / "cli"), "--scheduler", dask_cluster])
