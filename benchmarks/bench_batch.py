@@ -12,9 +12,22 @@ BVH), then measures clips per second of:
   the first ``--baseline`` clips (each pays the interpreter start-up and the database load).
 
 Every batch run starts from an empty output folder; the pool or LocalCluster start-up is
-included in its time (the running cluster's is not: that is the difference between them). Prints the rates and the ratios 2 workers / 1 worker and batch /
-process-per-clip (targets: >= 1.7 and >= 5). The machine's load average is printed
-beside them: other processes on a shared machine slow the 2-worker runs most.
+included in its time (the running cluster's is not: that is the difference between them).
+Prints the rates and the ratios 2 workers / 1 worker and batch / process-per-clip (targets:
+>= 1.7 and >= 5). The machine's load average is printed beside them: other processes on a
+shared machine slow the 2-worker runs most.
+
+CPU accounting (what a loaded machine distorts least): between the 10% and the 90% progress
+lines of each run, the CPU time of every thread of every process involved -- the batch
+process (for a LocalCluster: client, scheduler and nannies; sampled per thread), each worker
+process (its busiest thread, which runs the clips, and its other threads: event loop,
+monitors), the running cluster's scheduler and nanny processes -- per clip. The clips' own
+work is the workers' busiest threads; everything else is the overhead that 2 workers on 2
+cores take from the clips. Two workers can reach at most ``2 / (1 + overhead / clip work)``
+the rate of one worker whose overhead runs on the other core: the line "bound" prints it.
+The running cluster is started with the settings ``batch`` gives its own LocalCluster
+(``usdhands.jobs.batch.QUIET_LOCAL_CLUSTER``, as environment variables of those processes only),
+as docs/pipeline.md advises for a farm.
 
 Run: ``python benchmarks/bench_batch.py [--clips 200] [--baseline 20]``
 """
@@ -50,8 +63,10 @@ def make_clips(folder: Path, count: int) -> list[Path]:
     return out
 
 
-def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None) -> float:
-    """Seconds of one ``usdhands batch`` process (start-up included); checks every clip was done."""
+def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None,
+                  cluster_pids: tuple[int, ...] = ()) -> tuple[float, dict]:
+    """Seconds of one ``usdhands batch`` process (start-up included) and its CPU accounting
+    (:func:`cpu_by_role`, between the 10% and 90% progress lines); checks every clip was done."""
     import json
 
     shutil.rmtree(out, ignore_errors=True)
@@ -60,11 +75,93 @@ def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None) 
     if scheduler:
         cmd += ["--scheduler", scheduler]
     start = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True, text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    marks, lines = [], []
+    for line in proc.stderr:  # "synthesize: 20/200 done, 0 failed, ..." at each tenth (stderr is not a terminal)
+        lines.append(line)
+        done = line.split(":", 1)[-1].split(" done", 1)[0].strip().split("/")
+        if len(done) == 2 and done[0].isdigit() and done[1].isdigit():
+            finished, total = int(done[0]), int(done[1])
+            if (not marks and finished >= total // 10) or (len(marks) == 1 and finished >= total - total // 10):
+                marks.append((finished, time.perf_counter(), thread_cpu([proc.pid, *cluster_pids])))
+    if proc.wait() != 0:
+        raise RuntimeError(f"batch failed ({proc.returncode}): {''.join(lines[-20:])}")
     seconds = time.perf_counter() - start
     report = json.loads((out / "report.json").read_text())
     assert report["failed"] == 0 and report["done"] == len(report["clips"]), report
-    return seconds
+    (n0, t0, a), (n1, t1, b) = marks
+    return seconds, cpu_by_role(a, b, n1 - n0, t1 - t0, proc.pid)
+
+
+def thread_cpu(roots: list[int]) -> dict:
+    """``{(pid, tid): (role, CPU seconds)}`` for every thread of ``roots`` and their descendants."""
+    import psutil
+
+    procs = {}
+    for pid in roots:
+        with contextlib.suppress(psutil.Error):
+            root = psutil.Process(pid)
+            procs[pid] = root
+            for child in root.children(recursive=True):
+                procs[child.pid] = child
+    out = {}
+    for pid, p in procs.items():
+        with contextlib.suppress(psutil.Error):
+            role = process_role(p, roots[0])
+            for t in p.threads():
+                out[(pid, t.id)] = (role, t.user_time + t.system_time)
+    return out
+
+
+def process_role(p, batch_pid: int) -> str:
+    import psutil
+
+    if p.pid == batch_pid:
+        return "batch process"
+    try:
+        cmd = " ".join(p.cmdline())
+        parent = " ".join(p.parent().cmdline()) if p.parent() else ""
+    except psutil.Error:
+        return "other"
+    if "resource_tracker" in cmd:
+        return "resource tracker"
+    if "forkserver" in cmd:
+        return "worker" if "forkserver" in parent else "forkserver"
+    if "spawn_main" in cmd or "multiprocessing-fork" in cmd or "dask worker [" in cmd:
+        return "worker"
+    if "dask scheduler" in cmd or "dask-scheduler" in cmd:
+        return "scheduler process"
+    if "dask worker" in cmd or "dask-worker" in cmd or "dask nanny" in cmd:
+        return "nanny process"
+    return "other"
+
+
+def cpu_by_role(a: dict, b: dict, clips: int, seconds: float, batch_pid: int) -> dict:
+    """CPU milliseconds per clip between two :func:`thread_cpu` snapshots, by role; a worker's busiest
+    thread is its clips' own work ("worker clips"), its other threads "worker other"."""
+    per_thread: dict = {}
+    for key, (role, cpu) in b.items():
+        per_thread[key] = (role, cpu - a.get(key, (role, 0.0))[1])
+    busiest: dict = {}
+    for (pid, tid), (role, d) in per_thread.items():
+        if role == "worker" and d > busiest.get(pid, (None, -1.0))[1]:
+            busiest[pid] = (tid, d)
+    out: dict = {"clips": clips, "seconds": seconds}
+    for (pid, tid), (role, d) in per_thread.items():
+        if role == "worker":
+            role = "worker clips" if busiest[pid][0] == tid else "worker other"
+        out[role] = out.get(role, 0.0) + 1000 * d / clips
+    return out
+
+
+def print_cpu(acc: dict) -> None:
+    work = acc.get("worker clips", 0.0)
+    parts = {k: v for k, v in acc.items() if k not in ("clips", "seconds")}
+    overhead = sum(parts.values()) - work
+    print(f"    CPU ms per clip (clips {acc['clips']} of the middle, {acc['clips'] / acc['seconds']:.2f} clips/s): "
+          + ", ".join(f"{k} {v:.1f}" for k, v in sorted(parts.items(), key=lambda kv: -kv[1]))
+          + f"; overhead {overhead:.1f} = {100 * overhead / max(work, 1e-9):.0f}% of the clips' work; "
+          f"bound for 2 workers on 2 cores {2 / (1 + overhead / max(work, 1e-9)):.2f}x one clip thread")
 
 
 @contextlib.contextmanager
@@ -80,16 +177,21 @@ def running_dask_cluster(workers: int, folder: Path):
         port = s.getsockname()[1]
     address = f"tcp://127.0.0.1:{port}"
     folder.mkdir(parents=True, exist_ok=True)
+    from usdhands.jobs.batch import QUIET_LOCAL_CLUSTER
+
+    # the settings batch gives its LocalCluster, for these processes only (docs/pipeline.md: a farm's)
+    env = dict(os.environ, **{"DASK_" + key.upper().replace(".", "__").replace("-", "_"): str(value)
+                              for key, value in QUIET_LOCAL_CLUSTER.items()})
     with open(folder / "dask.log", "w") as log:
         procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port",
-                                   str(port), "--no-dashboard"], stdout=log, stderr=log, cwd=folder)]
+                                   str(port), "--no-dashboard"], stdout=log, stderr=log, cwd=folder, env=env)]
         procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", address, "--nworkers", str(workers),
                                        "--nthreads", "1", "--no-dashboard", "--local-directory", str(folder)],
-                                      stdout=log, stderr=log, cwd=folder))
+                                      stdout=log, stderr=log, cwd=folder, env=env))
         try:
             with Client(address, timeout="60s") as client:
                 client.wait_for_workers(workers, timeout=180)
-            yield address
+            yield address, tuple(p.pid for p in procs)
         finally:
             for p in reversed(procs):
                 p.terminate()
@@ -110,6 +212,9 @@ def main() -> None:
     ap.add_argument("--clips", type=int, default=200)
     ap.add_argument("--baseline", type=int, default=20, help="clips run as one process each (the baseline)")
     ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--runs", default="pool,local,running",
+                    help="which batches: pool (local process pool), local (Dask LocalCluster), running "
+                         "(a Dask cluster already running); comma-separated")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -117,32 +222,45 @@ def main() -> None:
         clips = make_clips(tmp / "in", args.clips)
         print(f"{len(clips)} clips generated in {time.perf_counter() - t0:.1f} s; {os.cpu_count()} CPUs; "
               f"load average {os.getloadavg()[0]:.1f}")
-        rates = {}
-        runs = [("local pool", None)] + ([] if args.no_dask else [("Dask LocalCluster", "local"),
-                                                                  ("Dask cluster running", "running")])
+        rates, cpu = {}, {}
+        chosen = set(args.runs.split(",")) - ({"local", "running"} if args.no_dask else set())
+        runs = [(name, scheduler) for key, name, scheduler in (
+            ("pool", "local pool", None), ("local", "Dask LocalCluster", "local"),
+            ("running", "Dask cluster running", "running")) if key in chosen]
         for name, scheduler in runs:
             for workers in (1, 2):
                 load = os.getloadavg()[0]
                 if scheduler == "running":
-                    with running_dask_cluster(workers, tmp / f"dask{workers}") as address:
+                    with running_dask_cluster(workers, tmp / f"dask{workers}") as (address, pids):
                         load = os.getloadavg()[0]
-                        seconds = run_batch_cli(tmp / "in", tmp / "out", workers, address)
+                        seconds, acc = run_batch_cli(tmp / "in", tmp / "out", workers, address, pids)
                 else:
-                    seconds = run_batch_cli(tmp / "in", tmp / "out", workers, scheduler)
+                    seconds, acc = run_batch_cli(tmp / "in", tmp / "out", workers, scheduler)
                 rates[(name, workers)] = len(clips) / seconds
+                cpu[(name, workers)] = acc
                 print(f"{name:18s} {workers} worker(s): {seconds:7.1f} s, {rates[(name, workers)]:6.2f} clips/s "
                       f"(load average before {load:.1f})")
+                print_cpu(acc)
         base = clips[:args.baseline]
         load = os.getloadavg()[0]
         seconds = process_per_clip(base, tmp / "single")
         baseline = len(base) / seconds
         print(f"one process per clip ({len(base)} clips): {seconds:7.1f} s, {baseline:6.2f} clips/s "
               f"(load average before {load:.1f})")
+        pool_one = rates.get(("local pool", 1))
         for name, _ in runs:
             one, two = rates[(name, 1)], rates[(name, 2)]
-            print(f"{name}: 2 workers / 1 worker = {two / one:.2f}x (target 1.7x); "
-                  f"batch 1 worker / process per clip = {one / baseline:.1f}x, "
+            middle = cpu[(name, 2)]["clips"] / cpu[(name, 2)]["seconds"] / (
+                cpu[(name, 1)]["clips"] / cpu[(name, 1)]["seconds"])
+            print(f"{name}: 2 workers / 1 worker = {two / one:.2f}x (target 1.7x; the middle 80% of the clips "
+                  f"{middle:.2f}x); "
+                  + (f"2 workers / the local pool's 1 worker = {two / pool_one:.2f}x; " if pool_one else "")
+                  + f"batch 1 worker / process per clip = {one / baseline:.1f}x, "
                   f"2 workers = {two / baseline:.1f}x (target 5x)")
+            total = {w: sum(v for k, v in cpu[(name, w)].items() if k not in ("clips", "seconds")) for w in (1, 2)}
+            print(f"    CPU per clip, all processes: 1 worker {total[1]:.1f} ms, 2 workers {total[2]:.1f} ms "
+                  f"(clips' own work {cpu[(name, 1)].get('worker clips', 0):.1f} and "
+                  f"{cpu[(name, 2)].get('worker clips', 0):.1f} ms)")
 
 
 if __name__ == "__main__":

@@ -86,6 +86,32 @@ def test_dask_local_cluster_synthesizes_like_the_job_alone(clips, tmp_path):
     assert report.scheduler == "local" and report.summary["clips_per_second"] > 0
 
 
+def test_dask_local_cluster_runs_without_profiler_and_monitors_and_the_callers_config_is_untouched(clips, tmp_path):
+    """batch's LocalCluster (worker processes, as ``--scheduler local`` makes them) has no statistical
+    profiler and slower health ticks and monitors (their CPU is what 2 workers on 2 cores cannot
+    spare); the outputs are the job's own; the caller's Dask config is as it was."""
+    dask = pytest.importorskip("dask")
+    pytest.importorskip("distributed")
+    from batch_worker_probe import SETTINGS
+
+    before = {key: dask.config.get(key) for key in SETTINGS}
+    assert before["distributed.worker.profile.enabled"] is True  # Dask's default: the test sees a change
+    out = tmp_path / "out"
+    report = run_batch([clips / "ok_00.glb", clips / "ok_01.glb"], BatchOptions(
+        job="batch_worker_probe:convert_and_describe_worker", out=out, workers=1, scheduler="local",
+        job_options=usdhands.ConvertOptions()))
+    assert [c.status for c in report.clips] == ["done", "done"]
+    for name in ("ok_00", "ok_01"):
+        usdhands.convert(clips / f"{name}.glb", tmp_path / "alone.glb")
+        assert (out / f"{name}.glb").read_bytes() == (tmp_path / "alone.glb").read_bytes()
+        worker = json.loads((out / f"{name}.glb.worker.json").read_text())
+        assert worker["pid"] != os.getpid()  # a worker process of its own, set up by its nanny
+        assert worker["settings"] == batch.QUIET_LOCAL_CLUSTER
+        assert "profile" not in worker["callbacks"] and "profile-cycle" not in worker["callbacks"]
+        assert {"heartbeat", "tick", "monitor"} <= set(worker["callbacks"])  # the rest of the worker as usual
+    assert {key: dask.config.get(key) for key in SETTINGS} == before
+
+
 def test_inputs_from_a_list_file_and_check_outputs(clips, tmp_path, capsys):
     listing = tmp_path / "takes.txt"
     listing.write_text("# takes to check\nin/ok_00.glb\n\nin/sub/broken.glb\n")
@@ -243,14 +269,21 @@ def dask_cluster(tmp_path):
         log.close()
 
 
-def test_dask_tasks_hold_up_to_8_clips_and_a_short_batch_one_clip_each():
+def test_dask_tasks_hold_up_to_8_clips_shrinking_to_one_and_a_short_batch_one_clip_each():
     todo = [(f"in{i}", f"out{i}") for i in range(200)]
-    chunks = batch.dask_chunks(todo, 2)
-    assert [len(c) for c in chunks] == [8] * 25 and [p for c in chunks for p in c] == todo
-    assert [len(c) for c in batch.dask_chunks(todo[:20], 2)] == [2] * 10
+    for slots in (1, 2, 3, 8):
+        sizes = [len(c) for c in batch.dask_chunks(todo, slots)]
+        assert [p for c in batch.dask_chunks(todo, slots) for p in c] == todo  # every clip once, in order
+        assert sizes[0] == max(sizes) == min(8, 200 // (4 * slots)) and sizes[-1] == 1  # 8, 8, 8, 6
+        assert sizes == sorted(sizes, reverse=True)
+        left = len(todo)
+        for size in sizes:  # a quarter of a thread's share of what is left, from 8 down to 1
+            assert size == max(1, min(8, left // (4 * slots)))
+            left -= size
+    assert [len(c) for c in batch.dask_chunks(todo, 2)] == [8] * 18 + [7, 6, 5, 4, 4, 3, 3, 3, 2, 2, 2] + [1] * 15
+    assert [len(c) for c in batch.dask_chunks(todo[:20], 2)] == [2, 2, 2] + [1] * 14
     assert [len(c) for c in batch.dask_chunks(todo[:7], 2)] == [1] * 7
     assert [len(c) for c in batch.dask_chunks(todo[:10], 64)] == [1] * 10
-    assert [len(c) for c in batch.dask_chunks(todo[:30], 2)] == [3] * 10
 
 
 def test_remote_scheduler_runs_the_batch_and_a_killer_clip_fails_alone(clips, tmp_path, dask_cluster):
@@ -279,7 +312,7 @@ def test_remote_scheduler_runs_the_batch_and_a_killer_clip_fails_alone(clips, tm
         shutil.copy(clips / "ok_00.glb", many / f"ok_{i:02d}.glb")
     shutil.copy(clips / "ok_00.glb", many / "die_07.glb")
     todo = sorted(many.iterdir())
-    assert [len(c) for c in batch.dask_chunks(todo, 2)] == [2] * 8
+    assert [len(c) for c in batch.dask_chunks(todo, 2)][0] == 2 and todo[0].name == "die_07.glb"  # in a 2-clip task
     report = run_batch([many], BatchOptions(job="batch_dying_job:convert_or_die", out=tmp_path / "many_out",
                                             workers=2, scheduler=dask_cluster, job_options=usdhands.ConvertOptions()))
     statuses = {os.path.basename(c.file): c.status for c in report.clips}

@@ -32,7 +32,9 @@
 - ``scheduler``: None for a local process pool (``workers`` processes), ``"local"`` for a
   ``dask.distributed.LocalCluster`` of ``workers`` processes, or a scheduler address
   (``tcp://host:8786``) to send the clips to an existing Dask cluster (``pip install
-  'usdhands[dask]'``; the workers need usdhands installed and the paths visible).
+  'usdhands[dask]'``; the workers need usdhands installed and the paths visible). The
+  LocalCluster runs without Dask's profiler and with slower health checks
+  (:data:`QUIET_LOCAL_CLUSTER`, set only while batch makes it).
 
 - ``correct`` (and ``check`` with ``props``): a changed prop file reruns every clip, as a
   changed option does.
@@ -571,6 +573,9 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
         stack.enter_context(dask.config.set({"distributed.scheduler.allowed-failures": 1,
                                              "distributed.scheduler.worker-saturation": 1.0}))
         if options.scheduler == "local":
+            # read when the cluster, its nannies and workers are made (a nanny hands them to the
+            # worker processes it starts and restarts); the caller's config is back on leaving
+            stack.enter_context(dask.config.set(QUIET_LOCAL_CLUSTER))
             cluster = stack.enter_context(LocalCluster(
                 n_workers=options.workers, threads_per_worker=1, processes=options.dask_processes,
                 dashboard_address=None))
@@ -609,17 +614,39 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
                     report(ClipRecord(str(src), str(dst), "failed", 0.0, one_line(f"{type(e).__name__}: {e}")))
 
 
-#: The most clips one Dask task runs (a task costs the caller's scheduler ~3 ms: on 40 ms clips, one
-#: clip per task cost 2 local workers a sixth of their speed)
+#: The Dask settings of the LocalCluster batch starts (``--scheduler local``). With Dask's defaults
+#: its machinery took ~7 ms of CPU per 20-40 ms clip (CPU of every thread of every process, sampled
+#: between the 20th and the 180th of 200 clips): a fifth of a core on two workers, which two cores
+#: cannot spare. What a batch never looks at goes: the statistical profiler (every 10 ms it walked
+#: the clip's stack in the worker's event loop), the event loop's health tick (every 20 ms in the
+#: scheduler, each nanny and each worker), the system monitor (twice a second, each of them); the
+#: memory monitor (nanny and worker, ten times a second) looks once a second.
+QUIET_LOCAL_CLUSTER = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+#: The most clips one Dask task runs: each task costs the caller's scheduler and client and the
+#: worker's event loop ~3 ms of CPU each (its messages, the result fetched), a sixth of a 40 ms clip
 DASK_CHUNK_MAX = 8
 
 
 def dask_chunks(todo: list, slots: int) -> list[list]:
-    """``todo``'s (source, output) pairs cut into consecutive tasks for ``slots`` worker threads:
-    at least 4 tasks per thread (the last ones even out), at most :data:`DASK_CHUNK_MAX` clips each,
-    one clip per task for a short batch."""
-    size = max(1, min(DASK_CHUNK_MAX, len(todo) // (4 * max(1, slots))))
-    return [todo[i:i + size] for i in range(0, len(todo), size)]
+    """``todo``'s (source, output) pairs cut into consecutive tasks for ``slots`` worker threads.
+
+    Each task takes a quarter of a thread's share of the clips left, at most
+    :data:`DASK_CHUNK_MAX` and at least one: a long batch starts with tasks of 8 clips and ends
+    with tasks of 1, so the workers finish together (tasks of equal size left one worker alone
+    on the last up to 8 clips); a short batch is one clip per task.
+    """
+    chunks, i = [], 0
+    while i < len(todo):
+        size = max(1, min(DASK_CHUNK_MAX, (len(todo) - i) // (4 * max(1, slots))))
+        chunks.append(todo[i:i + size])
+        i += size
+    return chunks
 
 
 def run_clips(job: str, job_options, model: Path | None, pairs) -> list[ClipRecord]:
