@@ -84,13 +84,18 @@ def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None,
             finished, total = int(done[0]), int(done[1])
             if (not marks and finished >= total // 10) or (len(marks) == 1 and finished >= total - total // 10):
                 marks.append((finished, time.perf_counter(), thread_cpu([proc.pid, *cluster_pids])))
-    if proc.wait() != 0:
+    _, status, usage = os.wait4(proc.pid, 0)  # the CPU of the batch process and every child it waited for
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
         raise RuntimeError(f"batch failed ({proc.returncode}): {''.join(lines[-20:])}")
     seconds = time.perf_counter() - start
     report = json.loads((out / "report.json").read_text())
     assert report["failed"] == 0 and report["done"] == len(report["clips"]), report
     (n0, t0, a), (n1, t1, b) = marks
-    return seconds, cpu_by_role(a, b, n1 - n0, t1 - t0, proc.pid)
+    acc = cpu_by_role(a, b, n1 - n0, t1 - t0, proc.pid)
+    if scheduler == "local":  # its nannies wait for their workers (the pool's are the forkserver's children,
+        acc["whole run cpu"] = usage.ru_utime + usage.ru_stime  # a running cluster's not the batch's)
+    return seconds, acc
 
 
 def thread_cpu(roots: list[int]) -> dict:
@@ -154,14 +159,21 @@ def cpu_by_role(a: dict, b: dict, clips: int, seconds: float, batch_pid: int) ->
     return out
 
 
-def print_cpu(acc: dict) -> None:
+NOT_ROLES = ("clips", "seconds", "whole run cpu")
+
+
+def print_cpu(acc: dict, clips: int) -> None:
     work = acc.get("worker clips", 0.0)
-    parts = {k: v for k, v in acc.items() if k not in ("clips", "seconds")}
+    parts = {k: v for k, v in acc.items() if k not in NOT_ROLES}
     overhead = sum(parts.values()) - work
     print(f"    CPU ms per clip (clips {acc['clips']} of the middle, {acc['clips'] / acc['seconds']:.2f} clips/s): "
           + ", ".join(f"{k} {v:.1f}" for k, v in sorted(parts.items(), key=lambda kv: -kv[1]))
           + f"; overhead {overhead:.1f} = {100 * overhead / max(work, 1e-9):.0f}% of the clips' work; "
           f"bound for 2 workers on 2 cores {2 / (1 + overhead / max(work, 1e-9)):.2f}x one clip thread")
+    if "whole run cpu" in acc:
+        whole = acc["whole run cpu"]
+        print(f"    CPU of the whole run, the batch process and its children: {whole:.1f} s, of which start-up and "
+              f"close ~{whole - clips * (work + overhead) / 1000:.1f} s (beyond {clips} clips at the middle's CPU)")
 
 
 @contextlib.contextmanager
@@ -238,9 +250,11 @@ def main() -> None:
                     seconds, acc = run_batch_cli(tmp / "in", tmp / "out", workers, scheduler)
                 rates[(name, workers)] = len(clips) / seconds
                 cpu[(name, workers)] = acc
+                fixed = seconds - len(clips) * acc["seconds"] / acc["clips"]
                 print(f"{name:18s} {workers} worker(s): {seconds:7.1f} s, {rates[(name, workers)]:6.2f} clips/s "
-                      f"(load average before {load:.1f})")
-                print_cpu(acc)
+                      f"(load average before {load:.1f}); start-up and close {fixed:.1f} s (the run's seconds "
+                      f"beyond its clips at the middle's rate)")
+                print_cpu(acc, len(clips))
         base = clips[:args.baseline]
         load = os.getloadavg()[0]
         seconds = process_per_clip(base, tmp / "single")
@@ -257,7 +271,7 @@ def main() -> None:
                   + (f"2 workers / the local pool's 1 worker = {two / pool_one:.2f}x; " if pool_one else "")
                   + f"batch 1 worker / process per clip = {one / baseline:.1f}x, "
                   f"2 workers = {two / baseline:.1f}x (target 5x)")
-            total = {w: sum(v for k, v in cpu[(name, w)].items() if k not in ("clips", "seconds")) for w in (1, 2)}
+            total = {w: sum(v for k, v in cpu[(name, w)].items() if k not in NOT_ROLES) for w in (1, 2)}
             print(f"    CPU per clip, all processes: 1 worker {total[1]:.1f} ms, 2 workers {total[2]:.1f} ms "
                   f"(clips' own work {cpu[(name, 1)].get('worker clips', 0):.1f} and "
                   f"{cpu[(name, 2)].get('worker clips', 0):.1f} ms)")
