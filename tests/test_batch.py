@@ -86,10 +86,13 @@ def test_dask_local_cluster_synthesizes_like_the_job_alone(clips, tmp_path):
     assert report.scheduler == "local" and report.summary["clips_per_second"] > 0
 
 
-def test_dask_local_cluster_runs_without_profiler_and_monitors_and_the_callers_config_is_untouched(clips, tmp_path):
-    """batch's LocalCluster (worker processes, as ``--scheduler local`` makes them) has no statistical
-    profiler and slower health ticks and monitors (their CPU is what 2 workers on 2 cores cannot
-    spare); the outputs are the job's own; the caller's Dask config is as it was."""
+@pytest.mark.parametrize("processes", [True, False])
+def test_dask_local_cluster_runs_without_profiler_and_monitors_and_the_callers_config_is_untouched(
+        clips, tmp_path, processes):
+    """batch's LocalCluster (worker processes, as ``--scheduler local`` makes them, or threads of this
+    process) has no statistical profiler and slower health ticks and monitors (their CPU is what 2
+    workers on 2 cores cannot spare); the outputs are the job's own; the caller's Dask config is as
+    it was, also while the clips run (a worker thread of this process reads it then)."""
     dask = pytest.importorskip("dask")
     pytest.importorskip("distributed")
     from batch_worker_probe import SETTINGS
@@ -99,14 +102,16 @@ def test_dask_local_cluster_runs_without_profiler_and_monitors_and_the_callers_c
     out = tmp_path / "out"
     report = run_batch([clips / "ok_00.glb", clips / "ok_01.glb"], BatchOptions(
         job="batch_worker_probe:convert_and_describe_worker", out=out, workers=1, scheduler="local",
-        job_options=usdhands.ConvertOptions()))
+        dask_processes=processes, job_options=usdhands.ConvertOptions()))
     assert [c.status for c in report.clips] == ["done", "done"]
     for name in ("ok_00", "ok_01"):
         usdhands.convert(clips / f"{name}.glb", tmp_path / "alone.glb")
         assert (out / f"{name}.glb").read_bytes() == (tmp_path / "alone.glb").read_bytes()
         worker = json.loads((out / f"{name}.glb.worker.json").read_text())
-        assert worker["pid"] != os.getpid()  # a worker process of its own, set up by its nanny
-        assert worker["settings"] == batch.QUIET_LOCAL_CLUSTER
+        if processes:  # a worker process of its own, set up by its nanny with the settings
+            assert worker["pid"] != os.getpid() and worker["settings"] == batch.QUIET_LOCAL_CLUSTER
+        else:  # a thread of this process, made with the settings; this process's config is Dask's own
+            assert worker["pid"] == os.getpid() and worker["settings"] == before
         assert "profile" not in worker["callbacks"] and "profile-cycle" not in worker["callbacks"]
         assert {"heartbeat", "tick", "monitor"} <= set(worker["callbacks"])  # the rest of the worker as usual
     assert {key: dask.config.get(key) for key in SETTINGS} == before

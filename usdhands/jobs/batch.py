@@ -34,7 +34,7 @@
   (``tcp://host:8786``) to send the clips to an existing Dask cluster (``pip install
   'usdhands[dask]'``; the workers need usdhands installed and the paths visible). The
   LocalCluster runs without Dask's profiler and with slower health checks
-  (:data:`QUIET_LOCAL_CLUSTER`, set only while batch makes it).
+  (:data:`QUIET_LOCAL_CLUSTER`, in Dask's config only while batch makes the cluster).
 
 - ``correct`` (and ``check`` with ``props``): a changed prop file reruns every clip, as a
   changed option does.
@@ -567,18 +567,18 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
         raise UsdHandsError("--scheduler needs Dask: pip install 'usdhands[dask]'") from None
     job, job_options, model = task
     with contextlib.ExitStack() as stack:
-        # a worker that dies is retried once by the scheduler (a local one: these settings; a
-        # remote one: its own distributed.scheduler.allowed-failures); one task at a time per
-        # worker thread, so a death counts against the clip that caused it and no other
-        stack.enter_context(dask.config.set({"distributed.scheduler.allowed-failures": 1,
-                                             "distributed.scheduler.worker-saturation": 1.0}))
         if options.scheduler == "local":
-            # read when the cluster, its nannies and workers are made (a nanny hands them to the
-            # worker processes it starts and restarts); the caller's config is back on leaving
-            stack.enter_context(dask.config.set(QUIET_LOCAL_CLUSTER))
-            cluster = stack.enter_context(LocalCluster(
-                n_workers=options.workers, threads_per_worker=1, processes=options.dask_processes,
-                dashboard_address=None))
+            # a worker that dies is retried once by the scheduler (a remote one: its own
+            # distributed.scheduler.allowed-failures); one task at a time per worker thread, so a
+            # death counts against the task that caused it and no other; QUIET_LOCAL_CLUSTER. Dask
+            # reads these when the scheduler, the nannies and the workers are made (a nanny hands
+            # them to the worker processes it starts and restarts): the caller's config holds them
+            # only while the cluster is made, never while the batch runs
+            with dask.config.set({"distributed.scheduler.allowed-failures": 1,
+                                  "distributed.scheduler.worker-saturation": 1.0, **QUIET_LOCAL_CLUSTER}):
+                cluster = stack.enter_context(LocalCluster(
+                    n_workers=options.workers, threads_per_worker=1, processes=options.dask_processes,
+                    dashboard_address=None))
             client = stack.enter_context(Client(cluster))
         else:
             try:
