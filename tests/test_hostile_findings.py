@@ -608,6 +608,22 @@ def _signalled_mid_write(src, out, sig):
     return proc, err
 
 
+def _whole_and_alone_then_removed(proc, err, codes, src, out) -> None:
+    """A run whose output ``out`` was renamed into place before its signal was handled: it exited
+    with one of ``codes``, the output reads whole, and nothing but ``src`` is beside it; then
+    the output is removed for the next attempt."""
+    from hostile import listing
+
+    assert proc.returncode in codes, (proc.returncode, err)
+    folder, target = out.parent, out.name
+    others = [p for p in listing(folder) if p != target and not p.startswith(target + os.sep)]
+    assert others == [src.name], "temporary output left behind"
+    check = folder / "check.glb"
+    assert run_bounded(["inspect", out] if out.is_file() else ["synthesize", src, "--db", out, "-o", check]).code == 0
+    shutil.rmtree(out) if out.is_dir() else out.unlink()
+    check.unlink(missing_ok=True)
+
+
 @pytest.mark.parametrize("target", ["out.usda", "out.usdc", "out.glb", "out_db", "rebuilt_db"])
 def test_sigterm_mid_write_leaves_nothing(target, sample_assets, tmp_path):
     """14 of 25 runs left .out.XXXX.usdc (and USD's own temporary) beside the target; every writer
@@ -627,15 +643,9 @@ def test_sigterm_mid_write_leaves_nothing(target, sample_assets, tmp_path):
     for attempt in range(5):
         out = tmp_path / target
         proc, err = _signalled_mid_write(src, out, signal.SIGTERM)
-        if out.exists() and not kept:  # the output was in place before the signal was handled (exit 0, or
-            # 143 when the signal came between the rename and the exit): then it is whole, nothing else left
-            assert proc.returncode in (0, -signal.SIGTERM, 143), (proc.returncode, err)
-            others = [p for p in listing(tmp_path) if p != target and not p.startswith(target + os.sep)]
-            assert others == ["long.glb"], "temporary output left behind"
-            assert run_bounded(["inspect", out] if out.is_file() else ["synthesize", src, "--db", out, "-o",
-                                                                      tmp_path / "check.glb"]).code == 0
-            shutil.rmtree(out) if out.is_dir() else out.unlink()
-            (tmp_path / "check.glb").unlink(missing_ok=True)
+        if out.exists() and not kept:  # in place before the signal was handled (exit 0, or 143 when the
+            # signal came between the rename and the exit)
+            _whole_and_alone_then_removed(proc, err, (0, -signal.SIGTERM, 143), src, out)
             continue
         if kept and proc.returncode in (0, -signal.SIGTERM):  # the new database took the old one's place
             assert listing(tmp_path) == kept
@@ -663,15 +673,9 @@ def test_sigint_mid_write_leaves_nothing(target, sample_assets, tmp_path):
     for attempt in range(4):
         out = tmp_path / target
         proc, err = _signalled_mid_write(src, out, signal.SIGINT)
-        if out.exists():  # the output was in place before the signal was handled (exit 0, or 130 when the
-            # interrupt came between the rename and the exit): then it is whole, and nothing else is left
-            assert proc.returncode in (0, 130), (proc.returncode, err)
-            others = [p for p in listing(tmp_path) if p != target and not p.startswith(target + os.sep)]
-            assert others == ["long.glb"], "temporary output left behind"
-            assert run_bounded(["inspect", out] if out.is_file() else ["synthesize", src, "--db", out, "-o",
-                                                                      tmp_path / "check.glb"]).code == 0
-            shutil.rmtree(out) if out.is_dir() else out.unlink()
-            (tmp_path / "check.glb").unlink(missing_ok=True)
+        if out.exists():  # in place before the signal was handled (exit 0, or 130 when the interrupt came
+            # between the rename and the exit)
+            _whole_and_alone_then_removed(proc, err, (0, 130), src, out)
             continue
         assert (proc.returncode, err.strip().splitlines()) == (130, ["usdhands: interrupted"])
         interrupted += 1

@@ -57,13 +57,13 @@ from usdhands.algorithms.splicing.costs import (
     sign_features, FirstPassInput, first_pass_band_cost, forearm_hand_vectors,
     hand_directions_from_xforms, forearm_rest_basis, fit_rotation, direction_angle_band_cost, hand_angle_cost,
 )
-from usdhands.algorithms.splicing.kinematics import chain_xforms, partial_world_xforms
+from usdhands.algorithms.splicing.kinematics import chain_xforms
 from usdhands.algorithms.splicing.sampling import one_hemisphere, relative_rotations, rest_times, sample_rotations
 
 _log = logging.getLogger(__name__)
 
 __all__ = [
-    "SpliceOptions", "SideAlignment", "median_alignment", "phase_boundaries", "align_hands", "pair_finger_joints", "FingerTransfer", "transfer_fingers", "SpliceResult", "splice_clips", "partial_world_xforms",
+    "SpliceOptions", "SideAlignment", "median_alignment", "phase_boundaries", "align_hands", "pair_finger_joints", "FingerTransfer", "transfer_fingers", "SpliceResult", "splice_clips",
 ]
 
 
