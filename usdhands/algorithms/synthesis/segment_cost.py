@@ -50,7 +50,7 @@ import numpy as np
 
 __all__ = [
     "weight_features", "band_window", "dtw_align", "dtw_align_fast", "dtw_align_many", "lb_keogh", "knn_segments",
-    "SearchResult",
+    "SearchResult", "load_search_kernel",
 ]
 
 
@@ -335,10 +335,26 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
 NUMPY_SEARCH_MAX_CELLS = 8e6
 #: Cells a process searches in NumPy in all before it loads the kernel instead (about the
 #: kernel's loading time): a command on one short clip never loads numba, a process that
-#: synthesizes many (a batch worker) loads it after the first few clips. Either way the
-#: results are the same to the bit.
+#: synthesizes many loads it after the first few clips (a batch worker loads it at its start,
+#: :func:`load_search_kernel`). Either way the results are the same to the bit.
 NUMPY_SEARCH_PROCESS_CELLS = 20e6
 _numpy_cells_searched = [0.0]
+
+
+def load_search_kernel() -> None:
+    """Load the numba search kernel into this process now (from the kernel cache; compiled there
+    on the first run), so that every later search runs in it, and synthesis's compiled twins
+    with it (:func:`~usdhands.algorithms.synthesis.output_warp.compiled_kernels_loaded`).
+
+    For a process that will synthesize many clips (a batch worker, at its start): otherwise its
+    first :data:`NUMPY_SEARCH_PROCESS_CELLS` cells are searched in NumPy (about 45 of the batch
+    benchmark's clips at 2.5 times the kernel's CPU, paid again by every worker). The results
+    are the same either way. Costs about 0.3 s (importing numba, loading the kernel).
+    """
+    one = np.zeros((2, 1))
+    # "keogh" always runs in the kernel; the bound is an int argument, so this is the
+    # signature of every search (float64 and int64 arrays made here, as knn_segments makes them)
+    knn_segments(one, np.array([[0, 2]]), one, np.array([[0, 2]]), k=1, bound="keogh")
 
 
 def _search_kernel(query_bounds: np.ndarray, db_segments: np.ndarray, length_factor: float, band: float,
