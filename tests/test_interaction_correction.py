@@ -4,6 +4,9 @@ fingers that are clear left bit-for-bit alone."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -215,6 +218,37 @@ def test_rts_smoother_matches_a_per_curve_kalman_loop(T):
             G = Ps[t] @ F.T @ np.linalg.inv(Pp[t + 1])
             out.insert(0, xs[t] + G @ (out[0] - xp[t + 1]))
         np.testing.assert_allclose(fast[:, c], np.array(out)[:, 0], rtol=0, atol=1e-8 * (1 + np.abs(z).max()))
+
+
+def test_second_order_recursion_equals_lfilter_to_the_bit():
+    """The recursion behind the RTS smoother's steady stretch, compiled and in NumPy steps, is scipy's
+    lfilter, bit for bit (signed zeros, coefficients of the smoother and arbitrary ones, one column and many)."""
+    from scipy.signal import lfilter
+
+    from usdhands.algorithms.interaction._recursion_kernel import second_order
+    from usdhands.algorithms.interaction.smoothing import second_order_steps
+
+    rng = np.random.default_rng(7)
+    for n, C, a1, a2 in [(1801, 9, -1.8737, 0.8812), (5, 1, 0.3, -0.2), (400, 3, -1.999999, 0.9999991),
+                         (64, 4, rng.normal(), rng.normal())]:
+        x = rng.normal(scale=50.0, size=(n, C))
+        x[::7] = 0.0
+        x[1::11] = -0.0
+        zi = rng.normal(size=(2, C))
+        expected = lfilter([1.0], np.array([1.0, a1, a2]), x, axis=0, zi=zi)[0]
+        assert second_order(x, a1, a2, zi).tobytes() == expected.tobytes()
+        assert second_order_steps(x, a1, a2, zi).tobytes() == expected.tobytes()
+
+
+def test_rts_smoother_needs_no_scipy_signal():
+    """A correction's smoothing imports neither scipy.signal nor numba (each about 0.3 s of a fresh process)."""
+    code = ("import sys, numpy as np\n"
+            "from usdhands.algorithms.interaction.smoothing import rts_smooth\n"
+            "rts_smooth(np.cumsum(np.ones((400, 3)), axis=0), 30.0, 0.2)\n"
+            "print('scipy.signal' in sys.modules, 'numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)})
+    assert out.stdout.strip() == "False False"
 
 
 def test_ccd_turns_the_distal_joint_first_by_the_least_flexion_that_clears():

@@ -14,6 +14,8 @@ cannot put a contact back.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 from scipy import sparse
 from scipy.linalg import solveh_banded
@@ -69,7 +71,7 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
     # Where the gains are steady both passes are a fixed linear recursion of the 2-vector state,
     # x_t = A x_(t-1) + u_t, so each state component follows the second-order recursion
     # x_t = tr(A) x_(t-1) - det(A) x_(t-2) + u_t + (A - tr(A) I) u_(t-1) (Cayley-Hamilton),
-    # run by scipy's lfilter; the frames before (and the two that start each recursion) are stepped.
+    # run by a compiled loop with lfilter's arithmetic; the frames before (and the two that start each recursion) are stepped.
     head = min(steady + 2, T)
     pos = np.empty_like(flat)
     vel = np.empty_like(flat)
@@ -112,21 +114,50 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
 
 
 def _recur(A: np.ndarray, u: tuple, x: tuple, start: int, stop: int) -> None:
-    """Run ``x_t = A x_(t-1) + u_t`` for ``t`` in ``[start, stop)`` in place, by lfilter on each component.
+    """Run ``x_t = A x_(t-1) + u_t`` for ``t`` in ``[start, stop)`` in place, as a second-order recursion on
+    each component with the arithmetic of ``scipy.signal.lfilter``: compiled where numba is already loaded
+    (:mod:`._recursion_kernel`), else :func:`second_order_steps` (the same bits).
 
     ``A`` ``(2, 2)``; ``u`` and ``x``: the two components, ``(T, C)`` arrays (views allowed);
     ``x`` holds the states at ``start - 2`` and ``start - 1`` (``start >= 2``).
     """
-    from scipy.signal import lfilter
-
+    if "numba" in sys.modules:
+        from usdhands.algorithms.interaction._recursion_kernel import second_order as run
+    else:
+        run = second_order_steps
     tr, det = float(np.trace(A)), float(np.linalg.det(A))
-    a = np.array([1.0, -tr, det])
     C = A - tr * np.eye(2)
+    w, zi = [], []
     for i in range(2):
-        w = u[i][start:stop] + C[i, 0] * u[0][start - 1:stop - 1] + C[i, 1] * u[1][start - 1:stop - 1]
+        w.append(u[i][start:stop] + C[i, 0] * u[0][start - 1:stop - 1] + C[i, 1] * u[1][start - 1:stop - 1])
         y1, y2 = x[i][start - 1], x[i][start - 2]
-        zi = np.stack([tr * y1 - det * y2, -det * y1])  # lfilter's state after y_(start-1), y_(start-2)
-        x[i][start:stop] = lfilter([1.0], a, w, axis=0, zi=zi)[0]
+        zi.append(np.stack([tr * y1 - det * y2, -det * y1]))  # the state after y_(start-1), y_(start-2)
+    # both components follow the same recursion: one pass over their columns side by side
+    y = run(np.ascontiguousarray(np.concatenate(w, axis=1)), -tr, det, np.ascontiguousarray(np.concatenate(zi, axis=1)))
+    n = w[0].shape[1]
+    x[0][start:stop], x[1][start:stop] = y[:, :n], y[:, n:]
+
+
+def second_order_steps(x: np.ndarray, a1: float, a2: float, zi: np.ndarray) -> np.ndarray:
+    """``scipy.signal.lfilter([1.0], [1.0, a1, a2], x, axis=0, zi=zi)[0]`` for ``x`` ``(n, C)`` and ``zi``
+    ``(2, C)``, a step at a time over all columns with lfilter's very operations (its transposed direct
+    form II, the numerator padded with zeros), so the same bits: a few milliseconds for 1,800 frames,
+    without importing ``scipy.signal`` or a compiler."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.empty_like(x)
+    xz = x * 0.0  # x * b1 and x * b2, the numerator's zero coefficients
+    z0 = np.array(zi[0], dtype=np.float64)
+    z1 = np.array(zi[1], dtype=np.float64)
+    t = np.empty_like(z0)
+    for k in range(len(x)):
+        yk = y[k]
+        np.add(z0, x[k], out=yk)  # z0 + 1.0 * x
+        np.add(z1, xz[k], out=z0)
+        np.multiply(yk, a1, out=t)
+        np.subtract(z0, t, out=z0)
+        np.multiply(yk, a2, out=t)
+        np.subtract(xz[k], t, out=z1)
+    return y
 
 
 def smoothness_weight(fps: float, time_scale_s: float) -> float:
