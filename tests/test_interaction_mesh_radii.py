@@ -188,3 +188,87 @@ def test_db_build_corrects_the_fingers_the_file_draws(hand_on_a_ledge, config, d
     build_db([held], tmp_path / "plain", BuildDbOptions())
     same = np.array_equal(load_database(tmp_path / "db").fingers, load_database(tmp_path / "plain").fingers)
     assert same == (deepest_mm == 0.0)
+
+
+def palm_slab(skeleton, hand, half_cm: float, rows: int = 10, cols: int = 8) -> SkinnedMesh:
+    """Two sheets ``half_cm`` either side of the plane of the wrist and the long fingers' first joints,
+    over the palm (from the wrist to the finger bases, between the outermost bases), every vertex
+    skinned fully to the wrist: a palm ``2 * half_cm`` thick."""
+    rest = skeleton.rest_world_xforms()[:, :3, 3]
+    w = rest[skeleton.index(hand.wrist)]
+    b = rest[[c.joints[0] for c in finger_chains(skeleton, hand) if c.finger != "thumb"]]
+    corners = np.vstack([w[None], b])
+    centre = corners.mean(axis=0)
+    normal = np.linalg.svd(corners - centre)[2][2]
+    forward = b.mean(axis=0) - w
+    forward -= normal * (forward @ normal)
+    across = np.cross(normal, forward) / np.linalg.norm(forward)
+    span = (b - w) @ across
+    t = np.linspace(0.05, 0.95, rows)[:, None, None]
+    u = np.linspace(span.min(), span.max(), cols)[None, :, None]
+    sheet = w + t * forward + u * across + ((centre - w) @ normal) * normal
+    pts = np.concatenate([(sheet + side * half_cm * normal).reshape(-1, 3) for side in (1.0, -1.0)])
+    faces = []
+    for base in (0, rows * cols):
+        for r in range(rows - 1):
+            for c in range(cols - 1):
+                i = base + r * cols + c
+                faces += [[i, i + 1, i + cols + 1], [i, i + cols + 1, i + cols]]
+    faces = np.asarray(faces)
+    return SkinnedMesh("palm", pts, np.full(len(faces), 3), faces.reshape(-1),
+                       joint_indices=np.full((len(pts), 1), skeleton.index(hand.wrist)),
+                       joint_weights=np.ones((len(pts), 1)))
+
+
+def test_the_palm_radius_is_half_the_thickness_of_the_palm_the_mesh_draws():
+    sk = humanoid_skeleton()
+    hand = humanoid_handmap(sk)["left"]
+    wrist = sk.joint_names[sk.index(hand.wrist)]
+    measured = mesh_radii(sk, hand, [tube_hand(sk, hand), palm_slab(sk, hand, 0.45)])
+    assert measured[wrist] == pytest.approx(4.5, rel=1e-9)  # mm
+    # vertices the wrist drives beside the palm (the forearm behind it, a thumb pad outside the bases)
+    # do not count
+    slab = palm_slab(sk, hand, 0.45)
+    rest = sk.rest_world_positions()
+    stray = np.concatenate([rest[sk.index(hand.wrist)] - [3.0, 0.0, 0.0] + np.arange(30)[:, None] * [0.0, 0.1, 0.0],
+                            rest[sk.index(hand.wrist)] + [3.0, 0.0, 6.0] + np.arange(30)[:, None] * [0.0, 0.1, 0.0]])
+    both = SkinnedMesh("palm", np.concatenate([slab.points, stray]), slab.face_vertex_counts, slab.face_vertex_indices,
+                       joint_indices=np.full((len(slab.points) + len(stray), 1), sk.index(hand.wrist)),
+                       joint_weights=np.ones((len(slab.points) + len(stray), 1)))
+    assert mesh_radii(sk, hand, [both])[wrist] == pytest.approx(4.5, rel=1e-9)
+    assert wrist not in mesh_radii(sk, hand, [tube_hand(sk, hand)])  # no palm drawn: palm_radius_mm applies
+
+
+@pytest.mark.parametrize("half_mm, config, deeper_mm", [
+    (3.0, {}, None),  # a thin palm clears the block the default 12 mm capsule is in
+    (16.0, {}, 4.0),  # a thick one is 4 mm deeper in than the default
+    (16.0, {"mesh_radii": False}, 0.0),  # the configuration's palm_radius_mm
+    (16.0, {"joint_radii_mm": {"LeftHand": 12.0}}, 0.0),  # the wrist named in the configuration wins
+])
+def test_correct_measures_the_palm_the_file_draws(tmp_path, half_mm, config, deeper_mm):
+    from test_interaction_palm import palm_on_a_block
+
+    from usdhands.formats.io import write_asset
+    from usdhands.jobs.correction import CorrectOptions, correct
+
+    clip, block = palm_on_a_block()
+    sk = clip.skeleton
+    hand = humanoid_handmap(sk)["left"]
+    src = tmp_path / "hand.glb"
+    write_asset(Asset("hand", (sk,), (clip,), (tube_hand(sk, hand), palm_slab(sk, hand, half_mm / 10.0))), src)
+    prop = tmp_path / "block.obj"
+    trimesh.Trimesh(np.asarray(block.vertices) * 0.01, np.asarray(block.faces)).export(prop)  # the .glb reads in metres
+    default = tmp_path / "default.json"
+    default.write_text(json.dumps({"mesh_radii": False}))
+    reference = correct(src, tmp_path / "ref.glb", CorrectOptions(props=(prop,), interaction_config=default))
+    assert reference.penetration_before_mm["max"] > 6.0  # the default 12 mm palm is in the block
+    cfg = tmp_path / "config.json"
+    cfg.write_text(json.dumps(config))
+    result = correct(src, tmp_path / "out.glb", CorrectOptions(props=(prop,), interaction_config=cfg))
+    assert result.chains_corrected == ()  # the fingers are clear: only the palm touches
+    if deeper_mm is None:
+        assert result.penetration_before_mm["max"] == 0.0 and result.unresolved == ()
+    else:
+        assert result.penetration_before_mm["max"] == pytest.approx(reference.penetration_before_mm["max"] + deeper_mm,
+                                                                     abs=0.06)
+        assert result.unresolved

@@ -79,7 +79,8 @@ class InteractionConfig:
     palm_radius_mm : float
         Radius of the palm's capsules (wrist to each long finger's base), mm: about half an
         adult palm's thickness. Measured, never moved (:mod:`usdhands.algorithms.interaction.palm`);
-        ``joint_radii_mm`` naming the wrist joint overrides it.
+        where the file has a mesh skinned to the hand, half the palm's thickness measured on it
+        (:func:`mesh_radii`) replaces it, and ``joint_radii_mm`` naming the wrist joint overrides both.
     ik : str
         ``"opening"``: each chain opens along one path toward its rest pose, distal joints
         first in overlapping ramps, and the least clear opening is the bound (continuous in
@@ -291,6 +292,13 @@ def mesh_radii(skeleton: Skeleton, hand: HandSide, meshes, config: InteractionCo
     modelled as a tube, the tube's radius. Segments with fewer than
     :data:`MESH_RADIUS_MIN_VERTICES` such vertices are left out (the configuration's radius applies).
 
+    The palm's radius (:mod:`~usdhands.algorithms.interaction.palm`: capsules from the wrist to each
+    long finger's first joint) is half the palm's thickness: the median distance from the plane of
+    the wrist and those joints (fitted, in the bind pose) of the vertices the wrist drives over the
+    middle 70% of the way from the wrist to the finger bases, between the outermost bases; it is
+    given under the wrist joint's name, as ``joint_radii_mm`` gives it (left out with fewer than
+    :data:`MESH_RADIUS_MIN_VERTICES` such vertices: ``palm_radius_mm`` applies).
+
     Parameters
     ----------
     skeleton : Skeleton
@@ -325,7 +333,11 @@ def mesh_radii(skeleton: Skeleton, hand: HandSide, meshes, config: InteractionCo
     pts, owner = np.concatenate(pts), np.concatenate(owner)
     bind = skeleton.bind_xforms if skeleton.bind_xforms is not None else skeleton.rest_world_xforms()
     out = {}
-    for chain in finger_chains(skeleton, hand, config):
+    chains = finger_chains(skeleton, hand, config)
+    palm = _palm_half_thickness(pts, owner, bind, skeleton, hand, chains)
+    if palm is not None:
+        out[skeleton.joint_names[skeleton.index(hand.wrist)]] = palm * skeleton.meters_per_unit * 1000.0
+    for chain in chains:
         js = list(chain.joints)
         ends = [bind[j, :3, 3] for j in js] + [bind[js[-1], :3, :3] @ chain.tip_offset + bind[js[-1], :3, 3]]
         for k, j in enumerate(js):
@@ -343,3 +355,32 @@ def mesh_radii(skeleton: Skeleton, hand: HandSide, meshes, config: InteractionCo
             r = float(np.median(np.linalg.norm(q - (a + t[:, None] * ab), axis=1)))
             out[skeleton.joint_names[j]] = r * skeleton.meters_per_unit * 1000.0
     return out
+
+
+def _palm_half_thickness(pts: np.ndarray, owner: np.ndarray, bind: np.ndarray, skeleton: Skeleton, hand: HandSide,
+                         chains: list[FingerChain]) -> float | None:
+    """Half the palm's thickness measured on the vertices the wrist drives, clip units (:func:`mesh_radii`);
+    None where the hand has fewer than two long fingers or the wrist too few vertices over the palm."""
+    wrist = skeleton.index(hand.wrist)
+    bases = [c.joints[0] for c in chains if c.finger != "thumb"]
+    q = pts[owner == wrist]
+    if len(bases) < 2 or len(q) < MESH_RADIUS_MIN_VERTICES:
+        return None
+    w = bind[wrist, :3, 3]
+    b = bind[bases, :3, 3]
+    corners = np.vstack([w[None], b])
+    centre = corners.mean(axis=0)
+    normal = np.linalg.svd(corners - centre)[2][2]  # the plane of the wrist and the finger bases
+    forward = b.mean(axis=0) - w
+    forward -= normal * (forward @ normal)
+    length2 = float(forward @ forward)
+    if length2 <= 0:
+        return None
+    across = np.cross(normal, forward)
+    span = (b - w) @ across
+    t = (q - w) @ forward / length2
+    s = (q - w) @ across
+    q = q[(t > 0.15) & (t < 0.85) & (s >= span.min()) & (s <= span.max())]
+    if len(q) < MESH_RADIUS_MIN_VERTICES:
+        return None
+    return float(np.median(np.abs((q - centre) @ normal)))

@@ -5,7 +5,10 @@ A hand pressed into a table with its fingers curled up off it, or laid on the ch
 correction cannot push it out (the palm's joints are body joints, which it never
 changes), but it is a penetration all the same: the correction's report and ``check``
 measure it with these capsules, one per long finger (index, middle, ring, little) from the
-wrist joint to the finger's first joint, of the configuration's ``palm_radius_mm``.
+wrist joint to the finger's first joint, of the configuration's ``palm_radius_mm``, or half the
+palm's thickness where the file has a mesh skinned to the hand (measured as the fingers' radii
+are: :func:`~usdhands.algorithms.interaction.finger_geometry.mesh_radii`), or the radius
+``joint_radii_mm`` gives the wrist joint.
 
 With ``--self`` a palm is measured against the body but its own upper arm: the elbow joins
 the two, and with the elbow folded (a hand at the shoulder or the head) the wrist end of the
@@ -58,7 +61,7 @@ def palm_depth_mm(world: np.ndarray, skeleton: Skeleton, hand: HandSide, chains:
     depth = np.zeros(T)
     if m == 0:
         return depth
-    radius = cfg.joint_radius_mm(hand.wrist, cfg.palm_radius_mm) * mm
+    radius = cfg.joint_radius_mm(skeleton.joint_names[skeleton.index(hand.wrist)], cfg.palm_radius_mm) * mm
     colliders = colliders.without_parts({f"{hand.side} upper arm"})
     pts = axes.reshape(T, -1, 3)
     frames = np.arange(T)
