@@ -16,6 +16,8 @@ positive outside (trimesh's is the opposite).
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 __all__ = ["MeshProximity"]
@@ -81,7 +83,13 @@ class _Part:
         return np.linalg.norm(gap, axis=-1)
 
     def distance(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        d2, face, closest = self.tree.squared_distance(self.vertices, self.faces, p)
+        if len(p) < SORT_FROM:
+            d2, face, closest = self.tree.squared_distance(self.vertices, self.faces, p)
+        else:  # in Morton order (each point's answer is its own: the same values, fewer cache misses)
+            order = morton_order(p, self.bounds)
+            d2s, fs, cs = self.tree.squared_distance(self.vertices, self.faces, np.ascontiguousarray(p[order]))
+            d2, face, closest = np.empty_like(d2s), np.empty_like(fs), np.empty_like(cs)
+            d2[order], face[order], closest[order] = d2s, fs, cs
         return np.sqrt(np.maximum(d2, 0.0)), np.asarray(face, dtype=np.int64), closest
 
     def inside(self, p: np.ndarray) -> np.ndarray:
@@ -93,6 +101,18 @@ class _Part:
         d, face, closest = self.distance(p)
         if self.winding is not None:
             return np.where(self.winding.winding_number(p) > 0.5, -d, d)
+        if "numba" in sys.modules:  # the same test compiled (_proximity_kernel), where numba is loaded anyway
+            from usdhands.algorithms.interaction._proximity_kernel import closed_shell_signs
+
+            out, rest = closed_shell_signs(p, closest, face, d, self.normals, self.vertices, self.faces,
+                                           self.neighbours, self.flat)
+            if rest.any():
+                out[rest] = np.where(self._parity(p[rest]), -d[rest], d[rest])
+            return out
+        return self._closed_signed(p, d, face, closest)
+
+    def _closed_signed(self, p: np.ndarray, d: np.ndarray, face: np.ndarray, closest: np.ndarray) -> np.ndarray:
+        """Signed distances on a closed shell from the nearest points, in NumPy."""
         # a closed shell: the point is inside iff it lies behind the nearest face, where the
         # nearest point is inside that face; on an edge or a vertex (ambiguous) the fast
         # winding number decides
@@ -126,6 +146,29 @@ class _Part:
             self._fwn = igl.FastWindingNumberBVH()
             self._fwn.init(self.vertices, self.faces, 2)
         return self._fwn.winding_number(np.ascontiguousarray(p)) > 0.5
+
+
+#: Batches of at least this many points are queried in Morton order (sorting costs less than the
+#: tree's cache misses it saves: on the synthesize --props benchmark's 67,577 queries, 2.7 -> 2.2 µs each).
+SORT_FROM = 64
+
+
+def _spread_bits(v: np.ndarray) -> np.ndarray:
+    """The low 10 bits of each of ``v`` (int64) spread two zeros apart (for a 3-D Morton code)."""
+    v = v & 0x3FF
+    v = (v | (v << 16)) & 0x030000FF
+    v = (v | (v << 8)) & 0x0300F00F
+    v = (v | (v << 4)) & 0x030C30C3
+    return (v | (v << 2)) & 0x09249249
+
+
+def morton_order(p: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """The order ``(N,)`` of points ``p`` ``(N, 3)`` along the Z-order curve over ``bounds`` ``(2, 3)``
+    (1,024 cells an axis; points outside take the nearest cell): neighbours in space come together."""
+    lo, hi = bounds
+    q = np.clip((p - lo) * (1023.0 / np.maximum(hi - lo, 1e-300)), 0.0, 1023.0).astype(np.int64)
+    code = _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << 1) | (_spread_bits(q[:, 2]) << 2)
+    return np.argsort(code, kind="stable")
 
 
 def _signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
