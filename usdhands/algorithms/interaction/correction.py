@@ -365,6 +365,7 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     # per chain near a collider, what was measured at each frame: the tests below, the report's depths
     known = {}
     input_angles = {}
+    to_correct = []
     for poser in posers:
         near = _near_frames(poser, colliders, margin)
         if len(near) == 0:
@@ -372,18 +373,29 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         seen = known[poser.chain.name] = ChainDistances(T, len(poser.chain.joints) + 1)
         angles = input_angles[poser.chain.name] = _chain_angles(clip, poser.chain)
         ok = poser.clear(colliders, near, angles[near], margin, resolution, known=seen)
-        if ok.all():
-            continue
+        if not ok.all():
+            to_correct.append((poser, near, ok))
+    smoothing = smooth and cfg.smoothing_s > 0 and T >= 3
+    smoothed = {}
+    if smoothing and to_correct:
+        # every corrected chain's whole curve (the input's own noise too) in one smoother call: the
+        # curves share its gains, each comes out as it would alone
+        curves = [input_angles[p.chain.name].reshape(T, -1) for p, _, _ in to_correct]
+        out_curves = np.split(rts_smooth(np.concatenate(curves, axis=1), clip.fps, cfg.smoothing_s),
+                              np.cumsum([c.shape[1] for c in curves])[:-1], axis=1)
+        smoothed = {p.chain.name: c for (p, _, _), c in zip(to_correct, out_curves)}
+    for poser, near, ok in to_correct:
+        seen = known[poser.chain.name]
+        angles = input_angles[poser.chain.name]
         corrected.append(poser.chain.name)
         n = len(poser.chain.joints)
         lo, hi = poser.chain.limits[..., 0], poser.chain.limits[..., 1]
-        smoothing = smooth and cfg.smoothing_s > 0 and T >= 3
         if smooth:
             # the whole curve: the input's own noise is smoothed too, within the joint limits
             frames = np.arange(T)
             base = angles
             if smoothing:
-                base = rts_smooth(angles.reshape(T, -1), clip.fps, cfg.smoothing_s).reshape(T, n, 3)
+                base = smoothed[poser.chain.name].reshape(T, n, 3)
             base = np.clip(base, lo, hi)
         else:
             frames = near[~ok]
