@@ -105,6 +105,35 @@ def test_candidates_sharing_a_frame_keep_their_own_rows():
         np.testing.assert_array_equal(ok, exact_ok)
 
 
+@pytest.mark.parametrize("case", ["cylinder", "mug"])
+def test_bisections_of_many_chains_in_step_equal_each_alone(case):
+    """The collision term opens every chain's candidates together (ik.least_openings: one query per step
+    for all chains): each chain's openings, resolved frames and query count are those of its own bisection."""
+    from usdhands.algorithms.interaction.ik import least_openings
+
+    if case != "cylinder" and not MUG.exists():
+        pytest.skip("shared assets not present")
+    clip, prop = CASES[case]()
+    hm = humanoid_handmap(clip.skeleton)
+    mm = 0.001 / clip.skeleton.meters_per_unit
+    rng = np.random.default_rng(11)
+    posers = chain_posers(clip, hm, InteractionConfig())
+    frames, bases = [], []
+    for k, poser in enumerate(posers):
+        angles = finger_angles(clip, poser.chain.joints)
+        f = np.sort(rng.choice(clip.num_frames, size=0 if k == 3 else 40))  # one chain with no frames
+        frames.append(f)
+        bases.append(angles[f] + rng.normal(scale=20.0, size=(len(f),) + angles.shape[1:]))
+    cols = colliders_for(clip, prop)
+    alone = [p.least_opening(cols, f, b, 0.3 * mm, 2.0 * mm, iterations=5) for p, f, b in zip(posers, frames, bases)]
+    queries = _queries(cols)
+    cols = colliders_for(clip, prop)
+    together = least_openings(posers, cols, frames, bases, 0.3 * mm, 2.0 * mm, iterations=5)
+    assert _queries(cols) == queries and any((u > 0).any() for u, _ in alone)
+    for (u, ok), (u2, ok2) in zip(alone, together):
+        assert u.tobytes() == u2.tobytes() and ok.tobytes() == ok2.tobytes()
+
+
 def test_a_capsule_proved_clear_by_earlier_distances_costs_no_query():
     clip, prop = _cylinder()
     hm = humanoid_handmap(clip.skeleton)

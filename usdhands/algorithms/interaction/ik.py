@@ -21,7 +21,7 @@ from usdhands.algorithms.interaction.finger_geometry import FingerChain
 from usdhands.algorithms.interaction.known_distances import ChainDistances, joint_cutoffs
 from usdhands.model.rotations import DEFAULT_EULER_ORDER, euler_deg_to_quat, quat_multiply, trs_to_xform
 
-__all__ = ["ChainPoser", "opening_weights"]
+__all__ = ["ChainPoser", "opening_weights", "clear_together", "least_openings"]
 
 
 def opening_weights(u: np.ndarray, n: int) -> np.ndarray:
@@ -281,3 +281,94 @@ class ChainPoser:
             lo = np.where(ok, mid, lo)
             hi = np.where(ok, hi, mid)
         return lo
+
+
+def clear_together(posers: list, colliders, frames: list, angles: list, margin: float,
+                   resolution: float) -> list:
+    """:meth:`ChainPoser.clear` of several chains at once (each with its own frames and poses), with one
+    collider query for all their joints and one clearance search for all their capsules.
+
+    Each capsule's search is its own (its intervals, its queries), so every answer is the one
+    :meth:`ChainPoser.clear` gives the chain alone, bit for bit; only the calls are fewer.
+
+    Returns
+    -------
+    list of (K_i,) bool
+    """
+    parts = []
+    for poser, f, ang in zip(posers, frames, angles):
+        f = np.asarray(f, dtype=np.int64)
+        if len(f) == 0:
+            parts.append(None)
+            continue
+        a, b = poser.capsules(f, ang)
+        n = a.shape[1]
+        need = np.tile(poser.chain.radii + margin, (len(f), 1))
+        joints = np.concatenate([a, b[:, -1:]], axis=1)
+        cut = joint_cutoffs(need, np.linalg.norm(b - a, axis=2))
+        parts.append((f, a, b, n, need, joints, cut))
+    live = [q for q in parts if q is not None]
+    if not live:
+        return [np.zeros(0, dtype=bool) for _ in parts]
+    d_all = colliders.signed_distance(np.concatenate([np.repeat(f, n + 1) for f, _, _, n, _, _, _ in live]),
+                                      np.concatenate([j.reshape(-1, 3) for *_, j, _ in live]),
+                                      np.concatenate([c.reshape(-1) for *_, c in live]))
+    d_split = np.split(d_all, np.cumsum([len(f) * (n + 1) for f, _, _, n, _, _, _ in live])[:-1])
+    ends0, ends1, fr, aa, bb, nn = [], [], [], [], [], []
+    for (f, a, b, n, need, _, _), d in zip(live, d_split):
+        d = d.reshape(len(f), n + 1)
+        ends0.append(d[:, :-1].reshape(-1))
+        ends1.append(d[:, 1:].reshape(-1))
+        fr.append(np.repeat(f, n))
+        aa.append(a.reshape(-1, 3))
+        bb.append(b.reshape(-1, 3))
+        nn.append(need.reshape(-1))
+    lower, upper = axis_clearance(colliders, np.concatenate(fr), np.concatenate(aa), np.concatenate(bb),
+                                  np.concatenate(nn), resolution,
+                                  end_distances=(np.concatenate(ends0), np.concatenate(ends1)))
+    out, at = [], 0
+    for q in parts:
+        if q is None:
+            out.append(np.zeros(0, dtype=bool))
+            continue
+        f, _, _, n, need, _, _ = q
+        k = len(f) * n
+        lo, up = lower[at:at + k].reshape(len(f), n), upper[at:at + k].reshape(len(f), n)
+        at += k
+        out.append(((lo >= need - 0.5 * resolution) & (up >= need)).all(axis=1))
+    return out
+
+
+def least_openings(posers: list, colliders, frames: list, bases: list, margin: float, resolution: float,
+                   iterations: int = 9) -> list:
+    """:meth:`ChainPoser.least_opening` (no IK pose to pass through, nothing remembered) of several chains
+    at once, their bisections in step (:func:`clear_together`): the same answers, bit for bit.
+
+    Returns
+    -------
+    list of (u (K_i,), resolved (K_i,))
+    """
+    frames = [np.asarray(f, dtype=np.int64) for f in frames]
+    u = [np.zeros(len(f)) for f in frames]
+    resolved = [np.ones(len(f), dtype=bool) for f in frames]
+    bad = [~ok for ok in clear_together(posers, colliders, frames, bases, margin, resolution)]
+    idx = [np.nonzero(b)[0] for b in bad]
+    open_ok = clear_together(posers, colliders, [f[i] for f, i in zip(frames, idx)],
+                             [p.angles(b[i], np.ones(len(i))) for p, b, i in zip(posers, bases, idx)],
+                             margin, resolution)
+    for c in range(len(posers)):
+        u[c][idx[c]] = 1.0
+        resolved[c][idx[c][~open_ok[c]]] = False
+        idx[c] = idx[c][open_ok[c]]
+    lo = [np.zeros(len(i)) for i in idx]
+    hi = [np.ones(len(i)) for i in idx]
+    if any(len(i) for i in idx):
+        for _ in range(iterations):
+            mid = [0.5 * (a + b) for a, b in zip(lo, hi)]
+            ok = clear_together(posers, colliders, [f[i] for f, i in zip(frames, idx)],
+                                [p.angles(b[i], m) for p, b, i, m in zip(posers, bases, idx, mid)], margin, resolution)
+            hi = [np.where(o, m, h) for o, m, h in zip(ok, mid, hi)]
+            lo = [np.where(o, low, m) for o, m, low in zip(ok, mid, lo)]
+    for c in range(len(posers)):
+        u[c][idx[c]] = hi[c]
+    return list(zip(u, resolved))

@@ -22,7 +22,7 @@ import numpy as np
 
 from usdhands.algorithms.interaction.correction import chain_posers, rest_branch
 from usdhands.algorithms.interaction.finger_geometry import InteractionConfig
-from usdhands.algorithms.interaction.ik import ChainPoser
+from usdhands.algorithms.interaction.ik import ChainPoser, least_openings
 from usdhands.model.clip import Clip
 from usdhands.model.handmap import HandMap, HandSide
 from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_euler_deg
@@ -179,6 +179,7 @@ class InteractionTerms:
         local = np.array(self.to_local(curves))
         fixed = np.zeros(len(frames), dtype=bool)
         parent_distance = {}  # per parent joint: its distance to the colliders at each input frame
+        todo = []  # (poser, cols, near, base) of each chain some candidate frame may touch
         for poser, cols, reach in self._chains():
             centre = poser.parent_world[frames, :3, 3]
             r = reach + margin
@@ -191,15 +192,18 @@ class InteractionTerms:
                 if parent not in parent_distance:
                     parent_distance[parent] = np.full(self.clip.num_frames, np.nan)
                 known = parent_distance[parent]
-                todo = np.unique(frames[near][np.isnan(known[frames[near]])])
-                if len(todo):
-                    known[todo] = self.colliders.signed_distance(todo, poser.parent_world[todo, :3, 3], r)
+                unknown = np.unique(frames[near][np.isnan(known[frames[near]])])
+                if len(unknown):
+                    known[unknown] = self.colliders.signed_distance(unknown, poser.parent_world[unknown, :3, 3], r)
                 near = near[known[frames[near]] < r]
             if len(near) == 0:
                 continue
             rel = quat_multiply(quat_conjugate(poser.rest_rotations)[None], local[near][:, cols])
-            base = rest_branch(quat_to_euler_deg(rel, poser.order))
-            u, _ = poser.least_opening(self.colliders, frames[near], base, margin, resolution, iterations=5)
+            todo.append((poser, cols, near, rest_branch(quat_to_euler_deg(rel, poser.order))))
+        # the chains' bisections in step: one collider query per step for all of them
+        found = least_openings([t[0] for t in todo], self.colliders, [frames[t[2]] for t in todo],
+                               [t[3] for t in todo], margin, resolution, iterations=5)
+        for (poser, cols, near, base), (u, _) in zip(todo, found):
             moved = u > 0
             if not moved.any():
                 continue
