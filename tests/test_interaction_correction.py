@@ -249,6 +249,31 @@ def test_rts_smoother_on_many_curves_gives_each_its_own_answer_to_the_bit():
         assert together[:, cols].tobytes() == rts_smooth(np.ascontiguousarray(z[:, cols]), 30.0, 0.15).tobytes()
 
 
+def test_principal_bands_are_the_sparse_submatrix_s():
+    """The bounded smoother's banded solves take the principal submatrix's bands gathered from the
+    pentadiagonal matrix's diagonals: equal to slicing the sparse matrix, so the solves are unchanged."""
+    from scipy import sparse
+
+    from usdhands.algorithms.interaction.smoothing import _principal_bands, _second_difference_gram
+
+    rng = np.random.default_rng(9)
+    for T in (3, 4, 7, 60):
+        H = (sparse.diags(rng.uniform(1.0, 10.0, T), format="csr") + 1234.5 * _second_difference_gram(T)).tocsr()
+        bands = (H.diagonal(0), H.diagonal(1), H.diagonal(2))
+        for _ in range(20):
+            idx = np.nonzero(rng.random(T) < rng.uniform(0.2, 1.0))[0]
+            if len(idx) == 0:
+                continue
+            sub = H[idx][:, idx]
+            expected = np.zeros((3, len(idx)))
+            expected[2] = sub.diagonal(0)
+            if len(idx) > 1:
+                expected[1, 1:] = sub.diagonal(1)
+            if len(idx) > 2:
+                expected[0, 2:] = sub.diagonal(2)
+            assert _principal_bands(bands, idx).tobytes() == expected.tobytes()
+
+
 def test_rts_smoother_needs_no_scipy_signal():
     """A correction's smoothing imports neither scipy.signal nor numba (each about 0.3 s of a fresh process)."""
     code = ("import sys, numpy as np\n"

@@ -171,16 +171,22 @@ def _second_difference_gram(T: int) -> sparse.csr_matrix:
     return (D.T @ D).tocsr()
 
 
-def _banded_solve(H: sparse.csr_matrix, rhs: np.ndarray) -> np.ndarray:
-    """Solve ``H x = rhs`` for a symmetric positive-definite matrix of bandwidth 2."""
-    n = H.shape[0]
+def _principal_bands(diagonals: tuple, idx: np.ndarray) -> np.ndarray:
+    """The upper bands ``(3, len(idx))`` (``solveh_banded``'s layout) of the principal submatrix
+    ``H[idx][:, idx]`` of a symmetric pentadiagonal ``H`` (at least 3 x 3) given by its ``diagonals``
+    (0, 1 and 2 above the main one), for sorted ``idx``: the very entries of ``H``, gathered without
+    building the submatrix (scipy's sparse indexing cost more than the solve)."""
+    d0, d1, d2 = diagonals
+    n = len(idx)
     ab = np.zeros((3, n))
-    ab[2] = H.diagonal(0)
-    if n > 1:
-        ab[1, 1:] = H.diagonal(1)
+    ab[2] = d0[idx]
+    first = idx[:-1]
+    gap = idx[1:] - first  # neighbours in the submatrix: H[i, i + 1] or H[i, i + 2], else 0
+    ab[1, 1:] = np.where(gap == 1, d1[np.minimum(first, len(d1) - 1)],
+                         np.where(gap == 2, d2[np.minimum(first, len(d2) - 1)], 0.0))
     if n > 2:
-        ab[0, 2:] = H.diagonal(2)
-    return solveh_banded(ab, rhs)
+        ab[0, 2:] = np.where(idx[2:] - idx[:-2] == 2, d2[np.minimum(idx[:-2], len(d2) - 1)], 0.0)
+    return ab
 
 
 def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iterations: int = 100,
@@ -221,6 +227,7 @@ def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iter
     if target is not None:
         c = c + a * (lower - np.asarray(target, dtype=np.float64))
     room = upper - lower
+    bands = (H.diagonal(0), H.diagonal(1), H.diagonal(2))
     at_lo = np.zeros(T, dtype=bool)
     at_hi = np.zeros(T, dtype=bool)
     y = np.zeros(T)
@@ -230,7 +237,7 @@ def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iter
         if free.any():
             idx = np.nonzero(free)[0]
             rhs = -c[idx] - (H @ y)[idx]
-            y[idx] = _banded_solve(H[idx][:, idx], rhs)
+            y[idx] = solveh_banded(_principal_bands(bands, idx), rhs)
         grad = H @ y + c
         to_lo = free & (y < -1e-12)
         to_hi = free & (y > room + 1e-12)
