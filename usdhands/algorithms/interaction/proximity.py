@@ -67,6 +67,7 @@ class _Part:
         self.tree.init(self.vertices, self.faces)
         self.winding = None
         self._fwn = None
+        self._edges = None  # per face: first corner, edges, their dot products (the side test's, on first use)
         if not closed:
             self.winding = igl.FastWindingNumberBVH()
             self.winding.init(self.vertices, self.faces, 2)
@@ -116,27 +117,46 @@ class _Part:
         # a closed shell: the point is inside iff it lies behind the nearest face, where the
         # nearest point is inside that face; on an edge or a vertex (ambiguous) the fast
         # winding number decides
-        side = np.einsum("ij,ij->i", p - closest, self.normals[face])
-        tri = self.vertices[self.faces[face]]
-        bary = _barycentric(closest, tri)
-        on = bary <= 1e-6
-        decided = ~on.any(axis=1) & (np.abs(side) > 1e-12 * (1.0 + d)) & ~self.flat[face]
+        diff = p - closest
+        side = np.einsum("ij,ij->i", diff, self.normals[face])
+        u, v, w = self._barycentric(closest, face)
+        on0, on1, on2 = u <= 1e-6, v <= 1e-6, w <= 1e-6  # the nearest point on an edge or a corner
+        count = on0.astype(np.int8) + on1 + on2
+        decided = (count == 0) & (np.abs(side) > 1e-12 * (1.0 + d)) & ~self.flat[face]
         inside = side < 0
         # nearest on an edge's inside: the side of the edge's pseudonormal, the sum of its two faces'
         # normals, decides (Baerentzen and Aanaes 2005: exact for a closed, oriented manifold edge)
-        edge = (on.sum(axis=1) == 1) & (d > 0)
-        if edge.any():
+        edge = np.nonzero((count == 1) & (d > 0))[0]
+        if len(edge):
             f = face[edge]
-            g = self.neighbours[f, np.argmax(on[edge], axis=1)]
-            s = np.einsum("ij,ij->i", p[edge] - closest[edge], self.normals[f] + self.normals[g])
+            g = self.neighbours[f, np.where(on0[edge], 0, np.where(on1[edge], 1, 2))]  # across that edge
+            s = np.einsum("ij,ij->i", diff[edge], self.normals[f] + self.normals[g])
             sure = (np.abs(s) > 1e-12 * (1.0 + d[edge])) & ~self.flat[f] & ~self.flat[g]
-            idx = np.nonzero(edge)[0][sure]
+            idx = edge[sure]
             decided[idx] = True
             inside[idx] = s[sure] < 0
         rest = ~decided & (d > 0)
         if rest.any():
             inside[rest] = self._parity(p[rest])
         return np.where(inside, -d, d)
+
+    def _barycentric(self, x: np.ndarray, face: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The columns of :func:`_barycentric` of points ``x`` ``(N, 3)`` in faces ``face`` ``(N,)``, from the
+        faces' edges and their products computed once (the same values: the same operations, gathered)."""
+        if self._edges is None:
+            tri = self.vertices[self.faces]
+            e0, e1 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+            d00, d01, d11 = (np.einsum("ij,ij->i", e0, e0), np.einsum("ij,ij->i", e0, e1),
+                             np.einsum("ij,ij->i", e1, e1))
+            self._edges = (tri[:, 0], e0, e1, d00, d01, d11, d00 * d11 - d01 * d01)
+        corner, e0, e1, d00, d01, d11, den = (a[face] for a in self._edges)
+        r = x - corner
+        d20 = np.einsum("ij,ij->i", r, e0)
+        d21 = np.einsum("ij,ij->i", r, e1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            v = np.where(den > 0, (d11 * d20 - d01 * d21) / den, -1.0)
+            w = np.where(den > 0, (d00 * d21 - d01 * d20) / den, -1.0)
+        return 1.0 - v - w, v, w
 
     def _parity(self, p: np.ndarray) -> np.ndarray:
         """Inside test by the fast winding number (its hierarchy built on first use), for the ambiguous points."""
