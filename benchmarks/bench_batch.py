@@ -27,7 +27,8 @@ cores take from the clips. Two workers can reach at most ``2 / (1 + overhead / c
 the rate of one worker whose overhead runs on the other core: the line "bound" prints it.
 The running cluster is started with the settings ``batch`` gives its own LocalCluster
 (``usdhands.jobs.batch.QUIET_LOCAL_CLUSTER``, as environment variables of those processes only),
-as docs/pipeline.md advises for a farm.
+and its workers' malloc trim threshold at 1 GiB instead of Dask's 64 KiB (a Dask config file of
+those processes), as docs/pipeline.md advises for a farm.
 
 Run: ``python benchmarks/bench_batch.py [--clips 200] [--baseline 20]``
 """
@@ -194,6 +195,12 @@ def running_dask_cluster(workers: int, folder: Path):
     # the settings batch gives its LocalCluster, for these processes only (docs/pipeline.md: a farm's)
     env = dict(os.environ, **{"DASK_" + key.upper().replace(".", "__").replace("-", "_"): str(value)
                               for key, value in QUIET_LOCAL_CLUSTER.items()})
+    # Dask's MALLOC_TRIM_THRESHOLD_ (64 KiB) overridden in a config file (an environment variable's name
+    # would be lower-cased, and Dask's own value cannot be removed, only replaced): docs/pipeline.md
+    (folder / "dask-config").mkdir(exist_ok=True)
+    (folder / "dask-config" / "batch-workers.yaml").write_text(
+        "distributed:\n  nanny:\n    pre-spawn-environ:\n      MALLOC_TRIM_THRESHOLD_: 1073741824\n")
+    env["DASK_CONFIG"] = str(folder / "dask-config")
     with open(folder / "dask.log", "w") as log:
         procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port",
                                    str(port), "--no-dashboard"], stdout=log, stderr=log, cwd=folder, env=env)]

@@ -1,6 +1,7 @@
 """A pipeline's own batch job for the tests: ``convert``, then ``<output>.worker.json`` beside the
 output, saying how the Dask worker that ran it is set up (its periodic callbacks, the settings
-that batch's LocalCluster changes, as that worker's process sees them)."""
+that batch's LocalCluster changes, as that worker's process sees them, and the malloc trim threshold
+in its environment)."""
 
 from __future__ import annotations
 
@@ -22,5 +23,6 @@ def convert_and_describe_worker(source, output, options):
     worker = get_worker()
     Path(str(output) + ".worker.json").write_text(json.dumps({
         "pid": os.getpid(), "callbacks": sorted(worker.periodic_callbacks),
-        "settings": {key: dask.config.get(key) for key in SETTINGS}}))
+        "settings": {key: dask.config.get(key) for key in SETTINGS},
+        "malloc_trim_threshold": os.environ.get("MALLOC_TRIM_THRESHOLD_")}))
     return result

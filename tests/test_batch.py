@@ -93,13 +93,15 @@ def test_dask_local_cluster_runs_without_profiler_and_monitors_and_the_callers_c
         clips, tmp_path, processes):
     """batch's LocalCluster (worker processes, as ``--scheduler local`` makes them, or threads of this
     process) has no statistical profiler and slower health ticks and monitors (their CPU is what 2
-    workers on 2 cores cannot spare); the outputs are the job's own; the caller's Dask config is as
-    it was, also while the clips run (a worker thread of this process reads it then)."""
+    workers on 2 cores cannot spare); a worker process is started without Dask's MALLOC_TRIM_THRESHOLD_
+    (2,900 page faults a synthesized clip instead of 8); the outputs are the job's own; the caller's Dask
+    config is as it was, also while the clips run (a worker thread of this process reads it then), and
+    so is its environment (the nannies, objects of this process, write their workers' variables into it)."""
     dask = pytest.importorskip("dask")
     pytest.importorskip("distributed")
     from batch_worker_probe import SETTINGS
 
-    before = {key: dask.config.get(key) for key in SETTINGS}
+    before, environ = {key: dask.config.get(key) for key in SETTINGS}, dict(os.environ)
     assert before["distributed.worker.profile.enabled"] is True  # Dask's default: the test sees a change
     out = tmp_path / "out"
     report = run_batch([clips / "ok_00.glb", clips / "ok_01.glb"], BatchOptions(
@@ -112,11 +114,13 @@ def test_dask_local_cluster_runs_without_profiler_and_monitors_and_the_callers_c
         worker = json.loads((out / f"{name}.glb.worker.json").read_text())
         if processes:  # a worker process of its own, set up by its nanny with the settings
             assert worker["pid"] != os.getpid() and worker["settings"] == batch.QUIET_LOCAL_CLUSTER
+            assert worker["malloc_trim_threshold"] is None
         else:  # a thread of this process, made with the settings; this process's config is Dask's own
             assert worker["pid"] == os.getpid() and worker["settings"] == before
         assert "profile" not in worker["callbacks"] and "profile-cycle" not in worker["callbacks"]
         assert {"heartbeat", "tick", "monitor"} <= set(worker["callbacks"])  # the rest of the worker as usual
     assert {key: dask.config.get(key) for key in SETTINGS} == before
+    assert dict(os.environ) == environ
 
 
 def test_inputs_from_a_list_file_and_check_outputs(clips, tmp_path, capsys):
