@@ -37,7 +37,11 @@ The bare baselines, per format (``bare_read_*``, ``bare_write_*``):
   hierarchy and turns every rotation channel's Euler angles into quaternions: ``np.cos``
   and ``np.sin`` of the half angles alone take about 14% of the loadtxt time of 10,000
   frames x 65 joints); writing: ``np.savetxt`` of the same numbers with ``%.6f`` (usdhands
-  also turns the quaternions into Euler angles and writes the hierarchy).
+  also turns the quaternions into Euler angles and writes the hierarchy). Two reading
+  rows: ``read``, the reader of a process where numba runs (its compiled motion parser
+  and axis products: every read once a kernel of the package has run or 128 MB of BVH
+  motion were read), and ``read.np``, NumPy alone (``np.loadtxt`` and the NumPy Euler
+  conversion: what a fresh process reads its first files with, numba not imported).
 
 usdhands does more than each baseline (hierarchy, rest poses, unit and axis
 conversion, quaternion normalisation, Euler conversions, checks), so the ratios are
@@ -341,8 +345,24 @@ def bench_file(fmt: str, source: Path, asset, folder: Path, repeat: int) -> list
         clear_decoded_cache()  # every read decodes its glTF JSON, as a first read does
         reader.read(source)
 
-    t = medians(repeat, {"ours": ours_read, "bare": lambda: globals()[f"bare_read_{fmt}"](source)})
-    rows.insert(0, ("read", t["ours"], t["bare"]))
+    if fmt != "bvh":
+        t = medians(repeat, {"ours": ours_read, "bare": lambda: globals()[f"bare_read_{fmt}"](source)})
+        rows.insert(0, ("read", t["ours"], t["bare"]))
+        return rows
+    import usdhands.formats.bvh as bvh
+
+    def bvh_read(compiled: bool):
+        def read():
+            bvh.USE_COMPILED = compiled
+            try:
+                reader.read(source)
+            finally:
+                bvh.USE_COMPILED = None
+        return read
+
+    bvh_read(True)()  # the kernels loaded (compiled on a first run), not timed
+    t = medians(repeat, {"compiled": bvh_read(True), "numpy": bvh_read(False), "bare": lambda: bare_read_bvh(source)})
+    rows[:0] = [("read", t["compiled"], t["bare"]), ("read.np", t["numpy"], t["bare"])]
     return rows
 
 

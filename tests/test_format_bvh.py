@@ -255,6 +255,7 @@ def test_not_a_number(tmp_path):
     (lambda t: t.replace("HIERARCHY", "HIERARCHIE"), "line 1: expected 'HIERARCHY', found 'HIERARCHIE'"),
     (lambda t: t.split("MOTION")[0], "line 20: no MOTION section"),
     (lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0"), "line 23: expected a positive frame time, found '0'"),
+    (lambda t: t.replace("CHANNELS 3", "CHANNELS \u00b2", 1), "line 13: expected a channel count, found '\u00b2'"),
 ])
 def test_malformed_hierarchy(tmp_path, edit, message):
     p = tmp_path / "bad.bvh"
@@ -521,7 +522,7 @@ def test_written_euler_angles_match_scipy_as_euler(tmp_path, order):
 
 
 def _bvh_variants(text: str):
-    """Well-formed and broken variants of one BVH text: what the streamed reader must read alike or hand over."""
+    """Well-formed and broken variants of one BVH text: what the fast reader must read alike or hand over."""
     head, motion = text.split("MOTION\n", 1)
     frames_line, time_line, *rows = motion.splitlines()
     yield "as is", text
@@ -544,8 +545,8 @@ def _bvh_variants(text: str):
     yield "no motion", head
 
 
-def test_streamed_reading_equals_the_line_by_line_reading(tmp_path, sample_assets, monkeypatch):
-    """parse_bvh's streamed fast path gives what reading the whole text line by line gives, or hands over."""
+def test_fast_reading_equals_the_line_by_line_reading(tmp_path, sample_assets, monkeypatch):
+    """parse_bvh's fast path gives what reading the whole text line by line gives, or hands over."""
     import usdhands.formats.bvh as bvh_module
 
     from conftest import SHARED_ASSETS
@@ -561,7 +562,7 @@ def test_streamed_reading_equals_the_line_by_line_reading(tmp_path, sample_asset
             for streamed in (True, False):
                 with monkeypatch.context() as m:
                     if not streamed:
-                        m.setattr(bvh_module, "_parse_bvh_streamed", lambda path: None)
+                        m.setattr(bvh_module, "_parse_bvh_fast", lambda path: None)
                     try:
                         results.append(parse_bvh(p))
                     except AssetReadError as e:
@@ -578,7 +579,7 @@ def test_streamed_reading_equals_the_line_by_line_reading(tmp_path, sample_asset
             outcomes.append(isinstance(slow, str))
     assert 4 < sum(outcomes) < len(outcomes) - 10  # both readable and broken variants were tried
     streamed = []
-    monkeypatch.setattr(bvh_module, "_parse_bvh_streamed",
-                        lambda path, f=bvh_module._parse_bvh_streamed: streamed.append(f(path)) or streamed[-1])
+    monkeypatch.setattr(bvh_module, "_parse_bvh_fast",
+                        lambda path, f=bvh_module._parse_bvh_fast: streamed.append(f(path)) or streamed[-1])
     parse_bvh(sources[0])
-    assert streamed[-1] is not None  # a well-formed file takes the streamed path
+    assert streamed[-1] is not None  # a well-formed file takes the fast path

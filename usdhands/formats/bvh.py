@@ -186,7 +186,7 @@ def parse_bvh(path: str | os.PathLike) -> BvhFile:
         Naming the line of the first problem.
     """
     path = Path(path)
-    fast = _parse_bvh_streamed(path)
+    fast = _parse_bvh_fast(path)
     if fast is not None:
         return fast
     try:
@@ -209,73 +209,237 @@ def parse_bvh(path: str | os.PathLike) -> BvhFile:
 
 #: Line breaks of ``str.splitlines`` other than ``\n`` and ``\r`` (which an open text file turns into ``\n``).
 _OTHER_LINE_BREAKS = re.compile("[\x0b\x0c\x1c\x1d\x1e\x85\u2028\u2029]")
+_MOTION_WORD = re.compile(rb"(?i)motion")
+#: Candidate ``MOTION`` words looked at before the fast path hands over (a hierarchy full of joints
+#: named "motion..."; the slow path then finds the line).
+_MOTION_CANDIDATES = 8
 
 
-def _parse_bvh_streamed(path: Path) -> BvhFile | None:
-    """:func:`parse_bvh` of a well-formed file, reading the motion values straight from the open file.
+def _is_motion_line(line: str) -> bool:
+    s = line.strip().upper()
+    return s == "MOTION" or s.startswith("MOTION ")
 
-    The hierarchy and the motion header are read line by line; ``np.loadtxt`` then
-    reads the rest of the open file (not the whole text decoded and split into lines
-    first, which cost a quarter of a read of 10,000 frames). None whenever anything is
+
+def _head_of(data: bytes) -> tuple[list[str], int] | None:
+    """The lines up to and including the ``MOTION`` line, and the offset of the byte after that line.
+
+    As :func:`parse_bvh` splits the decoded text (UTF-8, bad bytes replaced; ``\n``,
+    ``\r\n`` and ``\r`` end lines; a leading byte order mark dropped), or None when the head
+    holds other line breaks or the ``MOTION`` line is not found among the first candidates.
+    """
+    for k, m in enumerate(_MOTION_WORD.finditer(data)):
+        if k == _MOTION_CANDIDATES:
+            return None
+        end = m.end()
+        nl, cr = data.find(b"\n", end), data.find(b"\r", end)
+        end = len(data) if nl < 0 and cr < 0 else min(x for x in (nl, cr) if x >= 0)
+        text = data[:end].decode("utf-8", errors="replace")
+        if _OTHER_LINE_BREAKS.search(text):
+            return None
+        lines = text.splitlines()
+        if not lines or not _is_motion_line(lines[-1]):
+            continue  # "motion" inside another line (a joint's name)
+        lines[0] = lines[0].removeprefix("\ufeff")
+        if not data[:end].isascii() and any(_is_motion_line(line) for line in lines[:-1]):
+            return None  # an earlier line the slow path takes ("motıon": non-ASCII letters upper-cased)
+        after = end + (2 if data[end:end + 2] == b"\r\n" else 1 if end < len(data) else 0)
+        return lines, after
+    return None
+
+
+def _header_lines(data: bytes, pos: int) -> tuple[list[str], int] | None:
+    """The two non-blank lines after ``MOTION`` (whitespace runs as one space) and the offset after them.
+
+    None where a line there ends with a lone ``\r`` or holds another line break.
+    """
+    header = []
+    while len(header) < 2:
+        if pos >= len(data):
+            return None
+        nl = data.find(b"\n", pos)
+        nl = len(data) if nl < 0 else nl
+        raw = data[pos:nl].removesuffix(b"\r")
+        pos = nl + 1
+        if b"\r" in raw:
+            return None
+        line = raw.decode("utf-8", errors="replace")
+        if _OTHER_LINE_BREAKS.search(line):
+            return None
+        if line.strip():
+            header.append(" ".join(line.split()))
+    return header, min(pos, len(data))
+
+
+def _parse_bvh_fast(path: Path) -> BvhFile | None:
+    """:func:`parse_bvh` of a well-formed file, from its bytes.
+
+    The head (hierarchy and motion header) is decoded and split into lines; the motion
+    values are read from the bytes after the ``Frame Time`` line by the compiled parser
+    (:func:`_motion_from_bytes`), else by ``np.loadtxt``. None whenever anything is
     unusual (an unreadable file, other line breaks in the head, a header or motion line
     that is not as expected): :func:`parse_bvh` then reads the file its slower way and
     names the problem.
     """
     try:
-        f = open(path, encoding="utf-8", errors="replace")
+        data = path.read_bytes()
     except OSError:
         return None
-    with f:
-        lines: list[str] = []
-        motion_line = None
-        for line in f:
-            line = line[:-1] if line.endswith("\n") else line
-            if _OTHER_LINE_BREAKS.search(line):
-                return None
-            if not lines:
-                line = line.removeprefix("\ufeff")
-            if line.strip().upper() == "MOTION" or line.strip().upper().startswith("MOTION "):
-                motion_line = len(lines)
-                lines.append(line)
-                break
-            lines.append(line)
-        if motion_line is None:
-            return None
-        header = []
-        for line in f:
-            line = line[:-1] if line.endswith("\n") else line
-            if _OTHER_LINE_BREAKS.search(line):
-                return None
-            if not line.strip():
-                continue
-            header.append(" ".join(line.split()))
-            if len(header) == 2:
-                break
-        if len(header) < 2 or not header[0].lower().startswith("frames:") \
-                or not header[1].lower().startswith("frame time:"):
-            return None
-        try:
-            frames = int(header[0][len("Frames:"):].strip())
-            frame_time = float(header[1][len("Frame Time:"):].strip())
-        except ValueError:
-            return None
-        if frames < 0 or not (np.isfinite(frame_time) and MIN_FRAME_TIME_S <= frame_time <= MAX_FRAME_TIME_S):
-            return None
-        try:
-            joints = _parse_hierarchy(lines[:motion_line], path)
-        except AssetReadError:
-            return None
-        C = sum(len(j.channels) for j in joints)
-        if C == 0 or frames == 0:
-            return None
-        values = _motion_values(f, C)  # the rest of the open file
+    found = _head_of(data)
+    if found is None:
+        return None
+    lines, pos = found
+    found = _header_lines(data, pos)
+    if found is None:
+        return None
+    header, pos = found
+    if not header[0].lower().startswith("frames:") or not header[1].lower().startswith("frame time:"):
+        return None
+    try:
+        frames = int(header[0][len("Frames:"):].strip())
+        frame_time = float(header[1][len("Frame Time:"):].strip())
+    except ValueError:
+        return None
+    if frames < 0 or not (np.isfinite(frame_time) and MIN_FRAME_TIME_S <= frame_time <= MAX_FRAME_TIME_S):
+        return None
+    head = lines[:-1]
+    joints = _parse_hierarchy_fast(head)
+    if joints is None:
+        return None
+    C = sum(len(j.channels) for j in joints)
+    if C == 0 or frames == 0:
+        return None
+    values = _motion_from_bytes(data, pos, C, frames)
     if values is None:
         return None
     if len(values) == frames + 1 and not values[0].any():
         values = values[1:]  # the Leap Motion rest line (see _parse_motion)
     if len(values) != frames:
         return None
-    return BvhFile(joints, "\n".join(lines[:motion_line]) + "\n", frame_time, values)
+    return BvhFile(joints, "\n".join(head) + "\n", frame_time, values)
+
+
+#: Motion text (bytes) a process reads with ``np.loadtxt`` before it starts the compiled reader
+#: (:mod:`usdhands.formats._bvh_kernel`) on its own. numba's import and first kernel cost about
+#: 0.55 s of CPU (measured); the compiled reader saves about 5 ns a byte (parsing and the Euler
+#: conversion: 10,000 frames x 65 joints, 42 MB, 0.36 -> 0.21 s): paid back after about 110 MB.
+#: Where a kernel of the package already runs in the process (:func:`usdhands.jit.kernels_running`)
+#: the reader's own kernels load in a few milliseconds and are used from the first file.
+COMPILED_AFTER_BYTES = 128_000_000
+#: ``True``: the compiled reader always; ``False``: never (NumPy alone); ``None``: as above.
+USE_COMPILED: bool | None = None
+_motion_bytes_read = 0
+
+
+def _kernels():
+    """:mod:`usdhands.formats._bvh_kernel` when this process reads with it (see COMPILED_AFTER_BYTES), else None."""
+    if USE_COMPILED is False:
+        return None
+    if USE_COMPILED is None and _motion_bytes_read < COMPILED_AFTER_BYTES:
+        from usdhands.jit import kernels_running
+
+        if not kernels_running():
+            return None
+    from usdhands.formats import _bvh_kernel
+
+    return _bvh_kernel
+
+
+def _motion_from_bytes(data: bytes, pos: int, C: int, frames: int) -> np.ndarray | None:
+    """The motion values ``(T, C)`` float64 of ``data[pos:]``, or None where they are not ``C`` finite numbers a line.
+
+    The compiled parser (:mod:`usdhands.formats._bvh_kernel`, the same numbers) when the
+    process uses it and it can read the text; ``np.loadtxt`` of the lines otherwise.
+    At most ``frames + 1`` rows (the Leap Motion rest line): more is handed back.
+    """
+    global _motion_bytes_read
+    _motion_bytes_read += len(data) - pos
+    kernel = _kernels()
+    if kernel is not None:
+        # a row of C numbers takes at least 2 C bytes with its line break: at most 4 bytes of floats a byte read
+        rows = min(frames + 1, (len(data) - pos + 1) // (2 * C))
+        out = np.empty((rows, C))
+        got = kernel.parse_rows(np.frombuffer(data, np.uint8), pos, C, out, kernel.POW10)
+        if got >= 0:
+            return out[:got]
+    text = data[pos:].decode("utf-8", errors="replace")
+    if "\r" in text:
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return _motion_values(text.split("\n"), C)
+
+
+def _parse_hierarchy_fast(head: list[str]) -> list[BvhJoint] | None:
+    """:func:`_parse_hierarchy` of a hierarchy laid out one statement a line, or None.
+
+    Every ``ROOT``/``JOINT``/``End Site``, ``{``, ``}``, ``OFFSET x y z`` and
+    ``CHANNELS n ...`` on a line of its own (braces alone on theirs), as every exporter
+    writes them: the same joints as the token-by-token parser, without a method call per
+    token. Anything else (a brace beside a word, a statement over two lines, a
+    mistake) gives None, and the token parser reads the file and names the problem.
+    """
+    rows = [(i, parts) for i, line in enumerate(head, 1) if (parts := line.split())]
+    if not rows or len(rows[0][1]) != 1 or rows[0][1][0].upper() != "HIERARCHY":
+        return None
+    joints: list[BvhJoint] = []
+    names: set[str] = set()
+    stack: list[int] = []  # the open joints
+    k, n = 1, len(rows)
+    while k < n:
+        line, parts = rows[k]
+        word = parts[0]
+        if word == "}" and len(parts) == 1:
+            if not stack:
+                return None
+            stack.pop()
+            k += 1
+            continue
+        kw = word.upper()
+        if not stack:
+            if kw != "ROOT":
+                return None
+        elif kw not in ("JOINT", "END") or joints[stack[-1]].end_site:
+            return None
+        if kw == "END":
+            if len(parts) != 2 or parts[1].lower() != "site":
+                return None
+            pname = joints[stack[-1]].name
+            name = pname + END_SUFFIX
+            m = 1
+            while name in names:
+                name = f"{pname}{END_SUFFIX}{m}"
+                m += 1
+            end = True
+        else:
+            name = " ".join(parts[1:])
+            if not name or "{" in name or "}" in name or name in names:
+                return None
+            end = False
+        if k + 2 >= n or rows[k + 1][1] != ["{"]:
+            return None
+        offset = rows[k + 2][1]
+        if len(offset) != 4 or offset[0].lower() != "offset":
+            return None
+        try:
+            xyz = np.array([float(offset[1]), float(offset[2]), float(offset[3])])
+        except ValueError:
+            return None
+        names.add(name)
+        joint = BvhJoint(name, stack[-1] if stack else -1, xyz, [], end, line)
+        k += 3
+        if not end and k < n and rows[k][1][0].upper() == "CHANNELS":
+            chans = rows[k][1]
+            count = chans[1] if len(chans) > 1 else ""
+            if not (count.isascii() and count.isdigit()) or len(chans) != 2 + int(count):
+                return None
+            for c in chans[2:]:
+                if c.lower() not in _CHANNELS:
+                    return None
+                joint.channels.append(c[0].upper() + c[1:].lower())
+            k += 1
+        stack.append(len(joints))
+        joints.append(joint)
+    if stack or not joints:
+        return None
+    return joints
 
 
 def _parse_hierarchy(head: list[str], path: Path) -> list[BvhJoint]:
@@ -356,7 +520,7 @@ def _parse_joint_head(tok: _Tokens, joints: list, names: set, parent: int) -> tu
     if not end and tok.peek()[0] is not None and tok.peek()[0].upper() == "CHANNELS":
         tok.next("CHANNELS")
         t, cline = tok.next("a channel count")
-        if not t.isdigit():
+        if not (t.isascii() and t.isdigit()):  # "²" is a digit to str.isdigit, not to int()
             tok.error(cline, f"expected a channel count, found {t!r}")
         n = int(t)
         for _ in range(n):
@@ -505,10 +669,10 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     rot = np.empty((T, J, 4))  # arrays that own their memory: the clip keeps them (see below)
     trans = np.empty((T, J, 3))
     col = 0
-    groups: dict[tuple, list] = {}  # rotation axes -> [(joint, columns)]
+    rjoint, rfirst, rcount, raxes, rcols = [], [], [], [], []  # rotation channels: joint after joint
     moved = ([], [], [])  # position channels: joint, axis, column
     for k, j in enumerate(bvh.joints):
-        raxes, rcols = [], []
+        first = len(rcols)
         for c in j.channels:
             kind, axis = _CHANNELS[c.lower()]
             if kind == "p":
@@ -518,8 +682,10 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
                 raxes.append(axis)
                 rcols.append(col)
             col += 1
-        if raxes:
-            groups.setdefault(tuple(raxes), []).append((k, rcols))
+        if len(rcols) > first:
+            rjoint.append(k)
+            rfirst.append(first)
+            rcount.append(len(rcols) - first)
     flat = trans.reshape(T, 3 * J)  # column 3k + axis: joint k's translation along axis
     dest = 3 * np.array(moved[0], dtype=np.int64) + np.array(moved[1], dtype=np.int64)
     if np.array_equal(dest, np.arange(3 * J)):  # every joint X, Y, Z: one gather, no offsets under it
@@ -528,27 +694,65 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
         trans[:] = offsets
         if moved[0]:  # one fancy assignment; a channel given twice: the last one wins, as in the file order
             flat[:, dest] = np.take(bvh.values, moved[2], axis=1)
-    still = np.setdiff1d(np.arange(J), [k for members in groups.values() for k, _ in members])
-    if still.size:
-        rot[:, still] = quat_identity()  # joints without rotation channels
-    if T:
-        for axes, members in groups.items():
-            ks = [k for k, _ in members]
-            everyone = ks == list(range(J))
-            cols = np.array([c for _, c in members])  # (Jg, n)
-            step = max(1, _ROTATIONS_PER_CHUNK // len(ks))  # frames at a time: the gathered angles stay in cache
-            for t in range(0, T, step):
-                q = euler_channels_to_quat(np.take(bvh.values[t:t + step], cols, axis=1), axes)
-                if everyone:
-                    rot[t:t + step] = q
-                else:
-                    rot[t:t + step, ks] = q
+    if len(rjoint) < J:
+        rotated = set(rjoint)
+        rot[:, [k for k in range(J) if k not in rotated]] = quat_identity()  # joints without rotation channels
+    if T and rjoint:
+        kernel = _kernels()
+        if kernel is not None:
+            _rotations_compiled(kernel, bvh.values, rjoint, rfirst, rcount, raxes, rcols, rot)
+        else:
+            _rotations_numpy(bvh.values, rjoint, rfirst, rcount, raxes, rcols, rot)
     rot.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
     trans.setflags(write=False)
     clip = Clip(sk, _fps(bvh.frame_time), rot, trans, name=path.stem)
     if fps is not None and T:
         clip = clip.resample(fps)
     return Asset(str(path), (sk,), (clip,), ())
+
+
+def _rotations_numpy(values: np.ndarray, rjoint: list, rfirst: list, rcount: list, raxes: list, rcols: list,
+                     rot: np.ndarray) -> None:
+    """Fill ``rot (T, J, 4)`` with the rotations of the rotation channels of ``values (T, C)``.
+
+    Joint ``rjoint[g]`` has channels ``rfirst[g] .. rfirst[g] + rcount[g] - 1`` of the lists
+    ``raxes`` (0 X, 1 Y, 2 Z) and ``rcols`` (columns of ``values``). Joints with the same
+    axes are converted together, a chunk of frames at a time (the gathered angles stay in cache).
+    """
+    T, J = rot.shape[:2]
+    groups: dict[tuple, list] = {}  # rotation axes -> [(joint, columns)]
+    for k, f, n in zip(rjoint, rfirst, rcount):
+        groups.setdefault(tuple(raxes[f:f + n]), []).append((k, rcols[f:f + n]))
+    for axes, members in groups.items():
+        ks = [k for k, _ in members]
+        everyone = ks == list(range(J))
+        cols = np.array([c for _, c in members])  # (Jg, n)
+        step = max(1, _ROTATIONS_PER_CHUNK // len(ks))
+        for t in range(0, T, step):
+            q = euler_channels_to_quat(np.take(values[t:t + step], cols, axis=1), axes)
+            if everyone:
+                rot[t:t + step] = q
+            else:
+                rot[t:t + step, ks] = q
+
+
+def _rotations_compiled(kernel, values: np.ndarray, rjoint: list, rfirst: list, rcount: list, raxes: list,
+                        rcols: list, rot: np.ndarray) -> None:
+    """:func:`_rotations_numpy` with the axis products in one compiled pass (the same numbers to the bit).
+
+    The half angles' cosines and sines are NumPy's, as in the twin, a chunk of frames at
+    a time; :func:`usdhands.formats._bvh_kernel.axis_products` multiplies the axis
+    rotations of every joint and writes them time-major into ``rot``.
+    """
+    T = rot.shape[0]
+    cols = np.array(rcols, dtype=np.int64)
+    args = (np.array(rfirst, dtype=np.int64), np.array(rcount, dtype=np.int64), np.array(raxes, dtype=np.int64),
+            np.array(rjoint, dtype=np.int64), kernel.PERM, kernel.SIGN, rot)
+    step = max(1, _ROTATIONS_PER_CHUNK // len(cols))
+    for t in range(0, T, step):
+        half = np.radians(np.take(values[t:t + step], cols, axis=1))
+        half *= 0.5
+        kernel.axis_products(np.cos(half), np.sin(half), *args, t)
 
 
 def euler_channels_to_quat(angles_deg: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
