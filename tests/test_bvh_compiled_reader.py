@@ -4,6 +4,7 @@ token-by-token reader (real files, variants, mutated bytes), and when the proces
 
 from __future__ import annotations
 
+import math
 import os
 import random
 import re
@@ -100,33 +101,46 @@ def test_parse_rows_lines_like_loadtxt():
         assert _kernel_read(bad, 3, 3) is None, bad
 
 
-def _rotation_layout(rng, joints: int):
-    """Random channel groups of 1 to 4 rotation axes (repeats included) over ``joints`` joints."""
-    rjoint, rfirst, rcount, raxes = [], [], [], []
-    for k in sorted(rng.choice(joints, size=max(1, joints - 2), replace=False).tolist()):
-        n = int(rng.integers(1, 5))
-        rjoint.append(k)
-        rfirst.append(len(raxes))
-        rcount.append(n)
-        raxes += rng.integers(0, 3, n).tolist()
-    return rjoint, rfirst, rcount, raxes
+def _libm_trig(half: np.ndarray) -> bool:
+    """Whether NumPy's float64 cos and sin of ``half`` are the C library's (math.cos, math.sin), as on
+    x86-64 with NumPy 2: the compiled conversion's numbers are then NumPy's to the bit."""
+    flat = half.ravel()
+    return np.cos(flat).tobytes() == np.array([math.cos(x) for x in flat]).tobytes() and \
+        np.sin(flat).tobytes() == np.array([math.sin(x) for x in flat]).tobytes()
 
 
-def test_compiled_axis_products_equal_the_numpy_conversion_to_the_bit():
+def assert_same_rotations(ours: np.ndarray, twin: np.ndarray, angles_deg: np.ndarray) -> None:
+    """Equal to the bit where NumPy's trigonometry is the C library's; else within 1e-15 (an ulp or two)."""
+    if _libm_trig(np.radians(angles_deg) * 0.5):
+        assert ours.tobytes() == twin.tobytes()
+    else:
+        assert np.abs(ours - twin).max() <= 1e-15
+
+
+def test_compiled_clip_arrays_equal_the_numpy_conversion(monkeypatch):
+    """Random hierarchies of random channels (0 to 6 a joint, any order, repeats: rotation axes
+    given twice, a position channel given twice), angles with exact zeros (signed), half and
+    whole turns, tiny ones: the compiled clip's rotations are the NumPy reader's (to the bit
+    here), its translations the same numbers."""
+    from usdhands.formats.bvh import BvhFile, BvhJoint, bvh_to_asset
+
     rng = np.random.default_rng(4)
+    names = ["Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"]
     special = np.array([0.0, 90.0, -90.0, 180.0, -180.0, 360.0, -360.0, 720.5, 1e-300, -1e-7, -0.0])
     for trial in range(40):
         J = int(rng.integers(1, 9))
-        rjoint, rfirst, rcount, raxes = _rotation_layout(rng, J)
-        C = len(raxes) + 3
-        T = int(rng.integers(1, 300)) if trial else 9000  # once more frames than one chunk
-        values = rng.uniform(-400, 400, (T, C))
-        values = np.where(rng.random((T, C)) < 0.3, rng.choice(special, (T, C)), values)  # exact zeros, half turns
-        rcols = rng.permutation(C)[:len(raxes)].tolist()
-        ours, twin = np.full((T, J, 4), np.nan), np.full((T, J, 4), np.nan)
-        bvh_module._rotations_compiled(kernel, values, rjoint, rfirst, rcount, raxes, rcols, ours)
-        bvh_module._rotations_numpy(values, rjoint, rfirst, rcount, raxes, rcols, twin)
-        assert ours[:, rjoint].tobytes() == twin[:, rjoint].tobytes(), (rjoint, rcount, raxes)
+        joints = [BvhJoint(f"j{k}", int(rng.integers(-1, k)) if k else -1, rng.normal(size=3),
+                           [names[c] for c in rng.integers(0, 6, int(rng.integers(0, 7)))]) for k in range(J)]
+        C = sum(len(j.channels) for j in joints)
+        T = int(rng.integers(1, 300)) if trial else 9000  # once more frames than a NumPy chunk
+        values = np.where(rng.random((T, C)) < 0.3, rng.choice(special, (T, C)), rng.uniform(-400, 400, (T, C)))
+        bvh = BvhFile(joints, "", 1 / 30, values)
+        clips = {}
+        for compiled in (True, False):
+            monkeypatch.setattr(bvh_module, "USE_COMPILED", compiled)
+            clips[compiled] = bvh_to_asset(bvh, Path("random.bvh")).clip()
+        assert clips[True].translations.tobytes() == clips[False].translations.tobytes()
+        assert_same_rotations(clips[True].rotations, clips[False].rotations, values)
 
 
 def _bvh_sources(sample_assets):
@@ -149,7 +163,22 @@ def _outcome(path: Path, compiled: bool | None, monkeypatch, fast: bool = True):
             return str(e)
     return ([(j.name, j.parent, j.offset.tobytes(), j.channels, j.end_site, j.line) for j in parsed.joints],
             parsed.hierarchy_text, parsed.frame_time, parsed.values.shape, parsed.values.tobytes(),
-            clip.fps, clip.rotations.tobytes(), clip.translations.tobytes(), clip.skeleton.joint_names)
+            clip.fps, clip.translations.tobytes(), clip.skeleton.joint_names), (parsed.values, clip.rotations)
+
+
+def assert_same_outcome(a, b, what, exact: bool = False) -> None:
+    """Two _outcome: the same error, or the same file read (rotations to the bit where ``exact``,
+    else as assert_same_rotations says)."""
+    if isinstance(a, str) or isinstance(b, str):
+        assert a == b, what
+        return
+    assert a[0] == b[0], what
+    (values, ours), (_, twin) = a[1], b[1]
+    assert ours.shape == twin.shape, what
+    if exact:
+        assert ours.tobytes() == twin.tobytes(), what
+    elif ours.size:
+        assert_same_rotations(ours, twin, values)
 
 
 def test_compiled_reader_equals_the_numpy_reader_on_real_files_and_variants(sample_assets, tmp_path, monkeypatch):
@@ -164,8 +193,9 @@ def test_compiled_reader_equals_the_numpy_reader_on_real_files_and_variants(samp
             p = tmp_path / f"{src.stem}-{name.replace(' ', '_')}.bvh"
             p.write_bytes(text.encode("utf-8"))
             compiled = _outcome(p, True, monkeypatch)
-            assert compiled == _outcome(p, False, monkeypatch), (src.name, name)
-            assert compiled == _outcome(p, False, monkeypatch, fast=False), (src.name, name)
+            assert_same_outcome(compiled, _outcome(p, False, monkeypatch), (src.name, name))
+            assert_same_outcome(_outcome(p, False, monkeypatch), _outcome(p, False, monkeypatch, fast=False),
+                                (src.name, name), exact=True)
             checked += not isinstance(compiled, str)
     assert checked >= 5 * 7
 
@@ -194,8 +224,8 @@ def test_fast_paths_equal_the_token_reader_on_mutated_files(sample_assets, tmp_p
                 data = data[:i] + token.ljust(j - i) + data[j:] if len(token) <= j - i else data
         p.write_bytes(data)
         slow = _outcome(p, False, monkeypatch, fast=False)
-        assert _outcome(p, True, monkeypatch) == slow, p.read_bytes()[:300]
-        assert _outcome(p, False, monkeypatch) == slow, p.read_bytes()[:300]
+        assert_same_outcome(_outcome(p, True, monkeypatch), slow, p.read_bytes()[:300])
+        assert_same_outcome(_outcome(p, False, monkeypatch), slow, p.read_bytes()[:300], exact=True)
         readable += not isinstance(slow, str)
     assert 50 < readable < 200  # both readable and broken files were tried
 

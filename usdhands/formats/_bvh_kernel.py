@@ -1,4 +1,5 @@
-"""numba kernel behind reading BVH motion values: the text of the ``MOTION`` block to ``(T, C)`` floats.
+"""numba kernels behind reading BVH motion: the text of the ``MOTION`` block to ``(T, C)`` floats
+(:func:`parse_rows`), and those values to a clip's rotations and translations (:func:`clip_arrays`).
 
 :func:`parse_rows` is the compiled twin of ``np.loadtxt`` on the motion lines, for the
 numbers a BVH file holds. It reads only what it can read exactly as ``float()`` does
@@ -18,11 +19,13 @@ to the caller, which then reads the block with ``np.loadtxt`` (and names a bad l
   ``np.loadtxt`` skips them; every other line must hold exactly ``C`` numbers.
 
 Tests hold it to ``float()`` on random decimal strings (exponents, long mantissas,
-negative zero) and to ``np.loadtxt`` on every real BVH file. Kept apart so importing
-the BVH reader imports no numba.
+negative zero) and to ``np.loadtxt`` on every real BVH file, and :func:`clip_arrays`
+to the NumPy conversion. Kept apart so importing the BVH reader imports no numba.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -140,76 +143,113 @@ PERM = np.array([[3, 2, 1, 0], [2, 3, 0, 1], [1, 0, 3, 2]], dtype=np.int64)
 SIGN = np.array([[1.0, 1.0, -1.0, -1.0], [-1.0, 1.0, 1.0, -1.0], [1.0, -1.0, 1.0, -1.0]])
 
 
-@njit(cache=True, nogil=True)
-def axis_products(c, s, first, count, axes, joint, perm, sign, rot, row0):
-    """Rotations of BVH rotation channels from the cosines and sines of their half angles.
+#: Radians a degree, as ``np.radians`` multiplies by it.
+_RADIANS = math.pi / 180.0
 
-    ``c``, ``s`` ``(T, R)``: of the R rotation channels, joint after joint; channel group
-    ``g`` is columns ``first[g] .. first[g] + count[g] - 1`` about axes ``axes[...]`` (0 X,
-    1 Y, 2 Z), and its rotation, the product of its axis rotations in channel order,
-    goes to ``rot[row0 + t, joint[g]]`` (xyzw). The same operations as the NumPy twin
-    (``bvh._axis_product``), in the same order, skipping the same zero components: the
-    same numbers to the bit. Which components are zero depends on the axes alone: each
-    group's operations are planned once (``plan``), then run for every frame.
+
+#: Frames converted together, joint after joint: their rows of values and rotations stay in cache.
+_BLOCK = 64
+
+
+@njit(cache=True, nogil=True)
+def clip_arrays(values, offsets, first, count, axes, cols, pjoint, paxis, pcol, perm, sign, rot, trans):
+    """A clip's rotations ``rot (T, J, 4)`` (xyzw) and translations ``trans (T, J, 3)`` from BVH motion values.
+
+    ``values (T, C)``: the motion values, degrees in the rotation columns. Joint ``j`` has
+    rotation channels ``first[j] .. first[j] + count[j] - 1`` (none where ``count[j]`` is
+    0: the identity), about axes ``axes[...]`` (0 X, 1 Y, 2 Z), read from columns
+    ``cols[...]``; its rotation is the product of its axis rotations in channel order.
+    Translations are the ``offsets (J, 3)``, with position channel ``p`` (in file order:
+    a channel given twice, the last wins) putting column ``pcol[p]`` in place of component
+    ``paxis[p]`` of joint ``pjoint[p]``.
+
+    The NumPy twin's numbers (``bvh._rotations_numpy``): the half angle is
+    ``radians(x) * 0.5`` as NumPy computes it, its cosine and sine the C library's
+    (``math.cos``/``math.sin``, which NumPy's float64 ``cos``/``sin`` call; an angle of
+    zero gives ``1`` and the signed zero without the call, as they do), and the axis
+    rotations are multiplied with the same operations in the same order, skipping the
+    same zero components. Which components are zero depends on the axes alone: each
+    joint's operations are planned once (``plan``), then run for every frame.
     """
-    T = c.shape[0]
-    G = first.shape[0]
+    T = values.shape[0]
+    J = first.shape[0]
     width = 1
-    for g in range(G):
-        width = max(width, count[g])
-    # plan[i, k]: how step i makes component k: 0 zero, 1 kept * c, 2 moved * s, 3 -(moved * s),
-    # 4 kept * c + moved * s, 5 kept * c - moved * s (moved = component perm[axis, k])
-    plan = np.zeros((width, 4), dtype=np.int64)
+    for j in range(J):
+        width = max(width, count[j])
+    # plan[j, i, k]: how step i makes component k of joint j: 0 zero, 1 kept * c, 2 moved * s,
+    # 3 -(moved * s), 4 kept * c + moved * s, 5 kept * c - moved * s (moved = component perm[axis, k])
+    plan = np.zeros((J, width, 4), dtype=np.int64)
     has = np.zeros(4, dtype=np.bool_)
     nhas = np.zeros(4, dtype=np.bool_)
-    q = np.empty(4)
-    nq = np.empty(4)
-    for g in range(G):
-        f = first[g]
-        n = count[g]
-        a0 = axes[f]
+    for j in range(J):
+        f = first[j]
+        if count[j] == 0:
+            continue
         for k in range(4):
-            has[k] = k == 3 or k == a0
-        for i in range(1, n):
+            has[k] = k == 3 or k == axes[f]
+        for i in range(1, count[j]):
             a = axes[f + i]
             for k in range(4):
                 m = perm[a, k]
                 if not has[m]:
-                    plan[i, k] = 1 if has[k] else 0
+                    plan[j, i, k] = 1 if has[k] else 0
                     nhas[k] = has[k]
                 elif not has[k]:
-                    plan[i, k] = 3 if sign[a, k] < 0 else 2
+                    plan[j, i, k] = 3 if sign[a, k] < 0 else 2
                     nhas[k] = True
                 else:
-                    plan[i, k] = 5 if sign[a, k] < 0 else 4
+                    plan[j, i, k] = 5 if sign[a, k] < 0 else 4
                     nhas[k] = True
             for k in range(4):
                 has[k] = nhas[k]
-        j = joint[g]
-        for t in range(T):
-            for k in range(4):
-                q[k] = 0.0
-            q[3] = c[t, f]
-            q[a0] = s[t, f]
-            for i in range(1, n):
-                a = axes[f + i]
-                ci = c[t, f + i]
-                si = s[t, f + i]
+    q = np.empty(4)
+    nq = np.empty(4)
+    for t0 in range(0, T, _BLOCK):
+        t1 = min(T, t0 + _BLOCK)
+        for j in range(J):
+            f = first[j]
+            n = count[j]
+            if n == 0:
+                for t in range(t0, t1):
+                    rot[t, j, 0] = 0.0
+                    rot[t, j, 1] = 0.0
+                    rot[t, j, 2] = 0.0
+                    rot[t, j, 3] = 1.0
+                continue
+            a0 = axes[f]
+            for t in range(t0, t1):
                 for k in range(4):
-                    op = plan[i, k]
-                    if op == 0:
-                        nq[k] = 0.0
-                    elif op == 1:
-                        nq[k] = q[k] * ci
-                    elif op == 2:
-                        nq[k] = q[perm[a, k]] * si
-                    elif op == 3:
-                        nq[k] = -(q[perm[a, k]] * si)
-                    elif op == 4:
-                        nq[k] = q[k] * ci + q[perm[a, k]] * si
-                    else:
-                        nq[k] = q[k] * ci - q[perm[a, k]] * si
+                    q[k] = 0.0
+                h = values[t, cols[f]] * _RADIANS * 0.5
+                q[3] = 1.0 if h == 0.0 else math.cos(h)
+                q[a0] = h if h == 0.0 else math.sin(h)
+                for i in range(1, n):
+                    a = axes[f + i]
+                    h = values[t, cols[f + i]] * _RADIANS * 0.5
+                    ci = 1.0 if h == 0.0 else math.cos(h)
+                    si = h if h == 0.0 else math.sin(h)
+                    for k in range(4):
+                        op = plan[j, i, k]
+                        if op == 0:
+                            nq[k] = 0.0
+                        elif op == 1:
+                            nq[k] = q[k] * ci
+                        elif op == 2:
+                            nq[k] = q[perm[a, k]] * si
+                        elif op == 3:
+                            nq[k] = -(q[perm[a, k]] * si)
+                        elif op == 4:
+                            nq[k] = q[k] * ci + q[perm[a, k]] * si
+                        else:
+                            nq[k] = q[k] * ci - q[perm[a, k]] * si
+                    for k in range(4):
+                        q[k] = nq[k]
                 for k in range(4):
-                    q[k] = nq[k]
-            for k in range(4):
-                rot[row0 + t, j, k] = q[k]
+                    rot[t, j, k] = q[k]
+        for t in range(t0, t1):
+            for j in range(J):
+                trans[t, j, 0] = offsets[j, 0]
+                trans[t, j, 1] = offsets[j, 1]
+                trans[t, j, 2] = offsets[j, 2]
+            for p in range(pjoint.shape[0]):
+                trans[t, pjoint[p], paxis[p]] = values[t, pcol[p]]

@@ -82,6 +82,9 @@ MAX_INDENT = 64
 _CHANNELS = {"xposition": ("p", 0), "yposition": ("p", 1), "zposition": ("p", 2),
              "xrotation": ("r", 0), "yrotation": ("r", 1), "zrotation": ("r", 2)}
 _AXES = "XYZ"
+#: Each channel's name as the reader keeps it (``"Xrotation"``), from its lower-case and its own spelling.
+_CHANNEL_NAMES = {k: k[0].upper() + k[1:] for k in _CHANNELS} | {k[0].upper() + k[1:]: k[0].upper() + k[1:]
+                                                                  for k in _CHANNELS}
 
 
 def units_to_meters(units: str | float | None) -> float:
@@ -380,6 +383,7 @@ def _parse_hierarchy_fast(head: list[str]) -> list[BvhJoint] | None:
     if not rows or len(rows[0][1]) != 1 or rows[0][1][0].upper() != "HIERARCHY":
         return None
     joints: list[BvhJoint] = []
+    offsets: list[tuple] = []
     names: set[str] = set()
     stack: list[int] = []  # the open joints
     k, n = 1, len(rows)
@@ -419,11 +423,11 @@ def _parse_hierarchy_fast(head: list[str]) -> list[BvhJoint] | None:
         if len(offset) != 4 or offset[0].lower() != "offset":
             return None
         try:
-            xyz = np.array([float(offset[1]), float(offset[2]), float(offset[3])])
+            offsets.append((float(offset[1]), float(offset[2]), float(offset[3])))
         except ValueError:
             return None
         names.add(name)
-        joint = BvhJoint(name, stack[-1] if stack else -1, xyz, [], end, line)
+        channels = []
         k += 3
         if not end and k < n and rows[k][1][0].upper() == "CHANNELS":
             chans = rows[k][1]
@@ -431,14 +435,17 @@ def _parse_hierarchy_fast(head: list[str]) -> list[BvhJoint] | None:
             if not (count.isascii() and count.isdigit()) or len(chans) != 2 + int(count):
                 return None
             for c in chans[2:]:
-                if c.lower() not in _CHANNELS:
+                c = _CHANNEL_NAMES.get(c) or _CHANNEL_NAMES.get(c.lower())
+                if c is None:
                     return None
-                joint.channels.append(c[0].upper() + c[1:].lower())
+                channels.append(c)
             k += 1
         stack.append(len(joints))
-        joints.append(joint)
+        joints.append(BvhJoint(name, stack[-2] if len(stack) > 1 else -1, None, channels, end, line))
     if stack or not joints:
         return None
+    for joint, xyz in zip(joints, np.array(offsets)):  # one array, a row each
+        joint.offset = xyz
     return joints
 
 
@@ -668,11 +675,11 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     T = bvh.values.shape[0]
     rot = np.empty((T, J, 4))  # arrays that own their memory: the clip keeps them (see below)
     trans = np.empty((T, J, 3))
-    col = 0
-    rjoint, rfirst, rcount, raxes, rcols = [], [], [], [], []  # rotation channels: joint after joint
+    rfirst, rcount, raxes, rcols = [], [], [], []  # rotation channels: joint after joint
     moved = ([], [], [])  # position channels: joint, axis, column
+    col = 0
     for k, j in enumerate(bvh.joints):
-        first = len(rcols)
+        rfirst.append(len(rcols))
         for c in j.channels:
             kind, axis = _CHANNELS[c.lower()]
             if kind == "p":
@@ -682,27 +689,19 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
                 raxes.append(axis)
                 rcols.append(col)
             col += 1
-        if len(rcols) > first:
-            rjoint.append(k)
-            rfirst.append(first)
-            rcount.append(len(rcols) - first)
-    flat = trans.reshape(T, 3 * J)  # column 3k + axis: joint k's translation along axis
-    dest = 3 * np.array(moved[0], dtype=np.int64) + np.array(moved[1], dtype=np.int64)
-    if np.array_equal(dest, np.arange(3 * J)):  # every joint X, Y, Z: one gather, no offsets under it
-        np.take(bvh.values, moved[2], axis=1, out=flat)
+        rcount.append(len(rcols) - rfirst[-1])
+    kernel = _kernels() if T else None
+    if kernel is not None:
+        ints = [np.array(a, dtype=np.int64) for a in (rfirst, rcount, raxes, rcols) + moved]
+        kernel.clip_arrays(bvh.values, offsets, *ints, kernel.PERM, kernel.SIGN, rot, trans)
     else:
-        trans[:] = offsets
-        if moved[0]:  # one fancy assignment; a channel given twice: the last one wins, as in the file order
-            flat[:, dest] = np.take(bvh.values, moved[2], axis=1)
-    if len(rjoint) < J:
-        rotated = set(rjoint)
-        rot[:, [k for k in range(J) if k not in rotated]] = quat_identity()  # joints without rotation channels
-    if T and rjoint:
-        kernel = _kernels()
-        if kernel is not None:
-            _rotations_compiled(kernel, bvh.values, rjoint, rfirst, rcount, raxes, rcols, rot)
-        else:
-            _rotations_numpy(bvh.values, rjoint, rfirst, rcount, raxes, rcols, rot)
+        _translations_numpy(bvh.values, offsets, moved, trans)
+        rjoint = [k for k in range(J) if rcount[k]]
+        if len(rjoint) < J:
+            rot[:, [k for k in range(J) if not rcount[k]]] = quat_identity()  # joints without rotation channels
+        if T and rjoint:
+            _rotations_numpy(bvh.values, rjoint, [rfirst[k] for k in rjoint], [rcount[k] for k in rjoint], raxes,
+                             rcols, rot)
     rot.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
     trans.setflags(write=False)
     clip = Clip(sk, _fps(bvh.frame_time), rot, trans, name=path.stem)
@@ -736,23 +735,21 @@ def _rotations_numpy(values: np.ndarray, rjoint: list, rfirst: list, rcount: lis
                 rot[t:t + step, ks] = q
 
 
-def _rotations_compiled(kernel, values: np.ndarray, rjoint: list, rfirst: list, rcount: list, raxes: list,
-                        rcols: list, rot: np.ndarray) -> None:
-    """:func:`_rotations_numpy` with the axis products in one compiled pass (the same numbers to the bit).
+def _translations_numpy(values: np.ndarray, offsets: np.ndarray, moved: tuple, trans: np.ndarray) -> None:
+    """Fill ``trans (T, J, 3)``: the ``offsets (J, 3)``, position channels in place of their components.
 
-    The half angles' cosines and sines are NumPy's, as in the twin, a chunk of frames at
-    a time; :func:`usdhands.formats._bvh_kernel.axis_products` multiplies the axis
-    rotations of every joint and writes them time-major into ``rot``.
+    ``moved`` lists the position channels (joints, axes, columns of ``values``), in file
+    order: a channel given twice, the last one wins.
     """
-    T = rot.shape[0]
-    cols = np.array(rcols, dtype=np.int64)
-    args = (np.array(rfirst, dtype=np.int64), np.array(rcount, dtype=np.int64), np.array(raxes, dtype=np.int64),
-            np.array(rjoint, dtype=np.int64), kernel.PERM, kernel.SIGN, rot)
-    step = max(1, _ROTATIONS_PER_CHUNK // len(cols))
-    for t in range(0, T, step):
-        half = np.radians(np.take(values[t:t + step], cols, axis=1))
-        half *= 0.5
-        kernel.axis_products(np.cos(half), np.sin(half), *args, t)
+    T, J = trans.shape[:2]
+    flat = trans.reshape(T, 3 * J)  # column 3k + axis: joint k's translation along axis
+    dest = 3 * np.array(moved[0], dtype=np.int64) + np.array(moved[1], dtype=np.int64)
+    if np.array_equal(dest, np.arange(3 * J)):  # every joint X, Y, Z: one gather, no offsets under it
+        np.take(values, moved[2], axis=1, out=flat)
+    else:
+        trans[:] = offsets
+        if moved[0]:  # one fancy assignment, in file order
+            flat[:, dest] = np.take(values, moved[2], axis=1)
 
 
 def euler_channels_to_quat(angles_deg: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
