@@ -300,3 +300,23 @@ def test_frame_count_far_beyond_the_lines_allocates_nothing_big(tmp_path, monkey
     else:
         with pytest.raises(AssetReadError, match="'Frames: 1000000000000' .* but 3 frames of motion follow"):
             parse_bvh(p)
+
+
+@pytest.mark.parametrize("first_bytes", [1, 13, 700, 4096])
+def test_a_head_longer_than_the_first_read_is_read_whole(sample_assets, tmp_path, monkeypatch, first_bytes):
+    """The head is read in growing pieces: cut anywhere (inside a UTF-8 character, a CRLF, the
+    MOTION word, a header line) the file reads as when its head came in one piece."""
+    from test_format_bvh import _bvh_variants
+
+    src = sample_assets / "humanoid.bvh"
+    text = src.read_text().replace("JOINT Spine", "JOINT Spiné", 1)
+    for name, variant in _bvh_variants(text):
+        p = tmp_path / f"{name.replace(' ', '_')}.bvh"
+        p.write_bytes(variant.encode("utf-8"))
+        for compiled in (True, False):
+            whole = _outcome(p, compiled, monkeypatch)
+            with monkeypatch.context() as m:
+                m.setattr(bvh_module, "_HEAD_BYTES", first_bytes)
+                assert_same_outcome(_outcome(p, compiled, monkeypatch), whole, (name, compiled), exact=True)
+                if name in ("as is", "crlf", "bom"):
+                    assert bvh_module._parse_bvh_fast(p) is not None, name  # read in pieces, not handed over

@@ -1,6 +1,7 @@
 """Fuzz one reader of usdhands: ``python tests/fuzz/run.py bvh --seconds 600``.
 
-Readers: ``bvh``, ``gltf``, ``glb``, ``usda``, ``usdc`` (the file readers behind every
+Readers: ``bvh`` (``--bvh-reader compiled`` reads with the numba kernels a process
+running numba uses), ``gltf``, ``glb``, ``usda``, ``usdc`` (the file readers behind every
 command) and the side files: ``handmap``, ``config`` (synthesis configuration),
 ``interaction`` (interaction configuration), ``model`` (reduction model), ``manifest``
 (a finger database's manifest, over the bundled database's arrays), ``markers`` (splice's
@@ -51,7 +52,15 @@ def run_random(target: Target, seconds: float, seed: int, crashes: Path) -> dict
             "findings": findings}
 
 
-def run_atheris(target: Target, seconds: float, crashes: Path) -> None:
+def _choose_bvh_reader(choice: str) -> None:
+    """``compiled``: BVH files read with the numba kernels (as in a process where numba runs);
+    ``numpy``: without; ``auto``: as the reader decides (a fuzzing process: NumPy)."""
+    import usdhands.formats.bvh as bvh
+
+    bvh.USE_COMPILED = {"auto": None, "compiled": True, "numpy": False}[choice]
+
+
+def run_atheris(target: Target, seconds: float, crashes: Path, bvh_reader: str = "auto") -> None:
     """Coverage-guided run with libFuzzer for ``seconds``; libFuzzer prints its own report and exits."""
     import atheris
 
@@ -68,6 +77,7 @@ def run_atheris(target: Target, seconds: float, crashes: Path) -> None:
         import usdhands.jobs.inputs  # noqa: F401
         import usdhands.jobs.splicing  # noqa: F401
         import usdhands.input_files  # noqa: F401
+    _choose_bvh_reader(bvh_reader)  # after the instrumented imports
     corpus = Path(tempfile.mkdtemp(prefix=f"usdhands_fuzz_{target.reader}_"))
     for k, data in enumerate(seeds(target.reader)):
         (corpus / f"seed{k}").write_bytes(data)
@@ -92,6 +102,8 @@ def main(argv=None) -> int:
                         help="default: atheris when installed, else random")
     parser.add_argument("--seed", type=int, default=0, help="random engine's seed")
     parser.add_argument("--crashes", type=Path, default=Path(__file__).resolve().parent / "crashes")
+    parser.add_argument("--bvh-reader", choices=("auto", "compiled", "numpy"), default="auto",
+                        help="BVH files read with the numba kernels, without, or as the reader decides (default)")
     args = parser.parse_args(argv)
     engine = args.engine
     if engine is None:
@@ -102,8 +114,9 @@ def main(argv=None) -> int:
             engine = "random"
     target = Target(args.reader, timer=engine == "random")
     if engine == "atheris":
-        run_atheris(target, args.seconds, args.crashes)
+        run_atheris(target, args.seconds, args.crashes, args.bvh_reader)
         return 0
+    _choose_bvh_reader(args.bvh_reader)
     report = run_random(target, args.seconds, args.seed, args.crashes)
     print(report)
     return 1 if report["findings"] else 0

@@ -30,6 +30,16 @@ Reading
   hierarchy raise :class:`~usdhands.errors.AssetReadError` naming the line
   (``line 312: expected 171 values, found 168``).
 
+Speed
+-----
+A well-formed file (one statement a line in the hierarchy, as exporters write it) is read
+from its bytes: the hierarchy line by line, the motion values with ``np.loadtxt`` and the
+Euler angles converted with NumPy; or, in a process where numba already runs a kernel of
+the package (or that has read 128 MB of BVH motion, :data:`COMPILED_AFTER_BYTES`), with
+the compiled twins of :mod:`usdhands.formats._bvh_kernel` (the same numbers; about 2x
+faster). Anything unusual is read by the token-by-token parser, which names the line of
+a problem. A fresh process reading a file imports no numba.
+
 Writing
 -------
 - :meth:`BvhHandler.write` writes a new file from a skeleton and its first clip (or
@@ -51,6 +61,7 @@ Writing
 
 from __future__ import annotations
 
+import io
 import logging
 import os
 import re
@@ -273,45 +284,69 @@ def _header_lines(data: bytes, pos: int) -> tuple[list[str], int] | None:
     return header, min(pos, len(data))
 
 
-def _parse_bvh_fast(path: Path) -> BvhFile | None:
-    """:func:`parse_bvh` of a well-formed file, from its bytes.
+#: Bytes read first for the head of a file (doubled while the head is longer).
+_HEAD_BYTES = 1 << 16
 
-    The head (hierarchy and motion header) is decoded and split into lines; the motion
-    values are read from the bytes after the ``Frame Time`` line by the compiled parser
-    (:func:`_motion_from_bytes`), else by ``np.loadtxt``. None whenever anything is
-    unusual (an unreadable file, other line breaks in the head, a header or motion line
-    that is not as expected): :func:`parse_bvh` then reads the file its slower way and
-    names the problem.
+
+def _read_head(f) -> tuple[bytes, bool, list[str], list[str], int] | None:
+    """The first bytes of the binary file ``f`` up to at least the end of its ``Frame Time`` line.
+
+    Returns those bytes, whether they are the whole file, the head's lines (to the
+    ``MOTION`` line, see :func:`_head_of`), the two header lines (see :func:`_header_lines`)
+    and the offset of the first motion byte; None where the whole file has no such head.
+    """
+    want = _HEAD_BYTES
+    data = f.read(want)
+    while True:
+        whole = len(data) < want
+        found = _head_of(data)
+        if found is not None:
+            lines, pos = found
+            header = _header_lines(data, pos)
+            if header is not None and (whole or data[header[1] - 1:header[1]] == b"\n"):
+                return data, whole, lines, header[0], header[1]
+        if whole:
+            return None
+        data += f.read(want)
+        want *= 2
+
+
+def _parse_bvh_fast(path: Path) -> BvhFile | None:
+    """:func:`parse_bvh` of a well-formed file.
+
+    The head (hierarchy and motion header) is read as bytes, decoded and split into
+    lines; the motion values after the ``Frame Time`` line by the compiled parser from
+    the bytes, or by ``np.loadtxt`` from the text (:func:`_motion_from`). None whenever
+    anything is unusual (an unreadable file, other line breaks in the head, a header or
+    motion line that is not as expected): :func:`parse_bvh` then reads the file its
+    slower way and names the problem.
     """
     try:
-        data = path.read_bytes()
+        f = open(path, "rb")
     except OSError:
         return None
-    found = _head_of(data)
-    if found is None:
-        return None
-    lines, pos = found
-    found = _header_lines(data, pos)
-    if found is None:
-        return None
-    header, pos = found
-    if not header[0].lower().startswith("frames:") or not header[1].lower().startswith("frame time:"):
-        return None
-    try:
-        frames = int(header[0][len("Frames:"):].strip())
-        frame_time = float(header[1][len("Frame Time:"):].strip())
-    except ValueError:
-        return None
-    if frames < 0 or not (np.isfinite(frame_time) and MIN_FRAME_TIME_S <= frame_time <= MAX_FRAME_TIME_S):
-        return None
-    head = lines[:-1]
-    joints = _parse_hierarchy_fast(head)
-    if joints is None:
-        return None
-    C = sum(len(j.channels) for j in joints)
-    if C == 0 or frames == 0:
-        return None
-    values = _motion_from_bytes(data, pos, C, frames)
+    with f:
+        found = _read_head(f)
+        if found is None:
+            return None
+        data, whole, lines, header, pos = found
+        if not header[0].lower().startswith("frames:") or not header[1].lower().startswith("frame time:"):
+            return None
+        try:
+            frames = int(header[0][len("Frames:"):].strip())
+            frame_time = float(header[1][len("Frame Time:"):].strip())
+        except ValueError:
+            return None
+        if frames < 0 or not (np.isfinite(frame_time) and MIN_FRAME_TIME_S <= frame_time <= MAX_FRAME_TIME_S):
+            return None
+        head = lines[:-1]
+        joints = _parse_hierarchy_fast(head)
+        if joints is None:
+            return None
+        C = sum(len(j.channels) for j in joints)
+        if C == 0 or frames == 0:
+            return None
+        values = _motion_from(f, data, whole, pos, C, frames)
     if values is None:
         return None
     if len(values) == frames + 1 and not values[0].any():
@@ -347,27 +382,35 @@ def _kernels():
     return _bvh_kernel
 
 
-def _motion_from_bytes(data: bytes, pos: int, C: int, frames: int) -> np.ndarray | None:
-    """The motion values ``(T, C)`` float64 of ``data[pos:]``, or None where they are not ``C`` finite numbers a line.
+def _motion_from(f, data: bytes, whole: bool, pos: int, C: int, frames: int) -> np.ndarray | None:
+    """The motion values ``(T, C)`` float64 of the binary file ``f`` from byte ``pos``, or None where
+    they are not ``C`` finite numbers a line.
 
-    The compiled parser (:mod:`usdhands.formats._bvh_kernel`, the same numbers) when the
-    process uses it and it can read the text; ``np.loadtxt`` of the lines otherwise.
+    ``data`` holds the file's first bytes (all of them where ``whole``). The compiled
+    parser (:mod:`usdhands.formats._bvh_kernel`, the same numbers) reads the bytes when
+    the process uses it and it can read them; else ``np.loadtxt`` reads the text from
+    ``pos`` (UTF-8, bad bytes replaced, ``\r\n`` and ``\r`` ending lines as ``\n``).
     At most ``frames + 1`` rows (the Leap Motion rest line): more is handed back.
     """
     global _motion_bytes_read
-    _motion_bytes_read += len(data) - pos
+    size = len(data) if whole else os.fstat(f.fileno()).st_size
+    _motion_bytes_read += max(0, size - pos)
     kernel = _kernels()
     if kernel is not None:
+        if not whole:
+            data += f.read()
         # a row of C numbers takes at least 2 C bytes with its line break: at most 4 bytes of floats a byte read
         rows = min(frames + 1, (len(data) - pos + 1) // (2 * C))
         out = np.empty((rows, C))
         got = kernel.parse_rows(np.frombuffer(data, np.uint8), pos, C, out, kernel.POW10)
         if got >= 0:
             return out[:got]
-    text = data[pos:].decode("utf-8", errors="replace")
-    if "\r" in text:
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
-    return _motion_values(text.split("\n"), C)
+    f.seek(pos)
+    text = io.TextIOWrapper(f, encoding="utf-8", errors="replace")  # newlines as an open text file has them
+    try:
+        return _motion_values(text, C)
+    finally:
+        text.detach()  # f is closed by its owner
 
 
 def _parse_hierarchy_fast(head: list[str]) -> list[BvhJoint] | None:
