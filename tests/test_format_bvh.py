@@ -256,6 +256,8 @@ def test_not_a_number(tmp_path):
     (lambda t: t.split("MOTION")[0], "line 20: no MOTION section"),
     (lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0"), "line 23: expected a positive frame time, found '0'"),
     (lambda t: t.replace("CHANNELS 3", "CHANNELS \u00b2", 1), "line 13: expected a channel count, found '\u00b2'"),
+    (lambda t: t.replace("CHANNELS 3", "CHANNELS " + "3" * 5000, 1), f"line 13: expected a channel count, found '{'3' * 5000}'"),
+    (lambda t: t.replace("CHANNELS 3", "CHANNELS 1000000000", 1), "line 13: expected a channel count, found '1000000000'"),
 ])
 def test_malformed_hierarchy(tmp_path, edit, message):
     p = tmp_path / "bad.bvh"

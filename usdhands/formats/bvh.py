@@ -413,6 +413,22 @@ def _motion_from(f, data: bytes, whole: bool, pos: int, C: int, frames: int) -> 
         text.detach()  # f is closed by its owner
 
 
+def _is_count(text: str) -> bool:
+    """Whether ``text`` is a channel count: ASCII digits ("²" is a digit to ``str.isdigit``, not to
+    ``int``), at most 9 of them after leading zeros (5,000 digits exceed ``int()``'s limit)."""
+    return text.isascii() and text.isdigit() and len(text.lstrip("0")) <= 9
+
+
+def _end_site_name(parent: str, names: set[str]) -> str:
+    """``<parent>_end``, or ``<parent>_end1``, ``_end2``... where that name is taken."""
+    name = parent + END_SUFFIX
+    k = 1
+    while name in names:
+        name = f"{parent}{END_SUFFIX}{k}"
+        k += 1
+    return name
+
+
 def _parse_hierarchy_fast(head: list[str]) -> list[BvhJoint] | None:
     """:func:`_parse_hierarchy` of a hierarchy laid out one statement a line, or None.
 
@@ -448,12 +464,7 @@ def _parse_hierarchy_fast(head: list[str]) -> list[BvhJoint] | None:
         if kw == "END":
             if len(parts) != 2 or parts[1].lower() != "site":
                 return None
-            pname = joints[stack[-1]].name
-            name = pname + END_SUFFIX
-            m = 1
-            while name in names:
-                name = f"{pname}{END_SUFFIX}{m}"
-                m += 1
+            name = _end_site_name(joints[stack[-1]].name, names)
             end = True
         else:
             name = " ".join(parts[1:])
@@ -475,7 +486,7 @@ def _parse_hierarchy_fast(head: list[str]) -> list[BvhJoint] | None:
         if not end and k < n and rows[k][1][0].upper() == "CHANNELS":
             chans = rows[k][1]
             count = chans[1] if len(chans) > 1 else ""
-            if not (count.isascii() and count.isdigit()) or len(chans) != 2 + int(count):
+            if not _is_count(count) or len(chans) != 2 + int(count):
                 return None
             for c in chans[2:]:
                 c = _CHANNEL_NAMES.get(c) or _CHANNEL_NAMES.get(c.lower())
@@ -545,12 +556,7 @@ def _parse_joint_head(tok: _Tokens, joints: list, names: set, parent: int) -> tu
     kwu = kw.upper()
     if kwu == "END":
         tok.expect("Site")
-        pname = joints[parent].name
-        name = pname + END_SUFFIX
-        k = 1
-        while name in names:
-            name = f"{pname}{END_SUFFIX}{k}"
-            k += 1
+        name = _end_site_name(joints[parent].name, names)
         end = True
     else:
         name, nline = tok.next("a joint name")
@@ -570,7 +576,7 @@ def _parse_joint_head(tok: _Tokens, joints: list, names: set, parent: int) -> tu
     if not end and tok.peek()[0] is not None and tok.peek()[0].upper() == "CHANNELS":
         tok.next("CHANNELS")
         t, cline = tok.next("a channel count")
-        if not (t.isascii() and t.isdigit()):  # "²" is a digit to str.isdigit, not to int()
+        if not _is_count(t):
             tok.error(cline, f"expected a channel count, found {t!r}")
         n = int(t)
         for _ in range(n):
