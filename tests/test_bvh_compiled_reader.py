@@ -1,5 +1,5 @@
-"""The BVH reader's compiled twins: the motion parser against float() and np.loadtxt, the axis
-products against the NumPy conversion, whole reads against the NumPy reader and the
+"""The BVH reader's compiled twins: the motion parser against float() and np.loadtxt, the clip's
+arrays against the NumPy conversion, whole reads against the NumPy reader and the
 token-by-token reader (real files, variants, mutated bytes), and when the process uses them."""
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def _kernel_read(text: bytes, columns: int, rows: int = 1):
 
 def _fast_path_reads(token: str) -> bool:
     """Whether the kernel should read ``token`` (the rules of its docstring, written out in Python)."""
-    m = re.fullmatch(r"[+-]?(\d*)(?:\.(\d*))?(?:[eE]([+-]?\d{1,6}))?", token)
+    m = re.fullmatch(r"[+-]?([0-9]*)(?:\.([0-9]*))?(?:[eE]([+-]?[0-9]{1,6}))?", token)
     if m is None or not (m.group(1) or m.group(2)):
         return False
     digits = (m.group(1) + (m.group(2) or "")).lstrip("0")
@@ -56,7 +56,7 @@ def _random_token(rng: random.Random) -> str:
         return str(rng.randint(-10 ** rng.randint(1, 21), 10 ** rng.randint(1, 21)))
     digits = "".join(rng.choice("0123456789") for _ in range(rng.randint(1, 25)))
     p = rng.randint(0, len(digits))
-    s = rng.choice(["", "-", "+"]) + digits[:p] + rng.choice([".", "."]) + digits[p:]
+    s = rng.choice(["", "-", "+"]) + digits[:p] + "." + digits[p:]
     if rng.random() < 0.4:
         s += rng.choice("eE") + rng.choice(["", "-", "+"]) + str(rng.randint(0, 40))
     return s
