@@ -479,16 +479,22 @@ def run_clip(job: str, job_options, model: Path | None, src: Path, dst: Path) ->
                       None if error is None else one_line(error))
 
 
-def _start_pool_worker(job: str, job_options) -> None:
+#: Clips a synthesize worker must expect (its share of the batch) to load the search kernel while it
+#: starts: numba's import and first kernel take ~0.5 s, the NumPy search ~28 ms more per bench clip
+KERNEL_AT_START_CLIPS = 20
+
+
+def _start_pool_worker(job: str, job_options, clips_each: int) -> None:
     """The local pool's initializer: runs in each fresh worker process only."""
     become_worker_process()
-    _warm_worker(job, job_options)
+    _warm_worker(job, job_options, clips_each)
 
 
-def _warm_worker(job: str, job_options) -> None:
+def _warm_worker(job: str, job_options, clips_each: int) -> None:
     """Worker start-up: import the job's module and load the database once; a worker process of
-    its own also loads synthesis's search kernel (the numba kernels it would otherwise load only
-    after its first ~45 clips, searched in NumPy at 2.5 times the CPU)."""
+    its own that expects ``clips_each`` clips or more also loads synthesis's search kernel (the numba
+    kernels it would otherwise load only after its first ~45 clips, searched in NumPy at 2.5 times
+    the CPU; a worker of a few clips keeps to NumPy, as one ``usdhands synthesize`` does)."""
     with contextlib.suppress(ImportError, AttributeError):  # a failing import is each clip's error
         _job_function(job)
     if job == "synthesize":
@@ -496,7 +502,7 @@ def _warm_worker(job: str, job_options) -> None:
 
         with contextlib.suppress(UsdHandsError):
             cached_database(getattr(job_options, "db", None))
-        if _own_worker_process:  # never in the caller's process
+        if _own_worker_process and clips_each >= KERNEL_AT_START_CLIPS:  # never in the caller's process
             from usdhands.algorithms.synthesis.segment_cost import load_search_kernel
 
             _one_kernel_thread()  # Dask warms its workers on another thread than their tasks'
@@ -507,7 +513,7 @@ def _warm_worker(job: str, job_options) -> None:
 def _run_local(todo, task, workers: int, report) -> None:
     job, job_options, model = task
     broken = []
-    with _pool(workers, job, job_options) as pool:
+    with _pool(workers, job, job_options, -(-len(todo) // workers)) as pool:
         pending = {pool.submit(run_clip, job, job_options, model, src, dst): (src, dst) for src, dst in todo}
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -556,13 +562,14 @@ def _retry_alone(clips, task, workers: int, report) -> None:
             pool.shutdown(wait=True)
 
 
-def _pool(workers: int, job: str, job_options) -> ProcessPoolExecutor:
+def _pool(workers: int, job: str, job_options, clips_each: int = 1) -> ProcessPoolExecutor:
+    """``workers`` fresh worker processes for ``job``, each expecting ``clips_each`` clips (:func:`_warm_worker`)."""
     import multiprocessing
 
     # forkserver/spawn: a fresh interpreter per worker (fork would copy the parent's threads and locks)
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
-                               initializer=_start_pool_worker, initargs=(job, job_options))
+                               initializer=_start_pool_worker, initargs=(job, job_options, clips_each))
 
 
 # ----------------------------------------------------------------------------- Dask
@@ -600,8 +607,8 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
         from usdhands.jobs.dask_worker import OwnProcessWorker
 
         client.register_plugin(OwnProcessWorker())
-        client.run(_warm_worker, job, job_options)
         slots = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()) or 1
+        client.run(_warm_worker, job, job_options, -(-len(todo) // slots))
         futures = {client.submit(run_clips, job, job_options, model, chunk, pure=False): chunk
                    for chunk in dask_chunks(todo, slots)}
         alone = []
