@@ -13,6 +13,7 @@ re-packing of buffer views.
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 import os
 import pickle
@@ -504,32 +505,69 @@ class BinaryAppender:
         self.gltf.accessors.append(acc)
         return len(self.gltf.accessors) - 1
 
-    def data(self) -> bytes:
-        """All bytes of the buffer, padded to a multiple of 4."""
-        self._align()
-        if len(self.parts) > 1:
-            self.parts = [b"".join(self.parts)]
-        return self.parts[0]
+    def finish(self, buffers: list) -> int:
+        """Store the buffer's content in ``buffers`` and its byteLength in the document; returns the length.
 
-    def finish(self, buffers: list[bytes]) -> bytes:
-        """Store the buffer's bytes in ``buffers`` and its byteLength in the document."""
-        data = self.data()
+        The content is stored as the tuple of its parts (bytes and memoryviews, in order), which
+        :func:`save_gltf` writes one after the other: a clip's 18 MB are not joined into one
+        more copy first.
+        """
+        self._align()
         while len(buffers) <= self.buffer_index:
             buffers.append(b"")
-        buffers[self.buffer_index] = data
-        self.gltf.buffers[self.buffer_index].byteLength = len(data)
-        return data
+        buffers[self.buffer_index] = tuple(p for p in self.parts if len(p))
+        self.gltf.buffers[self.buffer_index].byteLength = self.size
+        return self.size
 
 
 def _json_number(v) -> float | int:
     return int(v) if np.issubdtype(type(v), np.integer) else float(v)
 
 
+#: dataclass type -> its field names in order (what ``dataclasses.fields`` gives), for :func:`_as_plain`
+_FIELD_NAMES: dict[type, tuple[str, ...]] = {}
+_IMMUTABLE_LEAVES = (str, int, float, bool, type(None))
+
+
+def _as_plain(obj):
+    """pygltflib's ``gltf_asdict`` (dataclasses as dicts of their fields in order, ``Attributes``
+    as a copy of its ``__dict__``, containers copied), without its per-value ``deepcopy`` of
+    numbers and strings (immutable: the same objects) and its ``fields()`` call per object.
+
+    A document of one 10,000-frame, 65-joint clip (2,000 objects): ~2 ms instead of ~20.
+    Anything else (tuples, subclasses, other objects) goes to pygltflib's own conversion.
+    """
+    kind = type(obj)
+    if kind in _IMMUTABLE_LEAVES:
+        return obj
+    if kind is list:
+        return [_as_plain(v) for v in obj]
+    names = _FIELD_NAMES.get(kind)
+    if names is not None:
+        return {n: _as_plain(getattr(obj, n)) for n in names}
+    if kind is dict:
+        return {_as_plain(k): _as_plain(v) for k, v in obj.items()}
+    if kind is not pygltflib.Attributes and dataclasses.is_dataclass(kind) and kind.__module__ == "pygltflib":
+        _FIELD_NAMES[kind] = tuple(f.name for f in dataclasses.fields(kind))
+        return _as_plain(obj)
+    return pygltflib._asdict_inner(obj, dict)
+
+
 def _to_json(gltf: pygltflib.GLTF2) -> str:
-    return gltf.gltf_to_json(separators=(",", ":"), indent=None)
+    """The document's JSON text, the same text as ``gltf.gltf_to_json(separators=(",", ":"), indent=None)``
+    (tests/test_gltf_write_json.py compares them), made from :func:`_as_plain`."""
+    data = pygltflib.delete_empty_keys(_as_plain(gltf))
+    return json.dumps(data, cls=pygltflib.JsonEncoder, skipkeys=True, ensure_ascii=True, check_circular=True,
+                      allow_nan=False, indent=None, separators=(",", ":"), default=pygltflib.json_serial,
+                      sort_keys=False)
 
 
-def save_gltf(gltf: pygltflib.GLTF2, buffers: list[bytes], path: str | os.PathLike, *, glb: bool) -> None:
+def _parts(buffer) -> tuple:
+    """A buffer given to :func:`save_gltf` as its parts: bytes-like alone, or the tuple :meth:`BinaryAppender.finish` stores."""
+    return buffer if isinstance(buffer, tuple) else (buffer,)
+
+
+def save_gltf(gltf: pygltflib.GLTF2, buffers: list, path: str | os.PathLike, *, glb: bool) -> None:
     """Write a document and its buffers.
 
     Parameters
@@ -544,13 +582,13 @@ def save_gltf(gltf: pygltflib.GLTF2, buffers: list[bytes], path: str | os.PathLi
         for i, b in enumerate(gltf.buffers):
             if b.uri is None and i != 0:
                 raise ValueError(f"only buffer 0 can be the GLB binary chunk, buffer {i} has no uri")
-        bin_data = buffers[0] if gltf.buffers and gltf.buffers[0].uri is None else None
+        bin_parts = _parts(buffers[0]) if gltf.buffers and gltf.buffers[0].uri is None else None
         json_bytes = _to_json(gltf).encode("utf-8")
         json_bytes += b" " * (-len(json_bytes) % 4)
         chunks = [struct.pack("<II", len(json_bytes), CHUNK_JSON), json_bytes]
-        if bin_data is not None:
-            bin_data = bytes(bin_data) + b"\0" * (-len(bin_data) % 4)
-            chunks += [struct.pack("<II", len(bin_data), CHUNK_BIN), bin_data]
+        if bin_parts is not None:
+            size = sum(len(p) for p in bin_parts)
+            chunks += [struct.pack("<II", size + -size % 4, CHUNK_BIN), *bin_parts, b"\0" * (-size % 4)]
         total = 12 + sum(len(c) for c in chunks)
         with open(path, "wb") as f:
             f.write(struct.pack("<4sII", GLB_MAGIC, 2, total))
@@ -561,7 +599,8 @@ def save_gltf(gltf: pygltflib.GLTF2, buffers: list[bytes], path: str | os.PathLi
     try:
         for i, b in enumerate(gltf.buffers):
             if b.uri is None:
-                b.uri = "data:application/octet-stream;base64," + base64.b64encode(buffers[i]).decode("ascii")
+                data = b"".join(_parts(buffers[i]))
+                b.uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
         text = _to_json(gltf)
     finally:
         for b, uri in zip(gltf.buffers, saved):

@@ -12,8 +12,9 @@ __all__ = ["Skeleton", "short_joint_name", "display_joint_names", "readonly"]
 
 
 def readonly(a: np.ndarray, dtype=np.float64) -> np.ndarray:
-    """A read-only copy of ``a`` with the given dtype."""
-    out = np.array(a, dtype=dtype, copy=True)
+    """A read-only, C-contiguous copy of ``a`` with the given dtype (a broadcast made a copy in another
+    layout, which every later clip copied again)."""
+    out = np.array(a, dtype=dtype, copy=True, order="C")
     out.setflags(write=False)
     return out
 
