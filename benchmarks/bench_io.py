@@ -17,12 +17,14 @@ The bare baselines, per format (``bare_read_*``, ``bare_write_*``):
 - USD (pxr): ``Usd.Stage.Open``, ``Get`` of rotations and translations at every time
   sample of every SkelAnimation (scales once) into ``(T, J, 4/3)`` float32 arrays, and
   of what else the reader reads: every Skeleton's joints, bind and rest transforms,
-  every Mesh's points, faces, normals, UVs and joint influences (usdhands: float64
+  every Mesh's points, faces, normals, UVs, joint influences and bound material, every
+  shader's inputs and the bytes of the texture files they name (usdhands: float64
   arrays, the hierarchy checked, the crate's structure checked before USD opens it, the
   influences checked, skinning resolved; a generated file has no mesh); writing: one
   SkelAnimation per clip, ``Set`` of ``FromNumpy`` arrays per frame, and every Skeleton's
   joints and transforms, every mesh's points, faces, normals, UVs and influences, every
-  image into a file beside, ``Export``.
+  image into a file beside, every material as a UsdPreviewSurface network bound to its
+  meshes, ``Export`` (usdhands writes its textures atomically: a temporary file renamed).
 - glTF (pygltflib + numpy): ``GLTF2.load``, ``np.frombuffer`` of every channel's input
   and output accessor, and the outputs put into one time-major ``(T, nodes, 4 or 3)`` float32
   array per path (rotation, translation), as a reader hands over arrays of that shape, and
@@ -99,8 +101,9 @@ def medians(repeat: int, fns: dict) -> dict:
 def bare_write_usd(asset, path: Path) -> None:
     """One SkelAnimation per clip, Set per frame from numpy; what else the writer writes: every
     Skeleton's joints and transforms, every mesh's points, faces, normals, UVs and joint
-    influences, every image's bytes in a file beside; Export."""
-    from pxr import Sdf, Usd, UsdGeom, UsdSkel, Vt
+    influences, every image's bytes in a file beside, every material as a UsdPreviewSurface
+    network (its factors, a texture reader per texture) bound to its meshes; Export."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
     from usdhands.formats.usd_common import joint_tokens_for
 
@@ -134,8 +137,35 @@ def bare_write_usd(asset, path: Path) -> None:
                 np.ascontiguousarray(m.joint_indices, dtype=np.int32).ravel()))
             binding.CreateJointWeightsPrimvar(False, n).Set(Vt.FloatArray.FromNumpy(
                 np.ascontiguousarray(m.joint_weights, dtype=np.float32).ravel()))
+    image_paths = []
     for k, image in enumerate(asset.images):
-        (path.parent / f"bare_image{k}_{image.name}").write_bytes(image.data)
+        image_paths.append(path.parent / f"bare_image{k}_{image.name}")
+        image_paths[-1].write_bytes(image.content())
+    materials = []
+    for k, mat in enumerate(asset.materials):  # a UsdPreviewSurface network per material, as the writer makes
+        material = UsdShade.Material.Define(stage, f"/Materials/Material{k}")
+        surface = UsdShade.Shader.Define(stage, f"/Materials/Material{k}/PreviewSurface")
+        surface.CreateIdAttr("UsdPreviewSurface")
+        material.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
+        surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*mat.base_color[:3]))
+        surface.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(float(mat.metallic))
+        surface.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(float(mat.roughness))
+        reader = UsdShade.Shader.Define(stage, f"/Materials/Material{k}/uvReader_st")
+        reader.CreateIdAttr("UsdPrimvarReader_float2")
+        reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+        reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+        for slot, ref in mat.textures.items():
+            tex = UsdShade.Shader.Define(stage, f"/Materials/Material{k}/{slot}_texture")
+            tex.CreateIdAttr("UsdUVTexture")
+            tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(Sdf.AssetPath(f"./{image_paths[ref.image].name}"))
+            tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+            tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3)
+            surface.CreateInput(f"{slot}Texture", Sdf.ValueTypeNames.Color3f).ConnectToSource(tex.ConnectableAPI(),
+                                                                                            "rgb")
+        materials.append(material)
+    for k, m in enumerate(asset.meshes):
+        if m.material is not None:
+            UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(f"/Mesh{k}")).Bind(materials[m.material])
     for k, clip in enumerate(asset.clips):
         sk = clip.skeleton
         anim = UsdSkel.Animation.Define(stage, f"/Anim{k}")
@@ -153,8 +183,9 @@ def bare_write_usd(asset, path: Path) -> None:
 def bare_read_usd(path: Path) -> list:
     """Rotations and translations ``(T, J, 4/3)`` float32 of every SkelAnimation (scales once);
     every Skeleton's joints, bind and rest transforms; every Mesh's points, faces, normals,
-    UVs and joint influences as numpy arrays."""
-    from pxr import Usd, UsdGeom, UsdSkel
+    UVs and joint influences as numpy arrays, and its bound material; every shader's inputs,
+    and the bytes of every texture file they name."""
+    from pxr import Ar, Sdf, Usd, UsdGeom, UsdShade, UsdSkel
 
     out = []
     stage = Usd.Stage.Open(str(path))
@@ -173,7 +204,14 @@ def bare_read_usd(path: Path) -> list:
                        binding.GetJointWeightsPrimvar()):
                 if pv and pv.HasValue():
                     arrays.append(np.asarray(pv.ComputeFlattened()))
+            arrays.append(UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0])
             out.append(arrays)
+        elif prim.IsA(UsdShade.Shader):
+            for inp in UsdShade.Shader(prim).GetInputs():
+                value = inp.Get()
+                out.append(value)
+                if isinstance(value, Sdf.AssetPath) and value.resolvedPath:
+                    out.append(bytes(Ar.GetResolver().OpenAsset(Ar.ResolvedPath(value.resolvedPath)).GetBuffer()))
         if not prim.IsA(UsdSkel.Animation):
             continue
         anim = UsdSkel.Animation(prim)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import zipfile
 
+import numpy as np
 import pytest
 
 from hostile import crate_lies, crate_seed, run_batch  # noqa: E402  (tests/ is on sys.path)
@@ -133,6 +134,32 @@ def test_a_package_holding_a_lying_crate_names_the_member(sample_assets, tmp_pat
     assert message in str(e.value)
 
 
+def test_a_package_member_is_checked_whatever_its_checksum_says(sample_assets, tmp_path):
+    """USD reads a stored member without its CRC: a member whose CRC does not match was skipped by the
+    check (zipfile refused to read it) and handed to USD unchecked."""
+    import struct
+
+    data, message = crate_lies(crate_seed(sample_assets, tmp_path))["token_count"]
+    package = tmp_path / "bad_crc.usdz"
+    with zipfile.ZipFile(package, "w", compression=zipfile.ZIP_STORED) as z:
+        z.writestr("root.usdc", data)
+    crc = struct.pack("<I", zipfile.ZipFile(package).getinfo("root.usdc").CRC)
+    raw = package.read_bytes()
+    assert raw.count(crc) == 2  # the local header's and the central directory's
+    package.write_bytes(raw.replace(crc, struct.pack("<I", ~struct.unpack("<I", crc)[0] & 0xFFFFFFFF)))
+    with pytest.raises(zipfile.BadZipFile):
+        zipfile.ZipFile(package).read("root.usdc")
+    with pytest.raises(AssetReadError) as e:
+        check_crate(package)
+    assert str(e.value).startswith(f"{package}: root.usdc: cannot read as USD: ")
+    assert message in str(e.value)
+    good = tmp_path / "good.usdz"
+    with zipfile.ZipFile(good, "w", compression=zipfile.ZIP_STORED) as z:
+        z.writestr("root.usdc", crate_seed(sample_assets, tmp_path))
+        z.writestr("notes.txt", b"not a crate")
+    assert check_crate(good)
+
+
 def test_the_rewritten_sections_of_the_cases_are_valid(sample_assets, tmp_path):
     """The spec-type case rewrites SPECS with its own encoder: unchanged types give a file USD reads."""
     import struct
@@ -205,3 +232,49 @@ def test_a_text_layer_composing_a_lying_crate_is_refused(sample_assets, tmp_path
         f"usdhands: error: {top}: composes {tmp_path / 'lie.usdc'}: cannot read as USD: "
         + result["stderr"].split("cannot read as USD: ", 1)[1].rstrip("\n")]
     assert message in result["stderr"]
+
+
+def _decode_ints_one_by_one(encoded: bytes, n: int, width: int) -> list[int]:
+    """Sdf's integer coding read integer by integer: a common delta, 2-bit codes, signed deltas, summed as int64."""
+    codes_size = (2 * n + 7) // 8
+    if len(encoded) < width + codes_size:
+        raise ValueError
+    common = int.from_bytes(encoded[:width], "little", signed=True)
+    sizes = [0, 1, 2, 4] if width == 4 else [0, 2, 4, 8]
+    pos, total, out = width + codes_size, 0, []
+    for i in range(n):
+        size = sizes[(encoded[width + i // 4] >> (2 * (i % 4))) & 3]
+        if pos + size > len(encoded):
+            raise ValueError
+        total += common if size == 0 else int.from_bytes(encoded[pos:pos + size], "little", signed=True)
+        total = (total + (1 << 63)) % (1 << 64) - (1 << 63)  # int64 sums wrap
+        pos += size
+        out.append(total)
+    return out
+
+
+@pytest.mark.parametrize("width", [4, 8])
+def test_decode_ints_equals_decoding_one_by_one(width):
+    from usdhands.formats.usdc_crate import decode_ints
+
+    rng = np.random.default_rng(width)
+    for trial in range(400):
+        n = int(rng.integers(0, 40))
+        codes = rng.integers(0, 4, n)
+        sizes = ([0, 1, 2, 4] if width == 4 else [0, 2, 4, 8])
+        body = b"".join(int(rng.integers(-(1 << (8 * sizes[c] - 1)), 1 << (8 * sizes[c] - 1))).to_bytes(
+            sizes[c], "little", signed=True) for c in codes if sizes[c])
+        packed = bytearray((2 * n + 7) // 8)
+        for i, c in enumerate(codes):
+            packed[i // 4] |= int(c) << (2 * (i % 4))
+        common = int(rng.integers(-1000, 1000)).to_bytes(width, "little", signed=True)
+        encoded = common + bytes(packed) + body
+        for data in (encoded, encoded[:len(encoded) - int(rng.integers(1, 4))] if len(encoded) > 3 else b""):
+            try:
+                want = _decode_ints_one_by_one(data, n, width)
+            except ValueError:
+                with pytest.raises(ValueError):
+                    decode_ints(data, n, width)
+                continue
+            got = decode_ints(data, n, width)
+            assert got.dtype == np.int64 and got.tolist() == want

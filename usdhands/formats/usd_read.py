@@ -31,6 +31,7 @@ from usdhands.formats.usd_common import (
     SOURCE_NAME_KEY,
     SOURCE_NODE_KEY,
     SOURCE_SKELETON_KEY,
+    all_close,
     bound_animation_path,
     fold_into_roots,
     matrices_to_numpy,
@@ -297,7 +298,7 @@ def _node_chain_above(skel_prim: Usd.Prim, world: np.ndarray) -> tuple[tuple[Usd
         return ()
     chain.reverse()
     scale = max(1.0, float(np.abs(world).max()))
-    return tuple(chain) if np.allclose(total, world, rtol=0, atol=1e-9 * scale) else ()
+    return tuple(chain) if all_close(total, world, rtol=0, atol=1e-9 * scale) else ()
 
 
 def _moved_scale(prim: Usd.Prim) -> np.ndarray:
@@ -503,7 +504,7 @@ def frame_times(samples: list[float], tcps: float, fps: float | None) -> tuple[n
         if len(samples) == 1:
             return samples, tcps
         steps = np.diff(samples)
-        if np.allclose(steps, steps[0], rtol=1e-6, atol=1e-9) and steps[0] < 1.0 + 1e-9:
+        if all_close(steps, steps[0], rtol=1e-6, atol=1e-9) and steps[0] < 1.0 + 1e-9:
             return samples, tcps / float(steps[0])
         fps = tcps
     step = tcps / float(fps)
@@ -575,13 +576,13 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
     T = len(codes)
     J = sk.num_joints
     # gather in the animation's joint order, then scatter into the skeleton's
-    r_k = np.empty((T, K, 4), dtype=np.float32)
-    t_k = np.empty((T, K, 3), dtype=np.float32)
-    s_k = np.empty((T, K, 3), dtype=np.float32)
+    r_k = np.empty((T, K, 4))
+    t_k = np.empty((T, K, 3))
     try:  # every frame all three components, one value per joint: no per-frame checks
-        _copy_components(anim_query, codes, K, (t_k, r_k, s_k))
+        s_k = _copy_components(anim_query, codes, K, (t_k, r_k))
         has = {"translations": True, "rotations": True, "scales": True}
     except (ValueError, TypeError):  # no values at some frame, or a wrong count: the checks say which
+        s_k = np.empty((T, K, 3))
         has = {"translations": False, "rotations": False, "scales": False}
         for f, code in enumerate(codes):
             code = code if isinstance(code, Usd.TimeCode) else Usd.TimeCode(code)
@@ -615,7 +616,10 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
     def full(label: str, values: np.ndarray, rest: np.ndarray) -> np.ndarray:
         """Skeleton-order (T, J, n): the animation's values, rest for joints it lacks."""
         if has[label] and everyone:
-            return values[:T]  # Clip converts to float64 in its one copy
+            kept = values if len(values) == T else values[:T]
+            if kept.base is None:  # made here: the Clip keeps it without a copy
+                kept.setflags(write=False)
+            return kept
         out = np.empty((T, J, rest.shape[-1]))
         out[:] = rest
         if has[label]:
@@ -632,18 +636,24 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
     return Clip(sk, rate if len(times) else float(fps or tcps), rot, tr, sc, name=where, start_time=start)
 
 
-def _copy_components(anim_query, codes: list, K: int, out: tuple[np.ndarray, ...]) -> None:
-    """Translations, rotations and scales of every frame into ``out`` ``((T, K, 3), (T, K, 4), (T, K, 3))``
-    float32; ValueError when a frame lacks one or has another number of values than ``K``.
+#: Bytes of float32 rows a read stages before converting them to float64 (they stay in cache).
+_STAGE_BYTES = 1 << 18
+
+
+def _copy_components(anim_query, codes: list, K: int, out: tuple[np.ndarray, ...]) -> np.ndarray:
+    """Translations and rotations of every frame into ``out`` ``((T, K, 3), (T, K, 4))`` float64, and
+    the scales ``(T, K, 3)`` float64 (one row repeated, a broadcast with no array of T rows, for
+    scales without time samples); ValueError when a frame lacks one or has another number of values
+    than ``K``.
 
     The values ``anim_query.ComputeJointLocalTransformComponents`` gives (it reads the
     SkelAnimation's three attributes at the time), read through one ``Usd.AttributeQuery``
     per attribute: scales that have no time samples are read once (the same value at
-    every frame). Each frame's arrays are copied as bytes into the rows (the numbers
-    unchanged): a NumPy assignment from a Vt array parses its buffer's layout every time
-    (about 2 us, a quarter of a read of 10,000 frames). Time-sampled scales (half floats
-    in USD) are copied into a half-float array and converted once. 10,000 frames of 65
-    joints: 36 ms of CPU against 50 ms through the animation query.
+    every frame). Each frame's arrays are copied as bytes into float32 rows (the numbers
+    unchanged; a NumPy assignment from a Vt array parses its buffer's layout every time,
+    about 2 us, a quarter of a read of 10,000 frames), a block of rows at a time, each block
+    converted into ``out`` while it is in cache (no float32 copy of the whole clip). Time-sampled
+    scales (half floats in USD) are copied into a half-float array and converted once.
     """
     anim = UsdSkel.Animation(anim_query.GetPrim())
     attrs = (anim.GetTranslationsAttr(), anim.GetRotationsAttr(), anim.GetScalesAttr())
@@ -651,27 +661,36 @@ def _copy_components(anim_query, codes: list, K: int, out: tuple[np.ndarray, ...
         raise ValueError
     queries = [Usd.AttributeQuery(a) for a in attrs]
     tq, rq, sq = queries
-    t_rows, r_rows = out[0], out[1]
+    t_out, r_out = out
+    T = len(codes)
+    step = max(1, min(T, _STAGE_BYTES // max(28 * K, 1)))
+    t_rows, r_rows = np.empty((step, K, 3), dtype=np.float32), np.empty((step, K, 4), dtype=np.float32)
     tv, rv = memoryview(t_rows).cast("B"), memoryview(r_rows).cast("B")
-    ts, rs = (a[0].nbytes if len(a) else 0 for a in (t_rows, r_rows))
+    ts, rs = 12 * K, 16 * K
     tshape, rshape = (K, 3), (K, 4)
-    for f, code in enumerate(codes):  # translations and rotations: what a read of 10,000 frames spends most in
-        tm, rm = memoryview(tq.Get(code)), memoryview(rq.Get(code))  # no value (None): TypeError
-        if tm.shape == tshape and rm.shape == rshape and tm.format == "f" and rm.format == "f":
-            tv[f * ts:(f + 1) * ts] = tm.cast("B")
-            rv[f * rs:(f + 1) * rs] = rm.cast("B")
-        else:
-            if len(tm.obj) != K or len(rm.obj) != K:  # (one value would broadcast)
-                raise ValueError
-            t_rows[f], r_rows[f] = tm.obj, rm.obj
+    for f0 in range(0, T, step):  # translations and rotations: what a read of 10,000 frames spends most in
+        block = codes[f0:f0 + step]
+        for f, code in enumerate(block):
+            tm, rm = memoryview(tq.Get(code)), memoryview(rq.Get(code))  # no value (None): TypeError
+            if tm.shape == tshape and rm.shape == rshape and tm.format == "f" and rm.format == "f":
+                tv[f * ts:(f + 1) * ts] = tm.cast("B")
+                rv[f * rs:(f + 1) * rs] = rm.cast("B")
+            else:
+                if len(tm.obj) != K or len(rm.obj) != K:  # (one value would broadcast)
+                    raise ValueError
+                t_rows[f], r_rows[f] = tm.obj, rm.obj
+        n = len(block)
+        t_out[f0:f0 + n] = t_rows[:n]
+        r_out[f0:f0 + n] = r_rows[:n]
     if not sq.ValueMightBeTimeVarying():  # scales without time samples: one value, at every frame
-        if len(codes):
+        row = np.zeros((K, 3))
+        if T:
             value = sq.Get(codes[0])
             if value is None or len(value) != K:
                 raise ValueError
-            out[2][:] = np.asarray(value).astype(np.float32)
-        return
-    halves = np.empty(out[2].shape, dtype=np.float16)
+            row = np.asarray(value).astype(np.float32).astype(np.float64)  # as float32 rows held them
+        return np.broadcast_to(row, (T, K, 3))
+    halves = np.empty((T, K, 3), dtype=np.float16)
     view, size = memoryview(halves).cast("B"), halves[0].nbytes if len(halves) else 0
     for f, code in enumerate(codes):
         value = sq.Get(code)
@@ -682,7 +701,7 @@ def _copy_components(anim_query, codes: list, K: int, out: tuple[np.ndarray, ...
             view[f * size:(f + 1) * size] = v.cast("B")
         else:
             halves[f] = value
-    out[2][:] = halves
+    return halves.astype(np.float64)
 
 
 def _flattened(primvar: UsdGeom.Primvar, n_points: int, counts: np.ndarray, where: str, path: Path

@@ -337,6 +337,9 @@ def _node_chain(sk: Skeleton, non_skin: Sequence[str], clips: Sequence[Clip],
     """
     names = set(non_skin)
     parents = np.asarray(sk.parents)
+    roots = np.flatnonzero(parents < 0)
+    if not names or len(roots) != 1 or sk.joint_names[int(roots[0])] not in names:
+        return [], np.arange(sk.num_joints, dtype=np.int64)  # no chain: the meshes' weights are not needed
     weighted = set()
     for m in meshes:
         if m.joint_indices is not None:
@@ -352,8 +355,7 @@ def _node_chain(sk: Skeleton, non_skin: Sequence[str], clips: Sequence[Clip],
         return True
 
     chain: list[int] = []
-    roots = np.flatnonzero(parents < 0)
-    j = int(roots[0]) if len(roots) == 1 else -1
+    j = int(roots[0])
     while j >= 0 and sk.joint_names[j] in names and j not in weighted and (len(clips) == 1 or still(j)):
         chain.append(j)
         kids = np.flatnonzero(parents == j)

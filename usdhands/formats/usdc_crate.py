@@ -57,6 +57,11 @@ _COMPRESSIBLE[list(_COMPRESSED_INTS | _COMPRESSED_FLOATS)] = True
 _ARRAY, _INLINED, _COMPRESSED, _PAYLOAD = 1 << 63, 1 << 62, 1 << 61, (1 << 48) - 1
 _DICTIONARY, _VALUE, _UNREGISTERED_VALUE, _TIME_SAMPLES = 31, 52, 53, 46
 _STRING_KINDS, _TOKEN_KINDS, _PATH_EXPRESSION = {10}, {11, 12}, 57  # string, token/asset path: an index
+#: type enumerant -> whether it is a string / a token (asset path) / stored as an index into those tables
+_IS_STRING, _IS_TOKEN, _IS_INDEXED = (np.zeros(256, dtype=bool) for _ in range(3))
+_IS_STRING[list(_STRING_KINDS)] = True
+_IS_TOKEN[list(_TOKEN_KINDS)] = True
+_IS_INDEXED[list(_STRING_KINDS | _TOKEN_KINDS | {_PATH_EXPRESSION})] = True
 _PAYLOAD_KIND = 47
 # vectors of indices: type -> (indices per entry, table); of numbers: type -> bytes per entry
 _INDEX_VECTORS = {40: (1, "path"), 41: (1, "token"), 50: (1, "string"), 45: (2, "string"), 58: (2, "path")}
@@ -132,8 +137,16 @@ def lz4_block_decompress(src: bytes, limit: int) -> bytes:
     return bytes(out)
 
 
+#: bit offsets of the four 2-bit codes in a byte, and bytes per code (0: the common delta) for 32- and 64-bit integers
+_CODE_SHIFTS = np.array([0, 2, 4, 6], dtype=np.uint8)
+_CODE_BYTES = {4: np.array([0, 1, 2, 4], dtype=np.int64), 8: np.array([0, 2, 4, 8], dtype=np.int64)}
+
+
 def decode_ints(encoded: bytes, n: int, width: int = 4) -> np.ndarray:
     """Sdf's integer coding (a common delta, 2-bit codes, 8/16/32-bit deltas), decoded: ``n`` int64.
+
+    Every delta is read as ``width`` bytes from where it starts (the buffer padded with zeros)
+    and cut to its own size by two shifts (a sign-extending one back).
 
     Raises ValueError when the bytes are too few for ``n`` integers.
     """
@@ -142,19 +155,21 @@ def decode_ints(encoded: bytes, n: int, width: int = 4) -> np.ndarray:
     if len(encoded) < common_size + codes_size:
         raise ValueError(f"{len(encoded)} bytes hold no {n} coded integers")
     common = int.from_bytes(encoded[:common_size], "little", signed=True)
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
     packed = np.frombuffer(encoded, dtype=np.uint8, count=codes_size, offset=common_size)
-    codes = ((packed[:, None] >> np.array([0, 2, 4, 6], dtype=np.uint8)) & 3).reshape(-1)[:n]
-    sizes = np.array([0, 1, 2, 4] if width == 4 else [0, 2, 4, 8], dtype=np.int64)[codes]
-    starts = common_size + codes_size + np.concatenate([[0], np.cumsum(sizes)[:-1]]) if n else np.zeros(0, np.int64)
-    if n and starts[-1] + sizes[-1] > len(encoded):
+    sizes = _CODE_BYTES[width][((packed[:, None] >> _CODE_SHIFTS) & 3).reshape(-1)[:n]]
+    ends = np.cumsum(sizes)
+    head = common_size + codes_size
+    if head + int(ends[-1]) > len(encoded):
         raise ValueError(f"{len(encoded)} bytes hold no {n} coded integers")
-    raw = np.frombuffer(encoded, dtype=np.uint8)
-    deltas = np.full(n, common, dtype=np.int64)
-    for size, kind in ((1, "<i1"), (2, "<i2"), (4, "<i4"), (8, "<i8")):
-        pick = np.flatnonzero(sizes == size)
-        if len(pick):
-            bytes_ = raw[starts[pick, None] + np.arange(size)]
-            deltas[pick] = np.ascontiguousarray(bytes_).view(kind)[:, 0]
+    raw = np.zeros(len(encoded) + width, dtype=np.uint8)
+    raw[:len(encoded)] = np.frombuffer(encoded, dtype=np.uint8)
+    words = raw[(head + ends - sizes)[:, None] + np.arange(width)]
+    deltas = words.view("<u4")[:, 0].astype(np.int64) if width == 4 else words.view("<i8")[:, 0]
+    shift = np.where(sizes > 0, 64 - 8 * sizes, 0)
+    deltas = (deltas << shift) >> shift
+    deltas[sizes == 0] = common
     return np.cumsum(deltas)
 
 
@@ -404,12 +419,15 @@ class _Crate:
     def many(self, reps: np.ndarray, depth: int, seen: set[int]) -> None:
         """Check a run of value reps: arrays are collected for :meth:`arrays`, the rest walked here."""
         inlined = (reps & np.uint64(_INLINED)) != 0
-        kind = (reps >> np.uint64(48)) & np.uint64(0xFF)
-        for kinds, table in ((_STRING_KINDS, "string"), (_TOKEN_KINDS, "token")):  # payload: an index
-            named = inlined & np.isin(kind, kinds) & ((reps & np.uint64(_ARRAY)) == 0)
+        kind = ((reps >> np.uint64(48)) & np.uint64(0xFF)).astype(np.intp)
+        for kinds, table in ((_IS_STRING, "string"), (_IS_TOKEN, "token")):  # payload: an index
+            named = inlined & kinds[kind] & ((reps & np.uint64(_ARRAY)) == 0)
             self.indices((reps[named] & np.uint64(0xFFFFFFFF)), table, "a value")
         reps = reps[~inlined]
         arrays = (reps & np.uint64(_ARRAY)) != 0
+        if arrays.all():  # a time-sampled array attribute: one array per sample, nothing else to walk
+            self.array_reps.append(reps)
+            return
         self.array_reps.append(reps[arrays])
         for rep in np.unique(reps[~arrays]).tolist():
             self.value(rep, depth, seen)
@@ -533,7 +551,7 @@ class _Crate:
                            f"hold at most {room[k]}")
         for k in np.flatnonzero(compressed).tolist():
             self.compressed_array(int(kind[k]), int(at[k]) + head, int(n[k]), int(element[k]))
-        for k in np.flatnonzero(np.isin(kind, list(_STRING_KINDS | _TOKEN_KINDS | {_PATH_EXPRESSION}))).tolist():
+        for k in np.flatnonzero(_IS_INDEXED[kind]).tolist():
             table = "token" if int(kind[k]) in _TOKEN_KINDS else "string"
             self.index_run(int(at[k]) + head, int(n[k]), table, "an array")
 
@@ -589,21 +607,32 @@ def check_crate(path: str | os.PathLike) -> bool:
     return False
 
 
+#: A zip local file header: its signature, and where the lengths of the name and the extra field are.
+_LOCAL_HEADER, _LOCAL_HEADER_SIZE = b"PK\x03\x04", 30
+
+
 def _check_package(path: Path) -> None:
+    """Check each crate file a ``.usdz`` stores, as the bytes USD reads: after the member's local
+    header, whatever its checksum says (zipfile's read skipped a member whose CRC did not match,
+    which USD reads all the same), sliced from the mapped package (no checksum of every member)."""
     import zipfile
 
     try:
-        with zipfile.ZipFile(path) as package:
+        with (open(path, "rb") as f, zipfile.ZipFile(f) as package,
+              mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data):
             for info in package.infolist():
                 if info.compress_type != zipfile.ZIP_STORED or info.file_size < 8:
                     continue  # USD reads only stored members; it refuses the others itself
-                with package.open(info) as member:
-                    if member.read(8) != CRATE_MAGIC:
-                        continue
-                data = package.read(info)
+                at = info.header_offset
+                if data[at:at + 4] != _LOCAL_HEADER:
+                    continue  # not a member USD can find: it says so itself
+                name_size, extra_size = struct.unpack_from("<HH", data, at + 26)
+                start = at + _LOCAL_HEADER_SIZE + name_size + extra_size
+                if data[start:start + 8] != CRATE_MAGIC:
+                    continue
                 try:
-                    check_crate_bytes(data)
+                    check_crate_bytes(data[start:start + info.file_size])
                 except AssetReadError as e:
                     raise AssetReadError(f"{info.filename}: {e.message}", path=path) from None
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError):
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, struct.error):
         return  # not a readable package: USD says so itself

@@ -87,11 +87,10 @@ class Skeleton:
         if parents.shape != (J,):
             raise ValueError(f"Expected parents to have shape ({J},), got {parents.shape}")
         parents = parents.astype(np.int64)
-        for j, p in enumerate(parents):
-            if p >= j or p < -1:
-                raise ValueError(
-                    f"Joint {j} ({names[j]!r}) has parent {p}; parents must come before children"
-                )
+        bad = np.flatnonzero((parents >= np.arange(J)) | (parents < -1))
+        if len(bad):
+            j = int(bad[0])
+            raise ValueError(f"Joint {j} ({names[j]!r}) has parent {parents[j]}; parents must come before children")
         if len(set(names)) != J:
             dup = sorted({n for n in names if names.count(n) > 1})
             raise ValueError(f"Joint names must be unique, repeated: {dup}")
