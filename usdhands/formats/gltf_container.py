@@ -534,7 +534,7 @@ def _as_plain(obj):
     as a copy of its ``__dict__``, containers copied), without its per-value ``deepcopy`` of
     numbers and strings (immutable: the same objects) and its ``fields()`` call per object.
 
-    A document of one 10,000-frame, 65-joint clip (2,000 objects): ~2 ms instead of ~20.
+    A document of one 10,000-frame, 65-joint clip (~2,000 objects): ~2.3 ms instead of ~5.2.
     Anything else (tuples, subclasses, other objects) goes to pygltflib's own conversion.
     """
     kind = type(obj)
@@ -555,7 +555,7 @@ def _as_plain(obj):
 
 def _to_json(gltf: pygltflib.GLTF2) -> str:
     """The document's JSON text, the same text as ``gltf.gltf_to_json(separators=(",", ":"), indent=None)``
-    (tests/test_gltf_write_json.py compares them), made from :func:`_as_plain`."""
+    (tests/test_gltf_write_fast.py compares them), made from :func:`_as_plain`."""
     data = pygltflib.delete_empty_keys(_as_plain(gltf))
     return json.dumps(data, cls=pygltflib.JsonEncoder, skipkeys=True, ensure_ascii=True, check_circular=True,
                       allow_nan=False, indent=None, separators=(",", ":"), default=pygltflib.json_serial,

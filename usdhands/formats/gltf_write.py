@@ -180,7 +180,7 @@ def _rotation_channels(q: np.ndarray) -> np.ndarray:
 
     Each block is checked for unit length, its neighbours' signs found, rounded, flipped and
     moved into place while it is in the processor's cache: the float64 quaternions are read
-    once instead of about eight times (10,000 x 65: ~17 ms against ~31 in a write). Where a
+    once instead of about eight times (10,000 x 65 in a write: ~20 ms against ~27, under load). Where a
     quaternion is not of unit length the whole-array functions normalise them all.
     """
     q = np.asarray(q)

@@ -149,7 +149,9 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
     roots = []
     skel_prims = []
     anim_prims = []
-    for prim in stage.Traverse(_PREDICATE):
+    mesh_prims = []
+    others = {"Camera": 0, "light": 0}  # prims the model has no place for (counted in left_out)
+    for prim in stage.Traverse(_PREDICATE):  # the one walk over the stage
         if prim.IsA(UsdSkel.Root):
             roots.append(UsdSkel.Root(prim))
             cache.Populate(roots[-1], _PREDICATE)
@@ -157,6 +159,14 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
             skel_prims.append(prim)
         elif prim.IsA(UsdSkel.Animation):
             anim_prims.append(prim)
+        elif prim.IsA(UsdGeom.Mesh):
+            mesh_prims.append(prim)
+        else:
+            kind = str(prim.GetTypeName())
+            if kind == "Camera":
+                others["Camera"] += 1
+            elif kind.endswith("Light"):
+                others["light"] += 1
 
     skeletons: list[Skeleton] = []
     kept_prims: list[Usd.Prim] = []
@@ -224,12 +234,12 @@ def _read_stage(stage: Usd.Stage, path: Path, fps: float | None) -> Asset:
                     read_prims.add(mesh.name)
                     meshes.extend(_split_by_material_subsets(mesh, sq.GetPrim(), materials))
     if skeletons:  # meshes on no skeleton (props, static parts) where the file has a character
-        for prim in stage.Traverse(_PREDICATE):
-            if prim.IsA(UsdGeom.Mesh) and str(prim.GetPath()) not in read_prims:
+        for prim in mesh_prims:
+            if str(prim.GetPath()) not in read_prims:
                 mesh = _read_mesh(None, -1, [], path, None, materials, prim=prim)
                 read_prims.add(mesh.name)
                 meshes.extend(_split_by_material_subsets(mesh, prim, materials))
-    left_out = _left_out(stage, meshes, read_prims, materials)
+    left_out = _left_out(mesh_prims, meshes, read_prims, materials, others)
     for thing in left_out:
         _log.info("%s: not read: %s", path, thing)
     provenance, source_names, weights, interpolation, key_times = {}, {}, {}, {}, {}
@@ -344,19 +354,16 @@ def _blend_shape_weights(anim_query, clip: Clip, tcps: float) -> BlendShapeWeigh
     return BlendShapeWeights(tuple(names), out)
 
 
-def _left_out(stage: Usd.Stage, meshes: list[SkinnedMesh], read: set[str],
-              materials: MaterialReader) -> tuple[str, ...]:
-    """What the stage holds that the model does not, one short phrase each (``read``: the Mesh prims read)."""
-    counts = {"mesh": 0, "mesh_points": 0, "Material": len(materials.skipped), "Camera": 0, "light": 0}
-    for prim in stage.Traverse(_PREDICATE):
-        if prim.IsA(UsdGeom.Mesh) and str(prim.GetPath()) not in read:
+def _left_out(mesh_prims: list[Usd.Prim], meshes: list[SkinnedMesh], read: set[str],
+              materials: MaterialReader, others: dict[str, int]) -> tuple[str, ...]:
+    """What the stage holds that the model does not, one short phrase each (``mesh_prims``: the
+    stage's Mesh prims, ``read``: those read; ``others``: its cameras and lights)."""
+    counts = {"mesh": 0, "mesh_points": 0, "Material": len(materials.skipped), **others}
+    for prim in mesh_prims:
+        if str(prim.GetPath()) not in read:
             counts["mesh"] += 1
             pts = UsdGeom.Mesh(prim).GetPointsAttr().Get()
             counts["mesh_points"] += len(pts) if pts is not None else 0
-        elif prim.GetTypeName() == "Camera":
-            counts["Camera"] += 1
-        elif str(prim.GetTypeName()).endswith("Light"):
-            counts["light"] += 1
     out = []
     if counts["mesh"]:
         done = sum(int(np.asarray(m.points).shape[0]) for m in meshes)
