@@ -210,7 +210,7 @@ def parse_bvh(path: str | os.PathLike) -> BvhFile:
     lines = text.removeprefix("\ufeff").splitlines()
     motion_line = None
     for i, line in enumerate(lines):
-        if line.strip().upper() == "MOTION" or line.strip().upper().startswith("MOTION "):
+        if _is_motion_line(line):
             motion_line = i
             break
     joints = _parse_hierarchy(lines if motion_line is None else lines[:motion_line], path)

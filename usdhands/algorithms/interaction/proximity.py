@@ -16,9 +16,9 @@ positive outside (trimesh's is the opposite).
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
+
+from usdhands.jit import kernels_running
 
 __all__ = ["MeshProximity"]
 
@@ -102,7 +102,7 @@ class _Part:
         d, face, closest = self.distance(p)
         if self.winding is not None:
             return np.where(self.winding.winding_number(p) > 0.5, -d, d)
-        if "numba" in sys.modules:  # the same test compiled (_proximity_kernel), where numba is loaded anyway
+        if kernels_running():  # the same test compiled (_proximity_kernel), where the package's kernels run anyway
             from usdhands.algorithms.interaction._proximity_kernel import closed_shell_signs
 
             out, rest = closed_shell_signs(p, closest, face, d, self.normals, self.vertices, self.faces,

@@ -14,11 +14,11 @@ cannot put a contact back.
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 from scipy import sparse
 from scipy.linalg import solveh_banded
+
+from usdhands.jit import kernels_running
 
 __all__ = ["rts_smooth", "bounded_smooth", "smoothness_weight"]
 
@@ -115,13 +115,14 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
 
 def _recur(A: np.ndarray, u: tuple, x: tuple, start: int, stop: int) -> None:
     """Run ``x_t = A x_(t-1) + u_t`` for ``t`` in ``[start, stop)`` in place, as a second-order recursion on
-    each component with the arithmetic of ``scipy.signal.lfilter``: compiled where numba is already loaded
+    each component with the arithmetic of ``scipy.signal.lfilter``: compiled where a kernel of the package
+    already runs (:func:`usdhands.jit.kernels_running`)
     (:mod:`._recursion_kernel`), else :func:`second_order_steps` (the same bits).
 
     ``A`` ``(2, 2)``; ``u`` and ``x``: the two components, ``(T, C)`` arrays (views allowed);
     ``x`` holds the states at ``start - 2`` and ``start - 1`` (``start >= 2``).
     """
-    if "numba" in sys.modules:
+    if kernels_running():
         from usdhands.algorithms.interaction._recursion_kernel import second_order as run
     else:
         run = second_order_steps
