@@ -198,21 +198,11 @@ class ChainPoser:
             return np.zeros(0, dtype=bool)
         a, b = self.capsules(frames, angles)
         a, b = a[:, first:], b[:, first:]
-        n = a.shape[1]
         need = np.tile(self.chain.radii[first:] + margin, (K, 1))
-        if known is not None:
-            lower, upper = known.axis_bounds(colliders, frames if rows is None else rows, frames, a, b, need,
-                                             resolution, first)
-        else:
-            # the joints are measured once: each is the end of one segment and the start of the next
-            joints = np.concatenate([a, b[:, -1:]], axis=1)  # (K, n + 1, 3)
-            cut = joint_cutoffs(need, np.linalg.norm(b - a, axis=2))
-            d = colliders.signed_distance(np.repeat(frames, n + 1), joints.reshape(-1, 3), cut.reshape(-1))
-            d = d.reshape(K, n + 1)
-            lower, upper = axis_clearance(colliders, np.repeat(frames, n), a.reshape(-1, 3), b.reshape(-1, 3),
-                                          need.reshape(-1), resolution,
-                                          end_distances=(d[:, :-1].reshape(-1), d[:, 1:].reshape(-1)))
-            lower, upper = lower.reshape(K, n), upper.reshape(K, n)
+        if known is None:
+            return _capsules_clear(colliders, [(frames, a, b, need)], resolution)[0]
+        lower, upper = known.axis_bounds(colliders, frames if rows is None else rows, frames, a, b, need,
+                                         resolution, first)
         ok = (lower >= need - 0.5 * resolution) & (upper >= need)
         return ok.all(axis=1)
 
@@ -302,12 +292,27 @@ def clear_together(posers: list, colliders, frames: list, angles: list, margin: 
             parts.append(None)
             continue
         a, b = poser.capsules(f, ang)
-        n = a.shape[1]
-        need = np.tile(poser.chain.radii + margin, (len(f), 1))
-        joints = np.concatenate([a, b[:, -1:]], axis=1)
-        cut = joint_cutoffs(need, np.linalg.norm(b - a, axis=2))
-        parts.append((f, a, b, n, need, joints, cut))
-    live = [q for q in parts if q is not None]
+        parts.append((f, a, b, np.tile(poser.chain.radii + margin, (len(f), 1))))
+    return _capsules_clear(colliders, parts, resolution)
+
+
+def _capsules_clear(colliders, parts: list, resolution: float) -> list:
+    """Whether each frame's capsules clear the colliders by their ``need`` (up to ``resolution / 2``),
+    for several sets at once: ``parts`` holds ``(frames (K,), a (K, n, 3), b (K, n, 3), need (K, n))``
+    or None (no frames); one collider query for all their joints (each joint, the end of one segment
+    and the start of the next, measured once) and one clearance search for all their capsules.
+
+    Returns
+    -------
+    list of (K_i,) bool
+    """
+    live = []
+    for q in parts:
+        if q is not None:
+            f, a, b, need = q
+            n = a.shape[1]
+            joints = np.concatenate([a, b[:, -1:]], axis=1)  # (K, n + 1, 3)
+            live.append((f, a, b, n, need, joints, joint_cutoffs(need, np.linalg.norm(b - a, axis=2))))
     if not live:
         return [np.zeros(0, dtype=bool) for _ in parts]
     d_all = colliders.signed_distance(np.concatenate([np.repeat(f, n + 1) for f, _, _, n, _, _, _ in live]),
@@ -331,7 +336,8 @@ def clear_together(posers: list, colliders, frames: list, angles: list, margin: 
         if q is None:
             out.append(np.zeros(0, dtype=bool))
             continue
-        f, _, _, n, need, _, _ = q
+        f, a, _, need = q
+        n = a.shape[1]
         k = len(f) * n
         lo, up = lower[at:at + k].reshape(len(f), n), upper[at:at + k].reshape(len(f), n)
         at += k
