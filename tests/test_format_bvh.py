@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -320,6 +321,46 @@ def test_euler_product_skipping_zero_components_equals_the_product_from_the_iden
             assert np.array_equal(got, _euler_product_from_identity(a, axes)), axes
     big = rng.uniform(-180, 180, (20_000, 3))  # more rows than one chunk
     assert np.array_equal(euler_channels_to_quat(big, (2, 0, 1)), _euler_product_from_identity(big, (2, 0, 1)))
+
+
+def test_numpy_clip_conversion_equals_each_joint_converted_alone(monkeypatch):
+    """The NumPy reader converts every rotation channel of a block of frames at once, each group of
+    joints with the same axes together: the same numbers, to the bit, as each joint's channels
+    given to euler_channels_to_quat alone, and translations as the offsets with each position
+    channel in place (the last of a repeated one). Random hierarchies: mixed axis orders, 6
+    channels on inner joints, repeated and partial axes, joints without channels between,
+    signed zeros, half and whole turns; once more frames than a block."""
+    import usdhands.formats.bvh as bvh_module
+    from usdhands.formats.bvh import BvhFile, BvhJoint, bvh_to_asset, euler_channels_to_quat
+
+    monkeypatch.setattr(bvh_module, "USE_COMPILED", False)
+    rng = np.random.default_rng(21)
+    names = ["Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"]
+    layouts = [names[:3] + ["Zrotation", "Xrotation", "Yrotation"], ["Zrotation", "Yrotation", "Xrotation"],
+               ["Yrotation", "Xrotation", "Zrotation"], names, [], ["Xrotation"], ["Zrotation", "Zrotation"]]
+    special = np.array([0.0, -0.0, 90.0, -90.0, 180.0, -180.0, 360.0, 720.5, 1e-300, -1e-7])
+    for trial in range(30):
+        J = int(rng.integers(1, 14))
+        chans = [layouts[int(rng.integers(len(layouts)))] if rng.random() < 0.7 else
+                 [names[c] for c in rng.integers(0, 6, int(rng.integers(0, 7)))] for _ in range(J)]
+        joints = [BvhJoint(f"j{k}", int(rng.integers(-1, k)) if k else -1, rng.normal(size=3), chans[k])
+                  for k in range(J)]
+        C = sum(len(c) for c in chans)
+        T = 4000 if trial == 0 else int(rng.integers(1, 200))
+        values = np.where(rng.random((T, C)) < 0.2, rng.choice(special, (T, C)), rng.uniform(-400, 400, (T, C)))
+        clip = bvh_to_asset(BvhFile(joints, "", 1 / 30, values), Path("r.bvh")).clip()
+        col = 0
+        for k, j in enumerate(joints):
+            rot_cols = [col + i for i, c in enumerate(j.channels) if c.endswith("rotation")]
+            axes = tuple("XYZ".index(j.channels[i - col][0]) for i in rot_cols)
+            want_t = np.tile(j.offset, (T, 1))
+            for i, c in enumerate(j.channels):
+                if c.endswith("position"):
+                    want_t[:, "XYZ".index(c[0])] = values[:, col + i]
+            want_q = euler_channels_to_quat(values[:, rot_cols], axes) if axes else np.tile([0.0, 0, 0, 1], (T, 1))
+            assert clip.rotations[:, k].tobytes() == want_q.tobytes(), (trial, k, j.channels)
+            assert clip.translations[:, k].tobytes() == want_t.tobytes(), (trial, k, j.channels)
+            col += len(j.channels)
 
 
 def test_names_with_spaces_and_crlf(tmp_path):

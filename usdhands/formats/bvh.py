@@ -724,33 +724,15 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     T = bvh.values.shape[0]
     rot = np.empty((T, J, 4))  # arrays that own their memory: the clip keeps them (see below)
     trans = np.empty((T, J, 3))
-    rfirst, rcount, raxes, rcols = [], [], [], []  # rotation channels: joint after joint
-    moved = ([], [], [])  # position channels: joint, axis, column
-    col = 0
-    for k, j in enumerate(bvh.joints):
-        rfirst.append(len(rcols))
-        for c in j.channels:
-            kind, axis = _CHANNELS[c.lower()]
-            if kind == "p":
-                for lst, v in zip(moved, (k, axis, col)):
-                    lst.append(v)
-            else:
-                raxes.append(axis)
-                rcols.append(col)
-            col += 1
-        rcount.append(len(rcols) - rfirst[-1])
+    layout = _ChannelLayout(bvh.joints)
     kernel = _kernels() if T else None
     if kernel is not None:
-        ints = [np.array(a, dtype=np.int64) for a in (rfirst, rcount, raxes, rcols) + moved]
+        ints = [np.array(a, dtype=np.int64) for a in (layout.first, layout.count, layout.axes, layout.cols)
+                + layout.moved]
         kernel.clip_arrays(bvh.values, offsets, *ints, kernel.PERM, kernel.SIGN, rot, trans)
     else:
-        _translations_numpy(bvh.values, offsets, moved, trans)
-        rjoint = [k for k in range(J) if rcount[k]]
-        if len(rjoint) < J:
-            rot[:, [k for k in range(J) if not rcount[k]]] = quat_identity()  # joints without rotation channels
-        if T and rjoint:
-            _rotations_numpy(bvh.values, rjoint, [rfirst[k] for k in rjoint], [rcount[k] for k in rjoint], raxes,
-                             rcols, rot)
+        _translations_numpy(bvh.values, offsets, layout.moved, trans)
+        _rotations_numpy(bvh.values, layout.groups, rot)
     rot.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
     trans.setflags(write=False)
     clip = Clip(sk, _fps(bvh.frame_time), rot, trans, name=path.stem)
@@ -759,29 +741,106 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     return Asset(str(path), (sk,), (clip,), ())
 
 
-def _rotations_numpy(values: np.ndarray, rjoint: list, rfirst: list, rcount: list, raxes: list, rcols: list,
-                     rot: np.ndarray) -> None:
-    """Fill ``rot (T, J, 4)`` with the rotations of the rotation channels of ``values (T, C)``.
+class _ChannelLayout:
+    """Where each joint's channels are among the motion values, as the two conversions want it.
 
-    Joint ``rjoint[g]`` has channels ``rfirst[g] .. rfirst[g] + rcount[g] - 1`` of the lists
-    ``raxes`` (0 X, 1 Y, 2 Z) and ``rcols`` (columns of ``values``). Joints with the same
-    axes are converted together, a chunk of frames at a time (the gathered angles stay in cache).
+    Attributes
+    ----------
+    first, count, axes, cols : list of int
+        The rotation channels joint after joint (the compiled conversion): joint ``k`` has
+        channels ``first[k] .. first[k] + count[k] - 1`` of ``axes`` (0 X, 1 Y, 2 Z) and
+        ``cols`` (columns of the values).
+    moved : tuple of three lists of int
+        The position channels in file order: joint, axis, column.
+    groups : dict
+        Rotation axes (``(2, 0, 1)`` for ``Zrotation Xrotation Yrotation``) -> (the joints
+        with those channels, their columns joint after joint): the NumPy conversion
+        converts each group at once.
+    """
+
+    def __init__(self, joints: list[BvhJoint]):
+        self.first: list[int] = []
+        self.count: list[int] = []
+        self.axes: list[int] = []
+        self.cols: list[int] = []
+        self.moved: tuple[list, list, list] = ([], [], [])
+        self.groups: dict[tuple, tuple[list, list]] = {}
+        kinds: dict[tuple, tuple] = {}  # a joint's channel names -> its rotation and position channels
+        col = 0
+        for k, j in enumerate(joints):
+            channels = tuple(j.channels)
+            kind = kinds.get(channels)
+            if kind is None:
+                pairs = [_CHANNELS[c.lower()] for c in channels]
+                kind = kinds[channels] = (tuple(a for what, a in pairs if what == "r"),
+                                          [i for i, (what, _) in enumerate(pairs) if what == "r"],
+                                          [a for what, a in pairs if what == "p"],
+                                          [i for i, (what, _) in enumerate(pairs) if what == "p"])
+            raxes, rplaces, paxes, pplaces = kind
+            self.first.append(len(self.cols))
+            self.count.append(len(raxes))
+            if raxes:
+                cols = [col + i for i in rplaces]
+                self.axes.extend(raxes)
+                self.cols.extend(cols)
+                group = self.groups.get(raxes)
+                if group is None:
+                    group = self.groups[raxes] = ([], [])
+                group[0].append(k)
+                group[1].extend(cols)
+            if paxes:
+                self.moved[0].extend([k] * len(paxes))
+                self.moved[1].extend(paxes)
+                self.moved[2].extend(col + i for i in pplaces)
+            col += len(channels)
+
+
+#: Rotation channels converted together, a block of frames at a time (their temporaries stay in cache).
+_ANGLES_PER_CHUNK = 3 * 8192
+
+
+def _rotations_numpy(values: np.ndarray, groups: dict, rot: np.ndarray) -> None:
+    """Fill ``rot (T, J, 4)`` (xyzw) with the rotations of the rotation channels of ``values (T, C)``.
+
+    ``groups`` maps rotation axes to the joints with those channels and their columns,
+    joint after joint (:class:`_ChannelLayout`); joints in no group get the identity. For
+    a block of frames at a time, the angles of every rotation channel are gathered into
+    one array, a row per channel and joint (a group's first channel of every joint, then
+    its second...), their half angles' cosines and sines computed in one call each, and
+    each group's axis rotations multiplied (:func:`_axis_product`) on whole rows of them,
+    all its joints at once, into ``rot``.
     """
     T, J = rot.shape[:2]
-    groups: dict[tuple, list] = {}  # rotation axes -> [(joint, columns)]
-    for k, f, n in zip(rjoint, rfirst, rcount):
-        groups.setdefault(tuple(raxes[f:f + n]), []).append((k, rcols[f:f + n]))
-    for axes, members in groups.items():
-        ks = [k for k, _ in members]
-        everyone = ks == list(range(J))
-        cols = np.array([c for _, c in members])  # (Jg, n)
-        step = max(1, _ROTATIONS_PER_CHUNK // len(ks))
-        for t in range(0, T, step):
-            q = euler_channels_to_quat(np.take(values[t:t + step], cols, axis=1), axes)
-            if everyone:
-                rot[t:t + step] = q
-            else:
-                rot[t:t + step, ks] = q
+    order, plan = [], []  # the columns gathered; (axes, joints, rows of the block, the joints in rot)
+    for axes, (ks, cols) in groups.items():
+        for i in range(len(axes)):
+            order.extend(cols[i::len(axes)])
+        whole = ks[-1] - ks[0] == len(ks) - 1  # the joints follow each other: a slice of rot
+        plan.append((axes, len(ks), slice(len(order) - len(cols), len(order)),
+                     slice(ks[0], ks[-1] + 1) if whole else np.array(ks)))
+    if sum(size for _, size, _, _ in plan) < J:  # joints without rotation channels
+        still = np.ones(J, dtype=bool)
+        for ks, _ in groups.values():
+            still[ks] = False
+        rot[:, still] = quat_identity()
+    if not order or not T:
+        return
+    rcols = np.array(order, dtype=np.int64)
+    step = max(1, _ANGLES_PER_CHUNK // len(rcols))
+    for t in range(0, T, step):
+        half = values[t:t + step].T[rcols]  # (channels, frames): each channel's angles contiguous
+        half *= _RADIANS  # np.radians' number (it multiplies by pi / 180), a vectorised multiply
+        half *= 0.5
+        c = np.cos(half)
+        s = np.sin(half, out=half)
+        for axes, size, rows, ks in plan:
+            q = _axis_product(c[rows].reshape(len(axes), size, -1), s[rows].reshape(len(axes), size, -1), axes)
+            for k in range(4):
+                rot[t:t + step, ks, k] = 0.0 if q[k] is None else q[k].T
+
+
+#: Radians a degree, the factor ``np.radians`` multiplies by (NumPy's ``NPY_PI / 180.0``).
+_RADIANS = np.pi / 180.0
 
 
 def _translations_numpy(values: np.ndarray, offsets: np.ndarray, moved: tuple, trans: np.ndarray) -> None:
@@ -816,34 +875,35 @@ def euler_channels_to_quat(angles_deg: np.ndarray, axes: tuple[int, ...]) -> np.
     Returns
     -------
     (..., 4) float
-        Quaternions xyzw.
+        Quaternions xyzw: the numbers the reader makes of the same angles.
     """
     angles = np.asarray(angles_deg, dtype=np.float64)
     if angles.shape[-1:] != (len(axes),):
         raise ValueError(f"Expected {len(axes)} angles per rotation, got shape {angles.shape}")
     flat = angles.reshape(-1, len(axes))
     out = np.empty((len(flat), 4))
-    for start in range(0, len(flat), _ROTATIONS_PER_CHUNK):  # temporaries stay in cache
-        out[start:start + _ROTATIONS_PER_CHUNK] = _axis_product(flat[start:start + _ROTATIONS_PER_CHUNK], axes)
+    step = max(1, _ANGLES_PER_CHUNK // max(1, len(axes)))
+    for start in range(0, len(flat), step):  # temporaries stay in cache
+        block = flat[start:start + step]
+        half = np.multiply(block.T, _RADIANS, out=np.empty((len(axes), len(block))))  # channel-major
+        half *= 0.5
+        q = _axis_product(np.cos(half), np.sin(half), axes)
+        for k in range(4):
+            out[start:start + step, k] = 0.0 if q[k] is None else q[k]
     return out.reshape(angles.shape[:-1] + (4,))
 
 
-_ROTATIONS_PER_CHUNK = 8192
+def _axis_product(c, s, axes: tuple[int, ...]) -> list:
+    """The product of the axis rotations in channel order, component-major: ``[x, y, z, w]``.
 
-
-def _axis_product(angles: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
-    """:func:`euler_channels_to_quat` of ``(M, n)`` degrees: ``(M, 4)`` xyzw.
-
-    One ``np.cos`` and one ``np.sin`` over all the half angles (channel-major, contiguous),
-    then the axis rotations multiplied in channel order on whole columns, skipping the
-    components known to be zero: the first rotation is ``(s e_a, c)`` as it is, the second
-    takes four products, the third eight and four sums (three distinct axes: 12
-    multiplications instead of 24 from the identity). The same numbers as the product
-    from the identity (``+0.0`` where that gave ``0 * c + 0``).
+    ``c[i]`` and ``s[i]`` are the cosines and sines of channel ``i``'s half angles (arrays
+    of one shape); a component is None where it is zero. The axis rotations are
+    multiplied on whole arrays, skipping the components known to be zero: the first
+    rotation is ``(s e_a, c)`` as it is, the second takes four products, the third eight
+    and four sums (three distinct axes: 12 multiplications instead of 24 from the
+    identity). The same numbers as the product from the identity (``+0.0`` where that
+    gave ``0 * c + 0``), and as the compiled twin (``_bvh_kernel.clip_arrays``).
     """
-    half = np.radians(angles.T, out=np.empty(angles.T.shape))
-    half *= 0.5
-    c, s = np.cos(half), np.sin(half)
     # component-major x, y, z, w; None for a component that is zero
     q: list = [None, None, None, c[0]]
     q[axes[0]] = s[0]
@@ -867,10 +927,7 @@ def _axis_product(angles: np.ndarray, axes: tuple[int, ...]) -> np.ndarray:
                 out += term
             new.append(out)
         q = new
-    out = np.empty((len(angles), 4))
-    for k in range(4):
-        out[:, k] = 0.0 if q[k] is None else q[k]
-    return out
+    return q
 
 
 # q * e_x = (w, z, -y, -x), q * e_y = (-z, w, x, -y), q * e_z = (y, -x, w, -z)  (xyzw)
