@@ -329,7 +329,9 @@ def test_numpy_clip_conversion_equals_each_joint_converted_alone(monkeypatch):
     given to euler_channels_to_quat alone, and translations as the offsets with each position
     channel in place (the last of a repeated one). Random hierarchies: mixed axis orders, 6
     channels on inner joints, repeated and partial axes, joints without channels between,
-    signed zeros, half and whole turns; once more frames than a block."""
+    signed zeros, half and whole turns, channels that hold one number in every frame (the
+    posed joints converted once: also 0.0 in some frames and -0.0 in others, or a change
+    only in the last frame or after the first two); once more frames than a block."""
     import usdhands.formats.bvh as bvh_module
     from usdhands.formats.bvh import BvhFile, BvhJoint, bvh_to_asset, euler_channels_to_quat
 
@@ -339,7 +341,7 @@ def test_numpy_clip_conversion_equals_each_joint_converted_alone(monkeypatch):
     layouts = [names[:3] + ["Zrotation", "Xrotation", "Yrotation"], ["Zrotation", "Yrotation", "Xrotation"],
                ["Yrotation", "Xrotation", "Zrotation"], names, [], ["Xrotation"], ["Zrotation", "Zrotation"]]
     special = np.array([0.0, -0.0, 90.0, -90.0, 180.0, -180.0, 360.0, 720.5, 1e-300, -1e-7])
-    for trial in range(30):
+    for trial in range(60):
         J = int(rng.integers(1, 14))
         chans = [layouts[int(rng.integers(len(layouts)))] if rng.random() < 0.7 else
                  [names[c] for c in rng.integers(0, 6, int(rng.integers(0, 7)))] for _ in range(J)]
@@ -348,6 +350,16 @@ def test_numpy_clip_conversion_equals_each_joint_converted_alone(monkeypatch):
         C = sum(len(c) for c in chans)
         T = 4000 if trial == 0 else int(rng.integers(1, 200))
         values = np.where(rng.random((T, C)) < 0.2, rng.choice(special, (T, C)), rng.uniform(-400, 400, (T, C)))
+        for c in np.flatnonzero(rng.random(C) < 0.5):  # columns that do not move, or hardly
+            values[:, c] = rng.choice(special)
+            edit = int(rng.integers(5))
+            if edit == 1 and not values[0, c]:
+                values[rng.random(T) < 0.5, c] = -values[0, c]  # 0.0 and -0.0
+            elif edit == 2:
+                values[-1, c] += 1.0
+            elif edit == 3 and T > 2:
+                values[2:, c] = rng.uniform(-400, 400)
+        monkeypatch.setattr(bvh_module, "_POSED_AFTER", 0 if trial % 2 else bvh_module._POSED_AFTER)
         clip = bvh_to_asset(BvhFile(joints, "", 1 / 30, values), Path("r.bvh")).clip()
         col = 0
         for k, j in enumerate(joints):
