@@ -781,9 +781,10 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     else:
         _translations_numpy(values, offsets, layout.moved, trans)
         _rotations_numpy(values, layout.groups, rot)
-    rot.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
-    trans.setflags(write=False)
-    clip = Clip(sk, _fps(bvh.frame_time), rot, trans, name=path.stem)
+    scales = np.ones((T, J, 3))  # the rest scales (BVH has none): cheaper made here than broadcast and copied
+    for a in (rot, trans, scales):
+        a.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
+    clip = Clip(sk, _fps(bvh.frame_time), rot, trans, scales, name=path.stem)
     if fps is not None and T:
         clip = clip.resample(fps)
     return Asset(str(path), (sk,), (clip,), ())
@@ -807,12 +808,12 @@ class _ChannelLayout:
     """
 
     def __init__(self, joints: list[BvhJoint]):
-        self.first: list[int] = []
-        self.count: list[int] = []
-        self.axes: list[int] = []
-        self.cols: list[int] = []
-        self.moved: tuple[list, list, list] = ([], [], [])
-        self.groups: dict[tuple, tuple[list, list]] = {}
+        first: list[int] = []
+        count: list[int] = []
+        axes: list[int] = []
+        cols: list[int] = []
+        moved: tuple[list, list, list] = ([], [], [])
+        groups: dict[tuple, tuple[list, list]] = {}
         kinds: dict[tuple, tuple] = {}  # a joint's channel names -> its rotation and position channels
         col = 0
         for k, j in enumerate(joints):
@@ -825,22 +826,23 @@ class _ChannelLayout:
                                           [a for what, a in pairs if what == "p"],
                                           [i for i, (what, _) in enumerate(pairs) if what == "p"])
             raxes, rplaces, paxes, pplaces = kind
-            self.first.append(len(self.cols))
-            self.count.append(len(raxes))
+            first.append(len(cols))
+            count.append(len(raxes))
             if raxes:
-                cols = [col + i for i in rplaces]
-                self.axes.extend(raxes)
-                self.cols.extend(cols)
-                group = self.groups.get(raxes)
+                jcols = [col + i for i in rplaces]
+                axes += raxes
+                cols += jcols
+                group = groups.get(raxes)
                 if group is None:
-                    group = self.groups[raxes] = ([], [])
+                    group = groups[raxes] = ([], [])
                 group[0].append(k)
-                group[1].extend(cols)
+                group[1].extend(jcols)
             if paxes:
-                self.moved[0].extend([k] * len(paxes))
-                self.moved[1].extend(paxes)
-                self.moved[2].extend(col + i for i in pplaces)
+                moved[0].extend([k] * len(paxes))
+                moved[1].extend(paxes)
+                moved[2].extend([col + i for i in pplaces])
             col += len(channels)
+        self.first, self.count, self.axes, self.cols, self.moved, self.groups = first, count, axes, cols, moved, groups
 
 
 #: Rotation channels converted together, a block of frames at a time (their temporaries stay in cache).
@@ -953,12 +955,12 @@ def _translations_numpy(values: np.ndarray, offsets: np.ndarray, moved: tuple, t
     """
     T, J = trans.shape[:2]
     flat = trans.reshape(T, 3 * J)  # column 3k + axis: joint k's translation along axis
-    dest = 3 * np.array(moved[0], dtype=np.int64) + np.array(moved[1], dtype=np.int64)
-    if np.array_equal(dest, np.arange(3 * J)):  # every joint X, Y, Z: one gather, no offsets under it
+    dest = [3 * k + a for k, a in zip(moved[0], moved[1])]
+    if dest == list(range(3 * J)):  # every joint X, Y, Z: one gather, no offsets under it
         np.take(values, moved[2], axis=1, out=flat)
     else:
         trans[:] = offsets
-        if moved[0]:  # one fancy assignment, in file order
+        if dest:  # one fancy assignment, in file order
             flat[:, dest] = np.take(values, moved[2], axis=1)
 
 
