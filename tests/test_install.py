@@ -51,11 +51,15 @@ def test_install_then_editable_install_keeps_a_working_command(tmp_path):
             shutil.copy2(ROOT / name, src / name)
     venv = tmp_path / "venv"
     # without pip (and the old setuptools ensurepip would put beside it): the running pip
-    # installs into it with --python, setuptools comes from the running interpreter
-    _run([sys.executable, "-m", "venv", "--system-site-packages", "--without-pip", venv])
+    # installs into it with --python. The running interpreter's packages (setuptools, numpy,
+    # usd-core...) are seen through a .pth file, not --system-site-packages: run from a virtual
+    # environment, that option gives the base interpreter's packages (an old setuptools, no numpy)
+    _run([sys.executable, "-m", "venv", "--without-pip", venv])
     bindir = venv / ("Scripts" if os.name == "nt" else "bin")
     python = bindir / "python"
     site = _venv_site_packages(venv)
+    site.mkdir(parents=True, exist_ok=True)
+    (site / "running_interpreter.pth").write_text("\n".join(_running_site_packages()) + "\n")
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR")}
     env["USDHANDS_CACHE_DIR"] = str(tmp_path / "user-cache")
     env["PIP_DISABLE_PIP_VERSION_CHECK"] = "1"
@@ -89,6 +93,14 @@ def test_install_then_editable_install_keeps_a_working_command(tmp_path):
     assert version == f"usdhands {_package_version()}"
     where = _run([python, "-c", "import usdhands; print(usdhands.__file__)"], env=env, cwd=work).stdout.strip()
     assert Path(where).resolve() == (src / "usdhands" / "__init__.py").resolve()
+
+
+def _running_site_packages() -> list[str]:
+    """The folders the running interpreter imports installed packages from (its venv's, or the global ones)."""
+    import site
+
+    folders = [sysconfig.get_path("purelib"), sysconfig.get_path("platlib")] + site.getsitepackages()
+    return list(dict.fromkeys(f for f in folders if Path(f).is_dir()))
 
 
 def _package_version() -> str:
