@@ -237,6 +237,40 @@ def test_clearance_search_agrees_with_dense_sampling_on_random_axes():
     assert np.all(lower[~below] >= 0.3 - 0.0025)
 
 
+def test_within_gives_the_thresholded_signed_distance_with_fewer_exact_queries():
+    """``Colliders.within`` (the wrist's proximity cut) answers ``signed_distance(f, p, r) < r`` exactly:
+    on the mug (a moving placement, a uniform scale), an unused vertex far out that must not count as
+    surface, and a ball; points inside, on both sides of ``r`` and right at it."""
+    (prop,) = read_props(MUG, meters_per_unit=0.01, up_axis="Y")
+    verts = np.vstack([prop.vertices, [[-15.0, -15.0, -15.0]]])  # a vertex of no face, among the points
+    T = 5
+    world = np.tile(np.eye(4), (T, 1, 1))
+    world[:, :3, :3] *= 1.5
+    world[:, 0, 3] = np.arange(T) * 3.0
+    mug = mesh_collider(PropMesh("mug", verts, prop.faces), np.zeros(T), world=world)
+    ball, _ = _sphere_colliders(radius=2.0, centre=(0.0, 40.0, 0.0))
+    cols = Colliders([mug, *ball.items])
+    rng = np.random.default_rng(4)
+    frames = rng.integers(0, T, size=5000)
+    surface = _near_points(_trimesh_of(prop), 1000, 0.5, seed=5) * 1.5 + world[frames[:1000], :3, 3]
+    pts = np.vstack([surface, rng.uniform(-30.0, 45.0, size=(4000, 3))])
+    r = 12.0
+    exact = cols.signed_distance(frames, pts)
+    # points whose distance is r itself, to the last bit, and just either side of it
+    edge = np.nonzero(np.abs(exact - r) < 3.0)[0][:20]
+    assert len(edge) == 20
+    q0 = mug.exact_queries
+    want = cols.signed_distance(frames, pts, r) < r
+    q1 = mug.exact_queries
+    got = cols.within(frames, pts, r)
+    np.testing.assert_array_equal(got, want)
+    assert mug.exact_queries - q1 < 0.7 * (q1 - q0)  # the vertex bound decides many of them
+    assert got.sum() > 1000 and (~got).sum() > 1000 and (exact < 0).sum() > 200  # inside, near and far all met
+    for rr in (exact[edge], np.nextafter(exact[edge], np.inf), np.nextafter(exact[edge], -np.inf)):
+        for k, i in enumerate(edge):
+            assert cols.within(frames[i:i + 1], pts[i:i + 1], rr[k])[0] == (exact[i] < rr[k])
+
+
 def test_attached_prop_moves_with_the_joint():
     T = 10
     joint = np.tile(np.eye(4), (T, 1, 1))

@@ -62,22 +62,41 @@ class MeshCollider:
 
         Points farther than ``cutoff`` from the bounding box get the box distance (a lower bound).
         """
-        frames = np.asarray(frames, dtype=np.int64)
-        p = np.asarray(points, dtype=np.float64)
-        if self._static:
-            inv, scale = self._inv[0], self._scale[0]
-            local = p @ inv[:3, :3].T + inv[:3, 3]
-            scale = np.full(len(p), scale)
-        else:
-            inv = self._inv[frames]
-            local = np.einsum("nij,nj->ni", inv[:, :3, :3], p) + inv[:, :3, 3]
-            scale = self._scale[frames]
+        local, scale = self._local(frames, points)
         out = self.proximity.bbox_distance(local) * scale
         near = out < cutoff
         if near.any():
             out[near] = self.proximity.signed_distance(local[near]) * scale[near]
             self.exact_queries += int(near.sum())
         return out
+
+    def within(self, frames: np.ndarray, points: np.ndarray, r: float) -> np.ndarray:
+        """Whether the signed distance of each of ``points`` ``(N, 3)`` at ``frames`` ``(N,)`` is below ``r``
+        (clip units), ``(N,)`` bool: ``signed_distance(frames, points, r) < r``, the same answers, measuring
+        exactly only the points that neither the box distance (a lower bound) nor the distance to a few
+        of the mesh's vertices (an upper bound, :meth:`MeshProximity.upper_distance`) decides."""
+        local, scale = self._local(frames, points)
+        out = np.zeros(len(local), dtype=bool)
+        idx = np.nonzero(self.proximity.bbox_distance(local) * scale < r)[0]
+        if len(idx):
+            # by a relative 1e-9 short of r: the exact query's rounding cannot fall on the other side
+            sure = self.proximity.upper_distance(local[idx]) * scale[idx] < r - 1e-9 * abs(r)
+            out[idx[sure]] = True
+            ask = idx[~sure]
+            if len(ask):
+                out[ask] = self.proximity.signed_distance(local[ask]) * scale[ask] < r
+                self.exact_queries += len(ask)
+        return out
+
+    def _local(self, frames: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``points`` ``(N, 3)`` at ``frames`` ``(N,)`` in the mesh's frame and each one's scale ``(N,)``."""
+        frames = np.asarray(frames, dtype=np.int64)
+        p = np.asarray(points, dtype=np.float64)
+        if self._static:
+            inv, scale = self._inv[0], self._scale[0]
+            return p @ inv[:3, :3].T + inv[:3, 3], np.full(len(p), scale)
+        inv = self._inv[frames]
+        return np.einsum("nij,nj->ni", inv[:, :3, :3], p) + inv[:, :3, 3], self._scale[frames]
 
 
 def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -148,6 +167,18 @@ class Colliders:
         out = np.full(len(points), np.inf)
         for c in self.items:
             out = np.minimum(out, c.signed_distance(frames, points, cutoff))
+        return out
+
+    def within(self, frames: np.ndarray, points: np.ndarray, r: float) -> np.ndarray:
+        """Whether each of ``points`` ``(N, 3)`` at ``frames`` ``(N,)`` is nearer than ``r`` to some collider
+        (signed distance below ``r``, clip units), ``(N,)`` bool: ``signed_distance(frames, points, r) < r``."""
+        out = np.zeros(len(points), dtype=bool)
+        for c in self.items:
+            rest = np.nonzero(~out)[0]
+            if len(rest) == 0:
+                break
+            f, p = np.asarray(frames, dtype=np.int64)[rest], np.asarray(points, dtype=np.float64)[rest]
+            out[rest] = c.within(f, p, r) if hasattr(c, "within") else c.signed_distance(f, p, r) < r
         return out
 
     def without_parts(self, parts) -> "Colliders":

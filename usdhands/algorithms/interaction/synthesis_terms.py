@@ -27,7 +27,7 @@ from usdhands.model.clip import Clip
 from usdhands.model.handmap import HandMap, HandSide
 from usdhands.model.rotations import quat_conjugate, quat_multiply, quat_to_euler_deg
 
-__all__ = ["InteractionTerms", "wrist_proximity", "proximity_cuts"]
+__all__ = ["InteractionTerms", "wrist_proximity", "wrist_near", "proximity_cuts"]
 
 
 def wrist_proximity(clip: Clip, hand: HandSide, colliders, cutoff: float = np.inf,
@@ -38,6 +38,15 @@ def wrist_proximity(clip: Clip, hand: HandSide, colliders, cutoff: float = np.in
     j = clip.skeleton.index(hand.wrist)
     pos = (clip.world_xforms() if world is None else world)[:, j, :3, 3]
     return colliders.signed_distance(np.arange(clip.num_frames), pos, cutoff)
+
+
+def wrist_near(clip: Clip, hand: HandSide, colliders, reach: float, world: np.ndarray | None = None) -> np.ndarray:
+    """Whether the wrist is nearer than ``reach`` (clip units) to some collider per frame, ``(T,)`` bool:
+    ``wrist_proximity(clip, hand, colliders, reach, world) < reach``, measured exactly only where
+    bounds do not decide (:meth:`~usdhands.algorithms.interaction.colliders.Colliders.within`)."""
+    j = clip.skeleton.index(hand.wrist)
+    pos = (clip.world_xforms() if world is None else world)[:, j, :3, 3]
+    return colliders.within(np.arange(clip.num_frames), pos, reach)
 
 
 def proximity_cuts(bounds: np.ndarray, near: np.ndarray, min_frames: int) -> np.ndarray:
@@ -114,7 +123,7 @@ class InteractionTerms:
     world: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        self.near = wrist_proximity(self.clip, self.hand, self.colliders, self.reach, self.world) < self.reach
+        self.near = wrist_near(self.clip, self.hand, self.colliders, self.reach, self.world)
         self._posers = None
 
     def cuts(self, bounds: np.ndarray) -> np.ndarray:
