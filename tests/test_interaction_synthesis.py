@@ -78,3 +78,35 @@ def test_db_build_with_props_stores_the_corrected_fingers(tmp_path, capsys):
     assert plain.fingers.shape == fixed.fingers.shape
     # the curled frames were opened: less total flexion in the corrected database
     assert np.abs(np.asarray(fixed.fingers)).sum() < 0.8 * np.abs(np.asarray(plain.fingers)).sum()
+
+
+def test_synthesize_with_props_at_another_rate_than_the_database_builds_each_tree_once(tmp_path, capsys,
+                                                                                        monkeypatch):
+    """A 60 fps clip is synthesized at the database's 30 fps and corrected at its own rate: two sets of
+    colliders, one MeshProximity per prop (a static one and one attached to the wrist)."""
+    from usdhands.algorithms.interaction import colliders as colliders_module
+
+    built = []
+    real = colliders_module.MeshProximity
+
+    class Counted(real):
+        def __init__(self, *args, **kwargs):
+            built.append(1)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(colliders_module, "MeshProximity", Counted)
+    clip = closing_hand_clip(frames=60, fps=60.0)
+    write_asset(Asset("closing", (clip.skeleton,), (clip,)), tmp_path / "in.usda")
+    prop = cylinder_under_palm()
+    trimesh.Trimesh(np.asarray(prop.vertices), np.asarray(prop.faces)).export(tmp_path / "cyl.obj")
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    ball.apply_translation([60.0, 120.0, 0.0])
+    ball.export(tmp_path / "ball.obj")
+    wrist = humanoid_handmap(clip.skeleton)["left"].wrist
+    code = main([str(a) for a in ("synthesize", tmp_path / "in.usda", "--props", tmp_path / "cyl.obj",
+                                  tmp_path / "ball.obj", "--attach", f"ball={wrist}", "-o", tmp_path / "out.usda",
+                                  "--json")])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert len(built) == 2
+    assert json.loads(out.out)["interaction"]["penetration_after_mm"]["max"] <= 0.5

@@ -119,10 +119,12 @@ def read_scene_props(options, clip, world=None):
     return out
 
 
-def build_colliders(options, clip, handmap, props, path=None, world=None):
+def build_colliders(options, clip, handmap, props, path=None, world=None, proximities=None):
     """The colliders of the scene: the props (static, animated or attached) and, with ``--self``, the body.
 
-    ``world``: the clip's world transforms ``(T, J, 4, 4)`` when the caller has them.
+    ``world``: the clip's world transforms ``(T, J, 4, 4)`` when the caller has them; ``proximities``:
+    a dict from a prop's index in ``props`` to its ``MeshProximity``, used where it holds one and filled
+    where not (the same props placed at two frame rates build their trees once).
     Returns ``(Colliders, attachments)``.
     """
     from usdhands.algorithms.interaction.body import body_collider
@@ -149,14 +151,15 @@ def build_colliders(options, clip, handmap, props, path=None, world=None):
     items = []
     if by_prop and world is None:
         world = clip.world_xforms()
+    proximities = {} if proximities is None else proximities
     for i, (path, prop) in enumerate(props):
         att = by_prop.get(i)
-        if att is None:
-            items.append(mesh_collider(prop, clip.times))
-            continue
-        start, stop = (0, T - 1) if att.start is None else (att.start, att.stop)
-        xf = attached_xforms(prop.xforms_at(clip.times), world[:, clip.skeleton.index(att.joint)], start, stop)
-        items.append(mesh_collider(prop, clip.times, world=xf))
+        xf = None
+        if att is not None:
+            start, stop = (0, T - 1) if att.start is None else (att.start, att.stop)
+            xf = attached_xforms(prop.xforms_at(clip.times), world[:, clip.skeleton.index(att.joint)], start, stop)
+        items.append(mesh_collider(prop, clip.times, world=xf, proximity=proximities.get(i)))
+        proximities[i] = items[-1].proximity
     if options.self_collision:
         body = body_collider(clip, handmap)
         if body is not None:
@@ -207,9 +210,11 @@ def synthesis_interaction(options, clip, handmap, db, cfg, props, config, path=N
     from usdhands.algorithms.synthesis.database import same_rate
     from usdhands.algorithms.synthesis.finger_transfer import canonical_to_local, local_to_canonical
 
-    colliders, _ = build_colliders(options, clip, handmap, props, path=path, world=world)
+    proximities = {}  # each prop's tree, built once for both rates
+    colliders, _ = build_colliders(options, clip, handmap, props, path=path, world=world, proximities=proximities)
     at_db = clip if same_rate(clip.fps, db.fps) else clip.resample(db.fps)
-    db_colliders = colliders if at_db is clip else build_colliders(options, at_db, handmap, props, path=path)[0]
+    db_colliders = colliders if at_db is clip else \
+        build_colliders(options, at_db, handmap, props, path=path, proximities=proximities)[0]
     rest = clip.skeleton.rest_world_positions()
     if at_db is not clip or world is None:
         world = at_db.world_xforms()  # posed once for both hands

@@ -223,11 +223,13 @@ def attached_xforms(prop_world: np.ndarray, joint_world: np.ndarray, start: int,
     return out
 
 
-def mesh_collider(prop: PropMesh, times: np.ndarray, world: np.ndarray | None = None) -> MeshCollider:
+def mesh_collider(prop: PropMesh, times: np.ndarray, world: np.ndarray | None = None,
+                  proximity: MeshProximity | None = None) -> MeshCollider:
     """A collider for ``prop`` at each of the clip's frame ``times`` (seconds).
 
-    ``world`` ``(T, 4, 4)`` overrides the prop's own motion (an attached prop).
+    ``world`` ``(T, 4, 4)`` overrides the prop's own motion (an attached prop); ``proximity``: the
+    prop's :class:`MeshProximity` when the caller has built it already (the same prop at another rate).
     """
-    prox = MeshProximity(prop.vertices, prop.faces)
+    prox = MeshProximity(prop.vertices, prop.faces) if proximity is None else proximity
     xf = prop.xforms_at(times) if world is None else np.asarray(world, dtype=np.float64)
     return MeshCollider(prop.name, prox, xf)
