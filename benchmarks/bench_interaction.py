@@ -11,7 +11,8 @@ Measured in the same run:
 
 And ``synthesize --props`` against plain synthesis of the same 60 s clip (the bundled
 database; library calls: synthesis with the proximity cuts and the collision term, then the
-correction of the result), target within 2x.
+correction of the result; and the synthesize job end to end, in both engine states: the
+search in NumPy as one command runs it, and with the kernels loaded), target within 2x.
 
 Run: ``python benchmarks/bench_interaction.py [--seconds S] [--naive-frames N] [--no-synthesis]``.
 """
@@ -19,6 +20,7 @@ Run: ``python benchmarks/bench_interaction.py [--seconds S] [--naive-frames N] [
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -64,9 +66,15 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--naive-frames", type=int, default=30, help="frames the naive baseline is timed on")
     ap.add_argument("--no-synthesis", action="store_true", help="skip the synthesize --props comparison")
-    ap.add_argument("--repeat", type=int, default=3, help="runs of each synthesize job timed (the best counts)")
+    ap.add_argument("--repeat", type=int, default=5, help="alternating runs of each synthesize job timed (medians)")
     args = ap.parse_args()
     import trimesh
+
+    from usdhands.algorithms.synthesis import segment_cost
+
+    # every synthesis here searches in NumPy, as one command does, until the kernel's row loads it
+    # (otherwise the process loads it after 20 M cells, in the middle of some comparison)
+    segment_cost.NUMPY_SEARCH_PROCESS_CELLS = float("inf")
 
     clip = grasping_clip(args.seconds)
     hm = humanoid_handmap(clip.skeleton)
@@ -114,11 +122,12 @@ def main() -> None:
         print(f"  exact distance queries: set up {parts['setup']['queries']}, synthesis {parts['synthesis']['queries']}, "
               f"correction {parts['correction']['queries']}, total "
               f"{sum(v['queries'] for v in parts.values())}")
-        plain_job, props_job = synthesize_job_times(clip, mug, args.repeat)
-        print(f"synthesize job end to end (read .glb, synthesize, write .glb): plain {plain_job['wall']:.2f} s wall / "
-              f"{plain_job['cpu']:.2f} s CPU, --props {props_job['wall']:.2f} / {props_job['cpu']:.2f}, ratio "
-              f"{props_job['wall'] / plain_job['wall']:.2f}x wall, {props_job['cpu'] / plain_job['cpu']:.2f}x CPU "
-              f"(best of {args.repeat})")
+        for state, (plain_job, props_job) in synthesize_job_times(clip, mug, args.repeat).items():
+            print(f"synthesize job end to end (read .glb, synthesize, write .glb), {state}: plain "
+                  f"{plain_job['wall']:.2f} s wall / {plain_job['cpu']:.2f} s CPU, --props {props_job['wall']:.2f} / "
+                  f"{props_job['cpu']:.2f}, ratio {props_job['wall'] / plain_job['wall']:.2f}x wall, "
+                  f"{props_job['cpu'] / plain_job['cpu']:.2f}x CPU (medians of {args.repeat} alternating runs, "
+                  f"load {os.getloadavg()[0]:.1f})")
 
 
 def exact_queries(colliders) -> int:
@@ -137,27 +146,45 @@ def _timed(fn, repeat: int = 1) -> tuple[dict, object]:
     return best, out
 
 
-def synthesize_job_times(clip, mug, repeat: int = 3) -> tuple[dict, dict]:
-    """Seconds (wall and CPU, best of ``repeat``) of the synthesize job on the clip written as .glb,
-    without and with the mug as an OBJ prop."""
+def synthesize_job_times(clip, mug, repeat: int = 5) -> dict:
+    """Seconds (wall and CPU, medians of ``repeat`` runs alternating the two) of the synthesize job on the
+    clip written as .glb, without and with the mug as an OBJ prop, ``{state: (plain, props)}``: first with
+    the search in NumPy (as one ``usdhands synthesize`` of a clip runs it: numba is not loaded, so neither
+    are the interaction's compiled side test and recursion), then with the search kernel loaded (a batch
+    worker, a library user synthesizing many clips: the interaction's kernels run too).
+
+    Both jobs of a pair run in the same state: a process loads the kernel once it has searched
+    ``NUMPY_SEARCH_PROCESS_CELLS`` in NumPy, so timing all plain runs and then all ``--props`` runs
+    compared a NumPy search with a compiled one (the benchmark did so before session 7)."""
     import tempfile
 
     import trimesh
 
+    from usdhands.algorithms.synthesis import segment_cost
     from usdhands.formats.io import write_asset
     from usdhands.jobs.synthesis import SynthesizeOptions, synthesize
     from usdhands.model.asset import Asset
 
+    out = {}
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "grasping.glb"
         write_asset(Asset("grasping", (clip.skeleton,), (clip,)), src)
         prop = Path(tmp) / "mug.obj"
         metres = clip.skeleton.meters_per_unit  # the .glb is read back in metres; an OBJ is taken in the clip's units
         trimesh.Trimesh(np.asarray(mug.vertices) * metres, np.asarray(mug.faces), process=False).export(prop)
-        synthesize(src, Path(tmp) / "warm.glb")  # load the database and compile the kernels outside the timing
-        plain, _ = _timed(lambda: synthesize(src, Path(tmp) / "plain.glb"), repeat)
-        props, _ = _timed(lambda: synthesize(src, Path(tmp) / "props.glb", SynthesizeOptions(props=(prop,))), repeat)
-        return plain, props
+        jobs = {"plain": lambda: synthesize(src, Path(tmp) / "plain.glb"),
+                "props": lambda: synthesize(src, Path(tmp) / "props.glb", SynthesizeOptions(props=(prop,)))}
+        for state in ("search in NumPy (one command)", "kernels loaded (batch worker)"):
+            if state.startswith("kernels"):
+                segment_cost.load_search_kernel()
+            for job in jobs.values():
+                job()  # the database, the first query's set-up, outside the timing
+            runs = {k: [] for k in jobs}
+            for _ in range(repeat):
+                for k, job in jobs.items():
+                    runs[k].append(_timed(job)[0])
+            out[state] = tuple({m: float(np.median([t[m] for t in runs[k]])) for m in ("wall", "cpu")} for k in jobs)
+        return out
 
 
 def synthesis_times(clip, hm, mug) -> tuple[dict, dict]:
