@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import shutil
@@ -245,6 +246,81 @@ def test_a_synthesize_worker_loads_the_search_kernel_at_start_with_the_signature
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert json.loads(done.stdout.splitlines()[-1]) == [False, False, True, 1, 1]
+
+
+def _run_fresh(code: str) -> object:
+    """``code`` run by a fresh interpreter (its own forkserver) with the tests folder importable: the JSON
+    of its last printed line."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([here, os.environ.get("PYTHONPATH", "")]))
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
+def test_a_worker_forked_from_the_warm_forkserver_has_the_kernel_and_one_kernel_thread():
+    """The warm forkserver loaded numba but started none of its threads (a process forked after they
+    started would have none); its workers load the search kernel and run kernels on one thread. A pool
+    in a process that did not ask for it forks from a forkserver without numba."""
+    pytest.importorskip("numba")
+    code = (
+        "import json, usdhands\n"
+        "from usdhands.jobs import batch\n"
+        "import batch_dying_job\n"
+        "if {warm}:\n"
+        "    assert batch.start_warm_forkserver()\n"
+        "with batch._pool(2, 'synthesize', usdhands.SynthesizeOptions(), batch.KERNEL_AT_START_CLIPS) as pool:\n"
+        "    states = [f.result() for f in [pool.submit(batch_dying_job.worker_state) for _ in range(4)]]\n"
+        "print(json.dumps(states[0]))\n")
+    warm = _run_fresh(code.format(warm=True))
+    assert warm == {"kernel_threads": 1, "search_kernel": True, "parent_has_numba": True,
+                    "parent_started_threads": False}
+    cold = _run_fresh(code.format(warm=False))
+    assert cold == {"kernel_threads": 1, "search_kernel": True, "parent_has_numba": False,
+                    "parent_started_threads": False}
+
+
+def test_only_a_batch_that_asks_starts_the_warm_forkserver(clips, tmp_path, monkeypatch):
+    """run_batch's callers keep their process's forkserver as it is unless they set warm_forkserver (the
+    command line does), and then only for synthesize on the local pool with enough clips a worker."""
+    calls = []
+    monkeypatch.setattr(batch, "start_warm_forkserver", lambda: calls.append(1) or True)
+    monkeypatch.setattr(batch, "KERNEL_AT_START_CLIPS", 1)
+    options = BatchOptions(job="convert", out=tmp_path / "a", workers=1, job_options=usdhands.ConvertOptions(),
+                           to="usda")
+    run_batch([clips / "ok_00.glb"], options)
+    run_batch([clips / "ok_00.glb"], dataclasses.replace(options, warm_forkserver=True, out=tmp_path / "b"))
+    assert calls == []
+    synth = BatchOptions(job="synthesize", out=tmp_path / "c", workers=1, job_options=usdhands.SynthesizeOptions(k=3))
+    run_batch([clips / "ok_00.glb"], synth)
+    assert calls == []
+    report = run_batch([clips / "ok_00.glb"], dataclasses.replace(synth, warm_forkserver=True, out=tmp_path / "d"))
+    assert calls == [1] and [c.status for c in report.clips] == ["done"]
+    parsed = []
+    monkeypatch.setattr(batch, "run_batch", lambda inputs, options, progress=None: parsed.append(options) or
+                        run_batch(inputs, options, progress))
+    assert usdhands.cli.main(["batch", str(clips / "ok_00.glb"), "--job", "synthesize", "--k", "3", "--out",
+                              str(tmp_path / "e"), "--workers", "1", "-q"]) == 0
+    assert parsed[0].warm_forkserver is True
+
+
+def test_a_clip_that_kills_a_worker_forked_warm_is_retried_once_then_failed(clips, tmp_path):
+    """Workers forked from the warm forkserver die and are replaced as before: the killer fails alone."""
+    pytest.importorskip("numba")
+    shutil.copy(clips / "ok_00.glb", clips / "die_00.glb")
+    (clips / "sub" / "broken.glb").unlink()
+    code = (
+        "import json, usdhands\n"
+        "from pathlib import Path\n"
+        "from usdhands.jobs import batch\n"
+        "assert batch.start_warm_forkserver()\n"
+        f"report = batch.run_batch([{str(clips)!r}], batch.BatchOptions(job='batch_dying_job:convert_or_die', "
+        f"out=Path({str(tmp_path / 'out')!r}), workers=2, job_options=usdhands.ConvertOptions()))\n"
+        "print(json.dumps({Path(c.file).name: [c.status, c.error] for c in report.clips}))\n")
+    died = "the worker process died on this clip (retried once, alone)"
+    assert _run_fresh(code) == {"die_00.glb": ["failed", died], "ok_00.glb": ["done", None],
+                                "ok_01.glb": ["done", None], "attention_00.glb": ["done", None]}
 
 
 def test_a_clip_that_kills_its_worker_is_retried_once_then_failed_and_the_others_are_done(clips, tmp_path):

@@ -139,7 +139,7 @@ def run(args) -> int:
                      args.out)
     options = BatchOptions(job=args.job, out=args.out, job_options=job_options(args),
                            workers=args.workers or os.cpu_count() or 1, scheduler=args.scheduler, to=args.to,
-                           model=args.model)
+                           model=args.model, warm_forkserver=True)
     bar = _progress_bar(args.job)
     try:
         report = run_batch(args.inputs, options, progress=bar)

@@ -98,6 +98,12 @@ class BatchOptions:
         ``expand``: the reduction model JSON.
     dask_processes : bool
         ``scheduler="local"``: worker processes (True) or threads of this process (False, for tests).
+    warm_forkserver : bool
+        Local pool, ``synthesize``, 20 clips or more a worker: start this process's multiprocessing
+        forkserver at once with synthesis, the bundled database and numba loaded
+        (:func:`start_warm_forkserver`), so that the workers fork from it warm. It changes the
+        process's forkserver for the rest of its life: for a process that runs batch and nothing
+        else (the command line sets it); library callers keep False.
     """
 
     job: str
@@ -108,6 +114,7 @@ class BatchOptions:
     to: str | None = None
     model: Path | None = None
     dask_processes: bool = True
+    warm_forkserver: bool = False
 
 
 @dataclass(frozen=True)
@@ -196,6 +203,9 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
     out = Path(options.out)
     for src, rel in collect_inputs(inputs, extensions):
         pairs.append((src, out / output_name(rel, options)))
+    if (options.warm_forkserver and options.scheduler is None and options.job == "synthesize"
+            and len(pairs) >= KERNEL_AT_START_CLIPS * options.workers):
+        start_warm_forkserver()  # it loads while the outputs are checked and the pool is made
     if not pairs:
         named = [Path(p) for p in inputs]
         raise UsdHandsError(f"no input clips found ({', '.join(extensions)})",
@@ -507,6 +517,49 @@ def _warm_worker(job: str, job_options, clips_each: int) -> None:
 
             _one_kernel_thread()  # Dask warms its workers on another thread than their tasks'
             load_search_kernel()
+
+
+#: The module the warm forkserver imports before it forks a worker (:func:`start_warm_forkserver`)
+WARM_FORKSERVER_MODULE = "usdhands.jobs.batch_forkserver"
+
+
+def start_warm_forkserver() -> bool:
+    """Start this process's multiprocessing forkserver now, preloading :data:`WARM_FORKSERVER_MODULE`
+    (:func:`_warm_forkserver_process`); False where there is no forkserver (the pool spawns).
+
+    The pool's workers then fork from a process that has imported synthesis and loaded numba,
+    its CPU target and a kernel, instead of each importing and loading them after it starts;
+    the forkserver loads while the batch process checks its outputs. A forkserver already
+    running in this process keeps what it has (the workers then warm themselves, as without).
+    The preload stays set for this process's forkserver: see :attr:`BatchOptions.warm_forkserver`.
+    """
+    import multiprocessing
+
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return False
+    from multiprocessing import forkserver
+
+    forkserver.set_forkserver_preload([WARM_FORKSERVER_MODULE])
+    forkserver.ensure_running()
+    return True
+
+
+def _warm_forkserver_process() -> None:
+    """The warm forkserver's preload: the synthesize job's modules, the bundled database, numba and
+    one serial kernel of synthesis (numba's import and CPU target: ~0.5 s once instead of in each
+    worker). numba's threads are not started here (the parallel search kernel is not loaded): a
+    process forked after they started would have none; each worker starts its own, one kernel
+    thread, and loads the search kernel (:func:`_warm_worker`). Never raises (a forkserver whose
+    preload failed would start no worker): what failed is loaded again by each worker."""
+    with contextlib.suppress(Exception):
+        import numpy as np
+
+        from usdhands.algorithms.synthesis.output_warp import limit_steps_fast
+        from usdhands.jobs.inputs import cached_database
+
+        _job_function("synthesize")
+        cached_database(None)
+        limit_steps_fast(np.zeros((2, 1)), np.zeros(1))
 
 
 # ----------------------------------------------------------------------------- local process pool
