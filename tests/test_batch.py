@@ -305,6 +305,33 @@ def test_only_a_batch_that_asks_starts_the_warm_forkserver(clips, tmp_path, monk
     assert parsed[0].warm_forkserver is True
 
 
+@pytest.mark.parametrize("how", ["freeze_at_exit", "forkserver_preload", "dask_plugin", "dask_plugin_farm", "cli"])
+def test_processes_batch_starts_exit_without_the_last_collections_and_keep_their_status(how):
+    """The warm forkserver, the LocalCluster's workers (not a farm's) and the command line's process
+    freeze the garbage collector at exit (its last collections over numba's objects took ~0.3 s):
+    an exit handler registered before still runs, after the freeze, and the exit status is kept."""
+    setup = {
+        "freeze_at_exit": "from usdhands.jobs.batch import freeze_at_exit\nfreeze_at_exit()\nsys.exit(3)\n",
+        "forkserver_preload": "import usdhands.jobs.batch_forkserver\nsys.exit(3)\n",
+        "dask_plugin": "import pickle\npickle.loads(bytes.fromhex(sys.argv[1])).setup(None)\nsys.exit(3)\n",
+        "dask_plugin_farm": "import pickle\npickle.loads(bytes.fromhex(sys.argv[1])).setup(None)\nsys.exit(3)\n",
+        "cli": "sys.argv = ['usdhands', 'no-such-command']\nfrom usdhands.cli import entry_point\nentry_point()\n",
+    }[how]
+    args = []
+    if how.startswith("dask_plugin"):
+        pytest.importorskip("distributed")
+        import pickle
+
+        from usdhands.jobs.dask_worker import OwnProcessWorker
+
+        args = [pickle.dumps(OwnProcessWorker(freeze_at_exit=how == "dask_plugin")).hex()]
+    code = ("import atexit, gc, sys\n"
+            "atexit.register(lambda: print('frozen', gc.get_freeze_count() > 0, flush=True))\n" + setup)
+    done = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=600)
+    assert done.returncode == (2 if how == "cli" else 3), done.stderr[-2000:]
+    assert done.stdout.splitlines()[-1] == f"frozen {how != 'dask_plugin_farm'}"
+
+
 def test_a_clip_that_kills_a_worker_forked_warm_is_retried_once_then_failed(clips, tmp_path):
     """Workers forked from the warm forkserver die and are replaced as before: the killer fails alone."""
     pytest.importorskip("numba")

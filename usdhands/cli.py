@@ -212,8 +212,17 @@ def _main_thread() -> bool:
 
 
 def entry_point() -> None:
-    """Console-script entry point."""
-    sys.exit(main())
+    """Console-script entry point (and ``python -m usdhands``).
+
+    The process then exits without Python's last garbage collections over what it loaded
+    (``gc.freeze``; exit handlers, flushed streams and the exit status as before): with
+    Dask loaded, as after ``batch --scheduler``, they took ~0.14 of a 0.15 s exit.
+    """
+    import gc
+
+    code = main()
+    gc.freeze()
+    sys.exit(code)
 
 
 if __name__ == "__main__":

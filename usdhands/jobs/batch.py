@@ -550,7 +550,10 @@ def _warm_forkserver_process() -> None:
     worker). numba's threads are not started here (the parallel search kernel is not loaded): a
     process forked after they started would have none; each worker starts its own, one kernel
     thread, and loads the search kernel (:func:`_warm_worker`). Never raises (a forkserver whose
-    preload failed would start no worker): what failed is loaded again by each worker."""
+    preload failed would start no worker): what failed is loaded again by each worker.
+
+    At its exit the forkserver skips Python's last garbage collections (:func:`freeze_at_exit`).
+    """
     with contextlib.suppress(Exception):
         import numpy as np
 
@@ -560,6 +563,22 @@ def _warm_forkserver_process() -> None:
         _job_function("synthesize")
         cached_database(None)
         limit_steps_fast(np.zeros((2, 1)), np.zeros(1))
+    freeze_at_exit()
+
+
+def freeze_at_exit() -> None:
+    """At this process's exit, before the other exit handlers, move every object out of the garbage
+    collector's reach (``gc.freeze``): Python's exit then skips its last collections over them.
+
+    With numba and a kernel loaded those took ~0.3 s of a 0.32 s exit (0.04 s frozen), during
+    which a batch's forkserver or Dask worker still held the batch's stderr, or its nanny waited.
+    The exit is otherwise Python's own: exit handlers, streams flushed, the exit status kept.
+    For processes batch starts (the warm forkserver, a LocalCluster's workers), never the caller's.
+    """
+    import atexit
+    import gc
+
+    atexit.register(gc.freeze)  # exit handlers run last-registered first
 
 
 # ----------------------------------------------------------------------------- local process pool
@@ -659,7 +678,7 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
                 raise UsdHandsError(f"cannot reach the Dask scheduler {options.scheduler}: {e}") from None
         from usdhands.jobs.dask_worker import OwnProcessWorker
 
-        client.register_plugin(OwnProcessWorker())
+        client.register_plugin(OwnProcessWorker(freeze_at_exit=options.scheduler == "local"))
         slots = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()) or 1
         client.run(_warm_worker, job, job_options, -(-len(todo) // slots))
         futures = {client.submit(run_clips, job, job_options, model, chunk, pure=False): chunk
