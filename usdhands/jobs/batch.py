@@ -539,7 +539,7 @@ def start_warm_forkserver() -> bool:
         return False
     from multiprocessing import forkserver
 
-    forkserver.set_forkserver_preload([WARM_FORKSERVER_MODULE])
+    forkserver.set_forkserver_preload(["__main__", WARM_FORKSERVER_MODULE])  # __main__: multiprocessing's default
     forkserver.ensure_running()
     return True
 
