@@ -71,19 +71,25 @@ NOT_READ = ["nan", "inf", "-inf", "Infinity", "1e", "1e+", ".", "-", "+", "1.2.3
             "0x10", "\u0661", "1e1234567", "--1", "+-1", "e5", "1.5f", "1d5"]
 
 
+def assert_reads_as_float(read, rules, tokens: list[str]) -> int:
+    """Each token on a line of its own: ``read(text, 1)`` reads it exactly where ``rules(token)`` says,
+    and then as the one value float() makes of it, to the bit. Returns how many it read."""
+    count = 0
+    for t in tokens:
+        got = read((t + "\n").encode(), 1)
+        assert (got is not None) == rules(t), t
+        if got is not None:
+            count += 1
+            assert got.shape == (1, 1) and got[0, 0].tobytes() == np.float64(float(t)).tobytes(), t
+    return count
+
+
 def test_parse_rows_reads_exactly_what_float_reads():
     """Random decimal strings (long mantissas, exponents, negative zero, leading zeros, both sides
     of the point empty in turn): read exactly where the rules say, and then to float()'s bit."""
     rng = random.Random(7)
     tokens = SPECIAL + [_random_token(rng) for _ in range(30_000)]
-    read = 0
-    for t in tokens:
-        got = _kernel_read((t + "\n").encode(), 1)
-        assert (got is not None) == _fast_path_reads(t), t
-        if got is not None:
-            read += 1
-            assert got.shape == (1, 1) and got[0, 0].tobytes() == np.float64(float(t)).tobytes(), t
-    assert read > 0.6 * len(tokens)
+    assert assert_reads_as_float(_kernel_read, _fast_path_reads, tokens) > 0.6 * len(tokens)
     assert _kernel_read(b"-0.000000\n", 1)[0, 0].tobytes() == np.float64(-0.0).tobytes()
     for t in NOT_READ:
         assert _kernel_read((t + "\n").encode("utf-8"), 1) is None, t

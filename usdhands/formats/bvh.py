@@ -33,8 +33,10 @@ Reading
 Speed
 -----
 A well-formed file (one statement a line in the hierarchy, as exporters write it) is read
-from its bytes: the hierarchy line by line, the motion values with ``np.loadtxt`` and the
-Euler angles converted with NumPy; or, in a process where numba already runs a kernel of
+from its bytes: the hierarchy line by line, the motion values by the NumPy parser of
+:mod:`usdhands.formats._bvh_numpy_motion` (the numbers exporters write, the same values as
+``np.loadtxt``, which reads anything else) and the Euler angles converted with NumPy; or,
+in a process where numba already runs a kernel of
 the package (or that has read 128 MB of BVH motion, :data:`COMPILED_AFTER_BYTES`), with
 the compiled twins of :mod:`usdhands.formats._bvh_kernel` (the same numbers; about 2x
 faster). Anything unusual is read by the token-by-token parser, which names the line of
@@ -72,6 +74,7 @@ from pathlib import Path
 import numpy as np
 
 from usdhands.errors import AssetReadError, JointMismatchError
+from usdhands.formats._bvh_numpy_motion import parse_rows as parse_motion_rows
 from usdhands.formats.fixed_point_text import format_rows_6f
 from usdhands.model.asset import Asset
 from usdhands.model.clip import Clip
@@ -418,12 +421,24 @@ def _motion_from(f, data: bytes, whole: bool, pos: int, C: int, frames: int) -> 
     if kernel is not None:
         if not whole:
             data += f.read()
+            whole = True
         # a row of C numbers takes at least 2 C bytes with its line break: at most 4 bytes of floats a byte read
         rows = min(frames + 1, (len(data) - pos + 1) // (2 * C))
         out = np.empty((rows, C))
         got = kernel.parse_rows(np.frombuffer(data, np.uint8), pos, C, out, kernel.POW10)
         if got >= 0:
             return out[:got]
+    # the NumPy parser (_bvh_numpy_motion: the numbers exporters write, the same values) reads the bytes
+    # from the 8 before the motion
+    if whole:
+        buf, start = data, pos
+    else:
+        f.seek(pos - 8)
+        buf, start = f.read(), 8
+    out = np.empty((min(frames + 1, (len(buf) - start + 1) // (2 * C)), C))
+    got = parse_motion_rows(buf, start, C, out)
+    if got >= 0:
+        return out[:got]
     if whole:  # a small file, in memory: its lines (measured: a little faster than reading the file again)
         text = data[pos:].decode("utf-8", errors="replace")
         if "\r" in text:
