@@ -122,6 +122,13 @@ def main() -> None:
         print(f"  exact distance queries: set up {parts['setup']['queries']}, synthesis {parts['synthesis']['queries']}, "
               f"correction {parts['correction']['queries']}, total "
               f"{sum(v['queries'] for v in parts.values())}")
+        r = parts["correction"]["report"]
+        d = r.to_dict()
+        print(f"  the synthesized result, penetration before its correction: max {d['penetration_before_mm']['max']:.2f} "
+              f"mm, mean {d['penetration_before_mm']['mean']:.2f} mm, {d['penetration_before_mm']['frames']} frames; "
+              f"after: max {d['penetration_after_mm']['max']:.3f} mm, mean {d['penetration_after_mm']['mean']:.3f} mm, "
+              f"{d['penetration_after_mm']['frames']} frames; jitter {d['jitter_before']:.1f} -> {d['jitter_after']:.1f} "
+              f"deg/s^2; chains corrected: {', '.join(r.chains_corrected) or 'none'}")
         for state, (plain_job, props_job) in synthesize_job_times(clip, mug, args.repeat).items():
             print(f"synthesize job end to end (read .glb, synthesize, write .glb), {state}: plain "
                   f"{plain_job['wall']:.2f} s wall / {plain_job['cpu']:.2f} s CPU, --props {props_job['wall']:.2f} / "
@@ -214,8 +221,9 @@ def synthesis_times(clip, hm, mug) -> tuple[dict, dict]:
     parts["setup"]["queries"] = exact_queries(cols)
     parts["synthesis"], result = _timed(lambda: synthesize_clip(clip, hm, db, cfg, interaction=factory))
     parts["synthesis"]["queries"] = exact_queries(cols) - parts["setup"]["queries"]
-    parts["correction"], _ = _timed(lambda: correct_clip(result.clip, hm, cols, world=world))
+    parts["correction"], (_, report) = _timed(lambda: correct_clip(result.clip, hm, cols, world=world))
     parts["correction"]["queries"] = exact_queries(cols) - parts["setup"]["queries"] - parts["synthesis"]["queries"]
+    parts["correction"]["report"] = report
     return plain, parts
 
 
