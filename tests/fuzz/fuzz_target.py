@@ -19,7 +19,8 @@ SAMPLE = ROOT / "sample_assets" / "gestures" / "ok_00.glb"
 
 #: reader -> file extension fed to it: the asset readers, then the side files (hand map, synthesis and
 #: interaction configurations, reduction model, finger database manifest, marker and label CSVs)
-READERS = {"bvh": ".bvh", "gltf": ".gltf", "glb": ".glb", "usda": ".usda", "usdc": ".usdc", "handmap": ".json",
+READERS = {"bvh": ".bvh", "gltf": ".gltf", "glb": ".glb", "usda": ".usda", "usdc": ".usdc", "usdz": ".usdz",
+           "handmap": ".json",
            "config": ".json", "interaction": ".json", "model": ".json", "manifest": ".json", "markers": ".csv",
            "labels": ".csv"}
 #: frames of the clip a markers CSV is read for (its seed has as many rows)
@@ -53,11 +54,36 @@ def _seed_files() -> dict[str, list[bytes]]:
         if reader in side:
             out[reader] = side[reader]
             continue
+        if reader == "usdz":
+            out[reader] = _usdz_seeds(folder, small)
+            continue
         out[reader] = []
         for k, a in enumerate((small, rest)):
             path = folder / f"seed{k}{ext}"
             write_asset(a, path)
             out[reader].append(path.read_bytes())
+    return out
+
+
+def _usdz_seeds(folder: Path, asset) -> list[bytes]:
+    """Two packages of ``asset`` as usdhands writes it: a ``.usdc`` as the root layer, and a ``.usda``
+    root that sublayers a ``.usdc`` member (the crate check slices each member out of the package)."""
+    from pxr import Sdf
+
+    from usdhands.formats.io import write_asset
+
+    crate = folder / "member.usdc"
+    write_asset(asset, crate)
+    text = folder / "root.usda"
+    text.write_text('#usda 1.0\n(\n    subLayers = [@./member.usdc@]\n)\n')
+    out = []
+    for k, members in enumerate(((crate,), (text, crate))):
+        package = folder / f"seed{k}.usdz"
+        writer = Sdf.ZipFileWriter.CreateNew(str(package))
+        for member in members:
+            writer.AddFile(str(member), member.name)
+        writer.Save()
+        out.append(package.read_bytes())
     return out
 
 

@@ -1,8 +1,9 @@
 """Fuzz one reader of usdhands: ``python tests/fuzz/run.py bvh --seconds 600``.
 
 Readers: ``bvh`` (``--bvh-reader compiled`` reads with the numba kernels a process
-running numba uses), ``gltf``, ``glb``, ``usda``, ``usdc`` (the file readers behind every
-command) and the side files: ``handmap``, ``config`` (synthesis configuration),
+running numba uses), ``gltf``, ``glb``, ``usda``, ``usdc``, ``usdz`` (a package whose root
+is a crate, or a text layer sublayering a crate member: the crate check slices each member
+out of the package; the file readers behind every command) and the side files: ``handmap``, ``config`` (synthesis configuration),
 ``interaction`` (interaction configuration), ``model`` (reduction model), ``manifest``
 (a finger database's manifest, over the bundled database's arrays), ``markers`` (splice's
 marker CSV) and ``labels`` (the labels CSV). Each starts from seeds generated from the
