@@ -657,8 +657,8 @@ def _check_package(path: Path) -> None:
                                 name_size, extra_size = struct.unpack_from("<HH", data, at + 26)
                                 start = at + _LOCAL_HEADER_SIZE + name_size + extra_size
                                 members[start, info.file_size] = info.filename
-            except (zipfile.BadZipFile, ValueError, EOFError, struct.error):
-                pass  # no readable central directory: the local headers still name members
+            except (zipfile.BadZipFile, ValueError, EOFError, struct.error, NotImplementedError):
+                pass  # no central directory zipfile reads ("zip file version 11.6"): the local headers name members
             _walk_local_headers(data, members)
             for (start, size), name in sorted(members.items()):
                 if size < 8 or data[start:start + 8] != CRATE_MAGIC:
@@ -666,6 +666,7 @@ def _check_package(path: Path) -> None:
                 try:
                     check_crate_bytes(data[start:start + size])
                 except AssetReadError as e:
-                    raise AssetReadError(f"{name}: {e.message}", path=path) from None
+                    shown = name if name.isprintable() else repr(name)[1:-1]  # a name holding a line break (usdz fuzz)
+                    raise AssetReadError(f"{shown}: {e.message}", path=path) from None
     except (OSError, ValueError):
         return  # not a readable package (an empty file cannot be mapped): USD says so itself
