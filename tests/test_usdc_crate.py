@@ -318,3 +318,15 @@ def test_decode_ints_equals_decoding_one_by_one(width):
                 continue
             got = decode_ints(data, n, width)
             assert got.dtype == np.int64 and got.tolist() == want
+
+
+def test_a_layer_composing_a_path_with_a_nul_reads(tmp_path):
+    """A sublayer path holding a NUL byte (usdz fuzz: a package's root.usda mutated) raised ValueError
+    ('embedded null byte') from the layer walk before USD opened the stage: no such file, read as USD
+    reads it (a missing sublayer)."""
+    from usdhands.formats.io import read_asset
+
+    p = tmp_path / "nul.usda"
+    p.write_bytes(b"#usda 1.0\n(\n    subLayers = [@./x\x00y.usdc@]\n)\n")
+    asset = read_asset(p)
+    assert asset.skeletons == () and asset.clips == ()

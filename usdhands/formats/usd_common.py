@@ -174,7 +174,10 @@ def checked_layers(path: Path) -> list[Sdf.Layer]:
     held, seen, todo = [], set(), [Path(path)]
     while todo and len(seen) < MAX_LAYERS:
         here = todo.pop()
-        key = os.path.realpath(here)
+        try:
+            key = os.path.realpath(here)
+        except ValueError:  # a NUL in a path a layer composes (usdz fuzz): no file; USD reports the layer missing
+            continue
         if key in seen or not os.path.isfile(key):
             continue  # a missing layer: USD reports it (a warning) when it composes
         seen.add(key)
