@@ -463,6 +463,59 @@ def test_corrupt_usdc_values_fail_in_one_line(sample_assets, tmp_path):
     assert "Traceback" not in run.stderr
 
 
+def _crate_with_unknown_sample_type(sample_assets, folder):
+    """A .usdc of 4 frames whose rotation time samples (quatf[] value reps: type byte 17, array flag
+    0x80) claim type 239: the crate check does not walk time-sample values, USD's reader fails on
+    them when they are read, and its Python binding printed the value it could not convert."""
+    from usdhands.formats.io import read_asset, write_asset
+    from usdhands.model.asset import Asset
+
+    asset = read_asset(sample_assets / "gestures" / "ok_00.glb")
+    clip = asset.clips[0]
+    short = clip.__class__(clip.skeleton, clip.fps, clip.rotations[:4], clip.translations[:4], clip.scales[:4],
+                           name=clip.name)
+    good = folder / "good.usdc"
+    write_asset(Asset("fuzz seed", asset.skeletons, (short,), asset.meshes), good)
+    data = bytearray(good.read_bytes())
+    good.unlink()
+    reps = [k for k in range(len(data) - 1) if data[k] == 17 and data[k + 1] == 0x80]
+    assert len(reps) == 4, reps  # one a frame: the rotations' samples
+    for k in reps:
+        data[k] = 239
+    bad = folder / "bad.usdc"
+    bad.write_bytes(bytes(data))
+    return bad
+
+
+def test_usd_time_samples_of_an_unknown_type_fail_in_one_line(sample_assets, tmp_path):
+    """Found by the .usdz fuzz target (session 7): 'TypeError: No to_python (by-value) converter found
+    for C++ type: ...VtBackgroundType' on stderr before usdhands' own line."""
+    bad = _crate_with_unknown_sample_type(sample_assets, tmp_path)
+    check_promise(["inspect", bad], folder=tmp_path, inputs=[bad], names=bad,
+                  message="cannot read as USD: Attempted to unpack unsupported type enum value 239")
+
+
+def test_usd_binding_prints_dropped_only_inside_the_read(sample_assets, tmp_path, monkeypatch):
+    """The library's read drops the binding's print without losing an application's own excepthook:
+    it is not called for the print, and it is the hook again after the read."""
+    import sys
+
+    from usdhands.errors import AssetReadError
+    from usdhands.formats.io import read_asset
+
+    bad = _crate_with_unknown_sample_type(sample_assets, tmp_path)
+    seen = []
+
+    def own_hook(kind, value, tb):
+        seen.append(kind.__name__)
+
+    monkeypatch.setattr(sys, "excepthook", own_hook)
+    with pytest.raises(AssetReadError, match="unsupported type enum value 239"):
+        read_asset(bad)
+    assert seen == []
+    assert sys.excepthook is own_hook
+
+
 def gltf_with_data_uri(sample_assets, edit) -> str:
     """The sample take as a .gltf with an embedded buffer, ``edit(doc)`` applied to its JSON."""
     import base64

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
+import threading
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -57,12 +59,60 @@ def quiet_diagnostics() -> Iterator[object]:
 
     The library never prints; while a delegate is installed, Tf hands diagnostics to it
     rather than to stderr. Yields the delegate (``TakeUncoalescedDiagnostics()``).
+
+    USD's Python bindings also print, through ``sys.excepthook``, a value they cannot hand
+    to Python (a corrupt crate's time sample of an unknown type: ``TypeError: No to_python
+    (by-value) converter found for C++ type: ...VtBackgroundType``) before they raise the
+    ``Tf.ErrorException`` the caller turns into its one line. That print is dropped on this
+    thread while the block runs (:class:`_BindingPrints`); other threads' go on as before.
     """
     delegate = UsdUtils.CoalescingDiagnosticDelegate()
+    _BINDING_PRINTS.enter()
     try:
         yield delegate
     finally:
+        _BINDING_PRINTS.leave()
         del delegate
+
+
+class _BindingPrints:
+    """``sys.excepthook`` dropping what USD's bindings print on threads inside :func:`quiet_diagnostics`.
+
+    Installed while any thread is inside one (a count under a lock), and only if nobody has
+    replaced the hook meanwhile is the previous hook put back; every other call goes to the
+    hook that was there before, so an application's own hook keeps working.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._inside = threading.local()
+        self._count = 0
+        self._previous = None
+
+    def enter(self) -> None:
+        self._inside.depth = getattr(self._inside, "depth", 0) + 1
+        with self._lock:
+            if self._count == 0:
+                self._previous = sys.excepthook
+                sys.excepthook = self._hook
+            self._count += 1
+
+    def leave(self) -> None:
+        self._inside.depth -= 1
+        with self._lock:
+            self._count -= 1
+            if self._count == 0:
+                if sys.excepthook == self._hook:
+                    sys.excepthook = self._previous
+                self._previous = None
+
+    def _hook(self, kind, value, tb) -> None:
+        if getattr(self._inside, "depth", 0) > 0:
+            return  # the bindings' own print: the Tf error that follows is the caller's one line
+        (self._previous or sys.__excepthook__)(kind, value, tb)
+
+
+_BINDING_PRINTS = _BindingPrints()
 
 
 #: Longest USD error reason quoted in a one-line message.
