@@ -354,6 +354,7 @@ def test_bounded_smoother_between_two_bounds_matches_a_general_solver():
     np.testing.assert_allclose(x, ref, atol=1e-6)
 
 
+@pytest.mark.skipif(not MUG.exists(), reason="shared assets not present")
 def test_correction_of_a_clip_differing_in_its_fingers_reuses_the_inputs_world_transforms():
     """synthesize --props hands the input's world transforms to the correction of the result: only the
     fingers are posed again, and the correction and its report are those of full forward kinematics."""

@@ -75,7 +75,6 @@ def test_sign_on_edges_and_on_shells_wound_inward_matches_trimesh(shape):
                                atol=1e-9)
 
 
-@pytest.mark.skipif(not MUG.exists(), reason="shared assets not present")
 @pytest.mark.parametrize("shape", ["cup", "mug"])
 def test_compiled_sign_and_morton_order_give_the_numpy_answers_bit_for_bit(shape):
     """The compiled side test (_proximity_kernel) equals the NumPy one, and a batch queried in Morton
@@ -111,6 +110,7 @@ def test_compiled_sign_and_morton_order_give_the_numpy_answers_bit_for_bit(shape
         assert one_by_one.tobytes() == d[::7].tobytes()  # batches of >= SORT_FROM points go in Morton order
 
 
+@pytest.mark.skipif(not MUG.exists(), reason="shared assets not present")
 def test_mug_loads_closed_and_fast_distance_matches_trimesh():
     (prop,) = read_props(MUG, meters_per_unit=0.01, up_axis="Y")
     mesh = _trimesh_of(prop)
@@ -237,6 +237,7 @@ def test_clearance_search_agrees_with_dense_sampling_on_random_axes():
     assert np.all(lower[~below] >= 0.3 - 0.0025)
 
 
+@pytest.mark.skipif(not MUG.exists(), reason="shared assets not present")
 def test_within_gives_the_thresholded_signed_distance_with_fewer_exact_queries():
     """``Colliders.within`` (the wrist's proximity cut) answers ``signed_distance(f, p, r) < r`` exactly:
     on the mug (a moving placement, a uniform scale), an unused vertex far out that must not count as
