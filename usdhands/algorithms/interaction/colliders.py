@@ -172,12 +172,13 @@ class Colliders:
     def within(self, frames: np.ndarray, points: np.ndarray, r: float) -> np.ndarray:
         """Whether each of ``points`` ``(N, 3)`` at ``frames`` ``(N,)`` is nearer than ``r`` to some collider
         (signed distance below ``r``, clip units), ``(N,)`` bool: ``signed_distance(frames, points, r) < r``."""
+        frames, points = np.asarray(frames, dtype=np.int64), np.asarray(points, dtype=np.float64)
         out = np.zeros(len(points), dtype=bool)
         for c in self.items:
             rest = np.nonzero(~out)[0]
             if len(rest) == 0:
                 break
-            f, p = np.asarray(frames, dtype=np.int64)[rest], np.asarray(points, dtype=np.float64)[rest]
+            f, p = frames[rest], points[rest]
             out[rest] = c.within(f, p, r) if hasattr(c, "within") else c.signed_distance(f, p, r) < r
         return out
 
