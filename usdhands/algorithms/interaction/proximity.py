@@ -68,6 +68,7 @@ class _Part:
         self.winding = None
         self._fwn = None
         self._edges = None  # per face: first corner, edges, their dot products (the side test's, on first use)
+        self._around = None  # per vertex, its faces' normals (the corner side test's, on first use)
         if not closed:
             self.winding = igl.FastWindingNumberBVH()
             self.winding.init(self.vertices, self.faces, 2)
@@ -108,15 +109,16 @@ class _Part:
             out, rest = closed_shell_signs(p, closest, face, d, self.normals, self.vertices, self.faces,
                                            self.neighbours, self.flat)
             if rest.any():
-                out[rest] = np.where(self._parity(p[rest]), -d[rest], d[rest])
+                out[rest] = np.where(self._undecided_inside(p[rest], face[rest], closest[rest], d[rest]),
+                                     -d[rest], d[rest])
             return out
         return self._closed_signed(p, d, face, closest)
 
     def _closed_signed(self, p: np.ndarray, d: np.ndarray, face: np.ndarray, closest: np.ndarray) -> np.ndarray:
         """Signed distances on a closed shell from the nearest points, in NumPy."""
         # a closed shell: the point is inside iff it lies behind the nearest face, where the
-        # nearest point is inside that face; on an edge or a vertex (ambiguous) the fast
-        # winding number decides
+        # nearest point is inside that face; on an edge its pseudonormal decides, at a vertex the
+        # faces around it where they agree, and the fast winding number what is left
         diff = p - closest
         side = np.einsum("ij,ij->i", diff, self.normals[face])
         u, v, w = self._barycentric(closest, face)
@@ -137,8 +139,68 @@ class _Part:
             inside[idx] = s[sure] < 0
         rest = ~decided & (d > 0)
         if rest.any():
-            inside[rest] = self._parity(p[rest])
+            inside[rest] = self._undecided_inside(p[rest], face[rest], closest[rest], d[rest],
+                                                  (u[rest], v[rest], w[rest]))
         return np.where(inside, -d, d)
+
+    def _undecided_inside(self, p: np.ndarray, face: np.ndarray, closest: np.ndarray, d: np.ndarray,
+                          bary: tuple | None = None) -> np.ndarray:
+        """Whether each of the points ``p`` ``(N, 3)`` the side test left undecided is inside, ``(N,)`` bool: a
+        point whose nearest point is a corner by the faces around that vertex where they agree
+        (:meth:`_corner_sides`), every other by the winding number (:meth:`_parity`); ``bary``: the
+        nearest points' barycentric coordinates ``(u, v, w)`` when the caller has them."""
+        u, v, w = self._barycentric(closest, face) if bary is None else bary
+        corner = ((u <= 1e-6).astype(np.int8) + (v <= 1e-6) + (w <= 1e-6)) >= 2
+        inside = np.zeros(len(p), dtype=bool)
+        todo = ~corner
+        if corner.any():
+            k = np.nonzero(corner)[0]
+            uk, vk, wk = u[k], v[k], w[k]
+            slot = np.where(uk >= vk, np.where(uk >= wk, 0, 2), np.where(vk >= wk, 1, 2))  # the corner it is at
+            sure, behind = self._corner_sides(p[k], closest[k], d[k], self.faces[face[k], slot])
+            inside[k] = behind
+            todo[k[~sure]] = True
+        if todo.any():
+            inside[todo] = self._parity(p[todo])
+        return inside
+
+    def _corner_sides(self, p: np.ndarray, closest: np.ndarray, d: np.ndarray,
+                      vertex: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points ``p`` ``(N, 3)`` whose nearest point ``closest`` is (within ``1e-6`` in barycentric
+        coordinates) the shell's vertex ``vertex`` ``(N,)``: whether the faces around it decide the side
+        and whether that side is inside, ``(N,)`` bool each.
+
+        On a closed, outward-oriented shell, a direction from a vertex in front of the planes of every
+        face around it (positive dot product with each normal) leaves the solid there, and one behind
+        all of them enters it: the cone the solid fills at the vertex is bounded by those faces, and a
+        direction inside that cone is behind the plane of the face it is nearest to. The segment from
+        the nearest point to ``p`` crosses no surface, so ``p`` is on that side. The products are taken
+        from the vertex itself and must clear, besides rounding, how far the nearest point lies from it
+        (so the signs are those from the nearest point); faces without a usable normal, or faces that
+        disagree, leave the point to the winding number.
+        """
+        if self._around is None:
+            # each vertex's faces' normals, padded with zeros to the largest count (a zero normal's
+            # product, 0, is on no side: the padding is masked)
+            corners = self.faces.reshape(-1)
+            order = np.argsort(corners, kind="stable")
+            count = np.bincount(corners, minlength=len(self.vertices))
+            rank = np.arange(len(order)) - np.repeat(np.cumsum(count) - count, count)
+            width = max(int(count.max(initial=0)), 1)
+            normals = np.zeros((len(self.vertices), width, 3))
+            pad = np.ones((len(self.vertices), width), dtype=bool)
+            normals[corners[order], rank] = self.normals[order // 3]
+            pad[corners[order], rank] = False
+            flat = np.bincount(corners, weights=np.repeat(self.flat, 3), minlength=len(self.vertices)) > 0
+            self._around = (normals, pad, flat | (count == 0))
+        normals, pad, unusable = self._around
+        x = p - self.vertices[vertex]
+        dots = np.einsum("nkj,nj->nk", normals[vertex], x)
+        slack = (np.linalg.norm(closest - self.vertices[vertex], axis=1) + 1e-12 * (1.0 + d))[:, None]
+        padded = pad[vertex]
+        front = np.all((dots > slack) | padded, axis=1)
+        behind = np.all((dots < -slack) | padded, axis=1)
+        return (front | behind) & ~unusable[vertex], behind
 
     def _barycentric(self, x: np.ndarray, face: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The columns of :func:`_barycentric` of points ``x`` ``(N, 3)`` in faces ``face`` ``(N,)``, from the
