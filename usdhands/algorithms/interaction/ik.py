@@ -208,7 +208,7 @@ class ChainPoser:
 
     def least_opening(self, colliders, frames: np.ndarray, base: np.ndarray, margin: float, resolution: float,
                       iterations: int = 9, via: np.ndarray | None = None, known: ChainDistances | None = None,
-                      rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      rows: np.ndarray | None = None, every: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """The least path parameter clear of the colliders at each frame, by bisection.
 
         Parameters
@@ -220,12 +220,20 @@ class ChainPoser:
             IK poses the path passes through (:meth:`angles`).
         known, rows : optional
             What was measured on the chain and the memo row of each frame (:meth:`clear`).
+        every : int
+            1: every frame bisected. ``k > 1`` (``frames`` distinct clip frames): only frames whose
+            number is a multiple of ``k`` are bisected, and frames with no such failing frame within
+            ``k - 1``; each other failing frame is tried at the largest bound found within ``k - 1``
+            frames of it and bisected above that only where it is not clear (neighbouring frames'
+            bounds differ little, and the smoother holds the opening near the bound's running maximum
+            anyway: :data:`~usdhands.algorithms.interaction.correction.HOLD_OF_TIME_SCALE`).
 
         Returns
         -------
         u : (K,) float
-            0 where ``base`` is clear; otherwise the smallest ``u`` found clear (within
-            ``2**-iterations``), tested; 1 where even the open pose is not clear.
+            0 where ``base`` is clear; otherwise a ``u`` tested clear: the smallest found (within
+            ``2**-iterations``), or with ``every > 1`` a neighbour's where that is clear; 1 where even
+            the open pose is not clear.
         resolved : (K,) bool
             False where even the fully open pose touches (the palm or wrist is inside a prop).
         """
@@ -245,17 +253,57 @@ class ChainPoser:
         u[idx] = 1.0
         resolved[idx[~open_ok]] = False
         idx = idx[open_ok]
-        v = None if via is None else via[idx]
-        lo = np.zeros(len(idx))
-        hi = np.ones(len(idx))
-        for _ in range(iterations):
-            mid = 0.5 * (lo + hi)
-            ok = self.clear(colliders, frames[idx], self.angles(base[idx], mid, v), margin, resolution,
-                            known=known, rows=rows[idx])
-            hi = np.where(ok, mid, hi)
-            lo = np.where(ok, lo, mid)
-        u[idx] = hi
+        if every > 1 and len(idx) > 1:
+            # full bisections on every `every`-th frame of the clip (and on any frame with none of
+            # those within reach), then the frames between them tried at the largest bound of
+            # those within `every - 1` frames, and bisected above it (to the same 2**-iterations)
+            # only where that is not clear
+            f = frames[idx]
+            anchor = f % every == 0
+            af = np.sort(f[anchor])
+            reach = np.searchsorted(af, f + every - 1, side="right") - np.searchsorted(af, f - every + 1)
+            anchor |= reach == 0
+            a_idx, b_idx = idx[anchor], idx[~anchor]
+            u[a_idx] = self._bisect(colliders, frames, base, a_idx, np.zeros(len(a_idx)), iterations, margin,
+                                    resolution, via, known, rows)
+            if len(b_idx):
+                af, au = frames[a_idx], u[a_idx]
+                order = np.argsort(af, kind="stable")
+                af, au = af[order], au[order]
+                fb = frames[b_idx]
+                lo_i = np.searchsorted(af, fb - every + 1)
+                hi_i = np.searchsorted(af, fb + every - 1, side="right")
+                cand = np.array([au[i:j].max() for i, j in zip(lo_i, hi_i)])
+                v = None if via is None else via[b_idx]
+                ok = self.clear(colliders, frames[b_idx], self.angles(base[b_idx], cand, v), margin, resolution,
+                                known=known, rows=rows[b_idx])
+                u[b_idx[ok]] = cand[ok]
+                rest = b_idx[~ok]
+                u[rest] = self._bisect(colliders, frames, base, rest, cand[~ok], iterations, margin, resolution,
+                                       via, known, rows)
+            return u, resolved
+        u[idx] = self._bisect(colliders, frames, base, idx, np.zeros(len(idx)), iterations, margin, resolution, via,
+                              known, rows)
         return u, resolved
+
+    def _bisect(self, colliders, frames, base, idx, lo, iterations, margin, resolution, via, known, rows):
+        """Bisection between ``lo`` (not clear) and 1 (clear) for the frames ``idx``, to ``2**-iterations``
+        of the path: the least parameter found clear, ``(len(idx),)``."""
+        v = None if via is None else via[idx]
+        lo = np.array(lo, dtype=np.float64)
+        hi = np.ones(len(idx))
+        step = 2.0 ** -iterations
+        for _ in range(iterations):
+            live = np.nonzero(hi - lo > step)[0] if lo.any() else np.arange(len(idx))
+            if len(live) == 0:
+                break
+            mid = 0.5 * (lo[live] + hi[live])
+            ok = self.clear(colliders, frames[idx[live]], self.angles(base[idx[live]], mid,
+                                                                      None if v is None else v[live]),
+                            margin, resolution, known=known, rows=rows[idx[live]])
+            hi[live] = np.where(ok, mid, hi[live])
+            lo[live] = np.where(ok, lo[live], mid)
+        return hi
 
     def clear_below(self, colliders, frames: np.ndarray, base: np.ndarray, clear_u: np.ndarray,
                     blocked_u: np.ndarray, margin: float, resolution: float, iterations: int = 6,
