@@ -305,6 +305,62 @@ def test_only_a_batch_that_asks_starts_the_warm_forkserver(clips, tmp_path, monk
     assert parsed[0].warm_forkserver is True
 
 
+def test_the_command_line_starts_the_warm_forkserver_first_only_for_a_batch_that_forks_from_it(
+        clips, tmp_path, monkeypatch, capsys):
+    """entry_point's head start reads argv with the batch parser alone: a synthesize batch on the local
+    pool with enough clips a worker starts the warm forkserver (and gets the function that stops it);
+    any other command, engine, job, a small batch, missing inputs or --help start nothing and print nothing."""
+    calls = []
+    monkeypatch.setattr(batch, "start_warm_forkserver", lambda: calls.append(1) or True)
+    monkeypatch.setattr(batch, "KERNEL_AT_START_CLIPS", 2)
+    run = ["batch", str(clips), "--job", "synthesize", "--out", str(tmp_path / "o")]
+    assert usdhands.cli.head_start(run + ["--workers", "2", "-q"]) is batch.stop_warm_forkserver
+    assert usdhands.cli.head_start(["-v"] + run + ["--k", "3", "--workers=1"]) is batch.stop_warm_forkserver
+    assert calls == [1, 1]
+    for argv in (run + ["--workers", "3"],                            # 4 clips: under 2 a worker
+                 run + ["--workers", "2", "--scheduler", "local"], run + ["--workers", "2", "--sched", "tcp://h:1"],
+                 ["batch", str(clips), "--job", "convert", "--to", "usda", "--out", str(tmp_path / "o")],
+                 ["batch", str(tmp_path / "none"), "--job", "synthesize", "--out", str(tmp_path / "o")],
+                 run + ["--workers", "two"], run + ["-h"], run + ["--help"], ["--version"] + run,
+                 ["synthesize", str(clips / "ok_00.glb"), "-o", str(tmp_path / "batch")], ["batch"]):
+        assert usdhands.cli.head_start(argv) is None, argv
+    assert calls == [1, 1]
+    assert capsys.readouterr() == ("", "")
+
+
+def test_the_command_line_stops_the_forkserver_it_started_when_the_command_is_refused(tmp_path):
+    """A batch refused after its warm forkserver started (an option of another job) is one line, exit
+    status 2, and leaves no forkserver behind: it is stopped and reaped before the process exits."""
+    pytest.importorskip("numba")
+    src = tmp_path / "in"
+    src.mkdir()
+    for n in range(2 * batch.KERNEL_AT_START_CLIPS):
+        (src / f"c{n:02d}.bvh").write_text("HIERARCHY\n")
+    code = (
+        "import json, os, sys\n"
+        "from multiprocessing import forkserver\n"
+        "from usdhands.jobs import batch\n"
+        "started = []\n"
+        "start = batch.start_warm_forkserver\n"
+        "batch.start_warm_forkserver = lambda: start() and not started.append(forkserver._forkserver._forkserver_pid)\n"
+        f"sys.argv = ['usdhands', 'batch', {str(src)!r}, '--job', 'synthesize', '--steps', 'range<5',\n"
+        f"            '--out', {str(tmp_path / 'out')!r}, '--workers', '2']\n"
+        "from usdhands.cli import entry_point\n"
+        "try:\n"
+        "    entry_point()\n"
+        "except SystemExit as e:\n"
+        "    code = e.code\n"
+        "try:\n"
+        "    os.kill(started[0], 0)\n"
+        "    alive = True\n"
+        "except ProcessLookupError:\n"
+        "    alive = False\n"
+        "print(json.dumps([code, len(started), alive]))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert json.loads(done.stdout.splitlines()[-1]) == [2, 1, False], done.stderr[-2000:]
+    assert done.stderr == "usdhands: error: --steps is not an option of --job synthesize\n"
+
+
 @pytest.mark.parametrize("how", ["freeze_at_exit", "forkserver_preload", "dask_plugin", "dask_plugin_farm", "cli"])
 def test_processes_batch_starts_exit_without_the_last_collections_and_keep_their_status(how):
     """The warm forkserver, the LocalCluster's workers (not a farm's) and the command line's process

@@ -203,8 +203,7 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
     out = Path(options.out)
     for src, rel in collect_inputs(inputs, extensions):
         pairs.append((src, out / output_name(rel, options)))
-    if (options.warm_forkserver and options.scheduler is None and options.job == "synthesize"
-            and len(pairs) >= KERNEL_AT_START_CLIPS * options.workers):
+    if wants_warm_forkserver(options, len(pairs)):
         start_warm_forkserver()  # it loads while the outputs are checked and the pool is made
     if not pairs:
         named = [Path(p) for p in inputs]
@@ -523,6 +522,15 @@ def _warm_worker(job: str, job_options, clips_each: int) -> None:
 WARM_FORKSERVER_MODULE = "usdhands.jobs.batch_forkserver"
 
 
+def wants_warm_forkserver(options: BatchOptions, clips: int) -> bool:
+    """Whether a batch of ``clips`` clips forks its workers from the warm forkserver: it asked
+    (:attr:`BatchOptions.warm_forkserver`), ``synthesize`` on the local pool, and
+    :data:`KERNEL_AT_START_CLIPS` clips or more a worker (a smaller batch would wait for numba's
+    ~0.5 s start that its workers, searching in NumPy, never need)."""
+    return (options.warm_forkserver and options.scheduler is None and options.job == "synthesize"
+            and options.workers >= 1 and clips >= KERNEL_AT_START_CLIPS * options.workers)
+
+
 def start_warm_forkserver() -> bool:
     """Start this process's multiprocessing forkserver now, preloading :data:`WARM_FORKSERVER_MODULE`
     (:func:`_warm_forkserver_process`); False where there is no forkserver (the pool spawns).
@@ -542,6 +550,29 @@ def start_warm_forkserver() -> bool:
     forkserver.set_forkserver_preload(["__main__", WARM_FORKSERVER_MODULE])  # __main__: multiprocessing's default
     forkserver.ensure_running()
     return True
+
+
+def stop_warm_forkserver() -> None:
+    """Stop this process's forkserver at once, if it runs: terminated (SIGTERM) and reaped.
+
+    For the command line's process at its end, when it started the warm forkserver itself
+    (:func:`usdhands.cli.entry_point`): a forkserver still importing numba (a command refused after
+    it started) would otherwise outlive the process by up to ~0.5 s, holding its stderr, and one
+    that has forked the batch's workers takes ~25 ms to exit after the process (Python's exit with
+    numba loaded). Its workers have been joined by then; a worker still running is not its child
+    to wait for and ends when the batch process's pipes close, as before.
+    """
+    import signal
+    from multiprocessing import forkserver
+
+    server = forkserver._forkserver  # the process's forkserver (multiprocessing keeps one, like its start)
+    pid = getattr(server, "_forkserver_pid", None)
+    if pid is None:
+        return
+    with contextlib.suppress(OSError):
+        os.kill(pid, signal.SIGTERM)
+    with contextlib.suppress(OSError):
+        server._stop()  # closes its alive pipe and reaps it (multiprocessing's own, Python 3.8-3.13)
 
 
 def _warm_forkserver_process() -> None:
