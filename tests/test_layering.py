@@ -93,6 +93,22 @@ def test_importing_usdhands_imports_neither_pxr_nor_pygltflib():
     assert out.stdout.strip() == "[]"
 
 
+def test_importing_usdhands_and_its_command_line_loads_neither_numpy_nor_the_model():
+    """``import usdhands`` (which ``python -m usdhands`` and the console script run first) loads its names
+    on first use, so that the command line's batch starts its warm forkserver before numpy loads
+    (usdhands.cli.head_start); every name and subpackage still resolves, an unknown one does not."""
+    code = ("import sys, usdhands, usdhands.cli\n"
+            "print(sorted(m for m in ('numpy', 'usdhands.model', 'usdhands.formats', 'usdhands.jobs.synthesis')"
+            " if m in sys.modules))\n"
+            "from usdhands import Clip\n"
+            "print([Clip.__module__, usdhands.read_clip.__module__, usdhands.detect_hands.__module__, usdhands.FINGERS[0],"
+            " usdhands.SynthesizeOptions.__module__, usdhands.formats.io.__name__, hasattr(usdhands, 'no_such_name')])\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.splitlines() == [
+        "[]", "['usdhands.model.clip', 'usdhands.formats.io', 'usdhands.model.hand_detection', 'thumb', "
+        "'usdhands.jobs.synthesis', 'usdhands.formats.io', False]"]
+
+
 def test_ruff_clean():
     ruff = shutil.which("ruff")
     if ruff is None:

@@ -12,9 +12,10 @@ The jobs, one call per capability (see :mod:`usdhands.jobs`)::
     result = usdhands.synthesize("take.usda", "take_fingers.usda", usdhands.SynthesizeOptions(k=8))
     print(result.to_json())
 
-``usdhands.synthesize``, ``splice``, ``reduce``, ``expand``, ``convert``, ``check``, ``correct``, ``evaluate`` and
-their ``...Options`` / ``...Result`` classes are loaded on first use; so is
-:mod:`usdhands.usd`, the same jobs on an open ``Usd.Stage``.
+Every name here is loaded on first use (``import usdhands`` imports neither numpy nor the
+model): the readers and the model above, ``usdhands.synthesize``, ``splice``, ``reduce``,
+``expand``, ``convert``, ``check``, ``correct``, ``evaluate`` and their ``...Options`` /
+``...Result`` classes, and :mod:`usdhands.usd`, the same jobs on an open ``Usd.Stage``.
 
 Importing usdhands imports neither ``pxr`` nor ``pygltflib``; a format's library is
 imported when a file of that format is first read or written.
@@ -23,13 +24,16 @@ imported when a file of that format is first read or written.
 __version__ = "0.1.0"
 
 from usdhands.errors import UsdHandsError  # noqa: E402
-from usdhands.formats.io import read_asset, read_clip, write_asset, write_clip  # noqa: E402
-from usdhands.model import (  # noqa: E402
-    FINGERS, SIDES, Clip, FingerCurves, HandMap, HandSide, Skeleton, apply_finger_curves, finger_curves,
-)
-from usdhands.model.hand_detection import detect_hands, load_handmap  # noqa: E402
 
-#: names loaded on first use (module __getattr__), so that ``import usdhands`` stays fast
+#: names loaded on first use (module __getattr__), so that ``import usdhands`` stays fast: the
+#: command line's ``batch`` starts its warm forkserver before numpy and the model load
+#: (:func:`usdhands.cli.head_start`)
+_LAZY = {
+    **dict.fromkeys(("read_asset", "read_clip", "write_asset", "write_clip"), "usdhands.formats.io"),
+    **dict.fromkeys(("FINGERS", "SIDES", "Clip", "FingerCurves", "HandMap", "HandSide", "Skeleton",
+                     "apply_finger_curves", "finger_curves"), "usdhands.model"),
+    **dict.fromkeys(("detect_hands", "load_handmap"), "usdhands.model.hand_detection"),
+}
 _LAZY_JOBS = (
     "synthesize", "SynthesizeOptions", "SynthesizeResult", "splice", "SpliceOptions", "SpliceResult",
     "reduce", "ReduceOptions", "ReduceResult", "expand", "ExpandOptions", "ExpandResult",
@@ -39,21 +43,26 @@ _LAZY_JOBS = (
 
 
 def __getattr__(name: str):
+    import importlib
+
     if name == "usd":  # the USD stage hooks (imports pxr)
         import usdhands.usd
 
         return usdhands.usd
-    if name in _LAZY_JOBS:
-        import usdhands.jobs
-
-        value = getattr(usdhands.jobs, name)
+    if name in _LAZY or name in _LAZY_JOBS:
+        value = getattr(importlib.import_module(_LAZY.get(name, "usdhands.jobs")), name)
         globals()[name] = value
         return value
+    try:  # a subpackage (usdhands.model, usdhands.formats...), as when the names above loaded it
+        return importlib.import_module(f"{__name__}.{name}")
+    except ModuleNotFoundError as e:
+        if e.name != f"{__name__}.{name}":
+            raise
     raise AttributeError(f"module 'usdhands' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_LAZY_JOBS))
+    return sorted(set(globals()) | set(_LAZY) | set(_LAZY_JOBS))
 
 
 __all__ = [
