@@ -53,7 +53,7 @@ import json
 import os
 import tempfile
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, as_completed, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -222,17 +222,17 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
             records[src] = ClipRecord(str(src), str(dst), "skipped")
         else:
             todo.append((src, dst))
-    finished = [len(records)]
+    finished = [len(records), sum(r.status == "failed" for r in records.values())]  # clips finished, failed
 
     def report(record: ClipRecord) -> None:
         records[Path(record.file)] = record
         finished[0] += 1
+        finished[1] += record.status == "failed"
         if progress:
-            progress(finished[0], len(pairs), sum(r.status == "failed" for r in records.values()),
-                     Path(record.file).name)
+            progress(finished[0], len(pairs), finished[1], Path(record.file).name)
 
     if progress and records:
-        progress(finished[0], len(pairs), sum(r.status == "failed" for r in records.values()), "")
+        progress(finished[0], len(pairs), finished[1], "")
     task = (options.job, job_options, options.model)
     start = time.perf_counter()
     if todo:
@@ -618,14 +618,11 @@ def _run_local(todo, task, workers: int, report) -> None:
     broken = []
     with _pool(workers, job, job_options, -(-len(todo) // workers)) as pool:
         pending = {pool.submit(run_clip, job, job_options, model, src, dst): (src, dst) for src, dst in todo}
-        while pending:
-            done, _ = wait(pending, return_when=FIRST_COMPLETED)
-            for f in done:
-                src, dst = pending.pop(f)
-                try:
-                    report(f.result())
-                except BrokenProcessPool:
-                    broken.append((src, dst))
+        for f in as_completed(pending):  # one waiter on every future, where wait() put one on each clip's turn
+            try:
+                report(f.result())
+            except BrokenProcessPool:
+                broken.append(pending[f])
     if broken:
         _retry_alone(broken, task, workers, report)
 
