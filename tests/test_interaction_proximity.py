@@ -365,3 +365,41 @@ def test_animated_gltf_prop_keeps_its_node_animation(tmp_path):
     x = prop.xforms_at(np.array([0.0, 0.5, 1.0]))
     np.testing.assert_allclose(x[:, 1, 3], [0.0, 50.0, 100.0], atol=1e-4)  # 1 m = 100 cm, linear
     assert np.asarray(prop.vertices)[:, 1].max() == pytest.approx(9.5, abs=1e-3)  # the cup in cm
+
+
+def test_shells_are_the_components_of_faces_sharing_vertices():
+    """_shells (components of the vertex graph) against the definition (components of the graph of faces
+    sharing a vertex), on soups of spheres with shuffled faces and unused vertices and the split mug:
+    the same shells, in the order of their first face, each in increasing order."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from usdhands.algorithms.interaction.proximity import _shells
+
+    def reference(faces, n_vertices):
+        F = len(faces)
+        incidence = coo_matrix((np.ones(3 * F), (np.repeat(np.arange(F), 3), faces.reshape(-1))),
+                               shape=(F, n_vertices)).tocsr()
+        n, labels = connected_components(incidence @ incidence.T, directed=False)
+        order = np.argsort(labels, kind="stable")
+        return np.split(order, np.cumsum(np.bincount(labels, minlength=n))[:-1])
+
+    rng = np.random.default_rng(0)
+    cases = []
+    for _ in range(20):
+        parts, offset = [], 0
+        for _ in range(rng.integers(1, 8)):
+            sphere = trimesh.creation.icosphere(subdivisions=int(rng.integers(0, 3)))
+            parts.append(sphere.faces + offset)
+            offset += len(sphere.vertices) + int(rng.integers(0, 3))
+        faces = np.concatenate(parts)
+        cases.append((faces[rng.permutation(len(faces))], offset))
+    mesh = cup_mesh()
+    cases.append((np.asarray(mesh.faces), len(mesh.vertices)))
+    many = 0
+    for faces, n_vertices in cases:
+        faces = np.asarray(faces, dtype=np.int64)
+        got, want = _shells(faces, n_vertices), reference(faces, n_vertices)
+        assert len(got) == len(want) and all(np.array_equal(g, w) for g, w in zip(got, want))
+        many += len(want) > 2
+    assert many > 5

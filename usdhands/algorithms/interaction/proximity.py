@@ -24,16 +24,27 @@ __all__ = ["MeshProximity"]
 
 
 def _shells(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
-    """Face indices of each connected shell (faces sharing vertices)."""
+    """Face indices of each connected shell (faces sharing vertices), in order of each shell's first face,
+    each in increasing order.
+
+    The components of the vertices joined by the faces' edges (a face's vertices are one component,
+    and faces sharing a vertex share it), each face labelled by its first vertex's: the same shells
+    as the components of faces joined by shared vertices, without that graph's ``F x F`` product
+    (5.9 -> 0.9 ms on the mug)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    F = len(faces)
-    rows = np.repeat(np.arange(F), 3)
-    graph = coo_matrix((np.ones(3 * F), (rows, faces.reshape(-1))), shape=(F, n_vertices)).tocsr()
-    n, labels = connected_components(graph @ graph.T, directed=False)
+    a = faces.reshape(-1)
+    b = faces[:, [1, 2, 0]].reshape(-1)
+    graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n_vertices, n_vertices)).tocsr()
+    _, vertex_labels = connected_components(graph, directed=False)
+    labels = vertex_labels[faces[:, 0]]
+    found, first = np.unique(labels, return_index=True)
+    rank = np.empty(int(found.max(initial=-1)) + 1, dtype=np.int64)
+    rank[found[np.argsort(first, kind="stable")]] = np.arange(len(found))  # shells in order of their first face
+    labels = rank[labels]
     order = np.argsort(labels, kind="stable")
-    return np.split(order, np.cumsum(np.bincount(labels, minlength=n))[:-1])
+    return np.split(order, np.cumsum(np.bincount(labels, minlength=len(found)))[:-1])
 
 
 def _closed(faces: np.ndarray) -> bool:
