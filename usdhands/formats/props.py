@@ -15,6 +15,7 @@ surface again and inside/outside queries work on it.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,88 @@ def _clean(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndar
     return v, f[area2 > 1e-12 * size * size]
 
 
+#: Largest OBJ file :func:`_read_plain_obj` reads (bigger ones go to trimesh, which streams no better).
+_PLAIN_OBJ_MAX_BYTES = 256 * 1024 * 1024
+
+
+def _read_plain_obj(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """The vertices ``(V, 3)`` float64 and triangles ``(F, 3)`` int64 trimesh's OBJ loader gives for an OBJ
+    made only of positions and triangles, or None for any other file (trimesh reads those).
+
+    Read here: ASCII lines that are blank, comments (``#``), ``o``, ``g`` or ``s`` lines (which split
+    nothing in trimesh's default load), ``v x y z`` (three plain decimal numbers: digits, ``.``, ``-``)
+    and ``f a b c`` (three positive indices, no ``/``). The numbers are parsed as trimesh parses them
+    (``np.fromstring`` of the same tokens) and the vertices no face uses are dropped, the faces
+    renumbered, as it does; the per-line Python work of its general loader (its check that every
+    face line has the same columns, 24,544 lines for the mug) is done here on the whole text at
+    once. Anything else (normals, texture coordinates, materials, polygons, negative indices, tabs,
+    CR line ends, line continuations, exponents, other bytes) returns None.
+    """
+    try:
+        if path.suffix.lower() != ".obj" or path.stat().st_size > _PLAIN_OBJ_MAX_BYTES:
+            return None
+        data = path.read_bytes()
+    except OSError:
+        return None
+    buf = np.frombuffer(data + b"\n", dtype=np.uint8)
+    if len(buf) < 2 or buf.max() >= 128 or (buf == 9).any() or (buf == 13).any() or (buf == 92).any():
+        return None
+    ends = np.flatnonzero(buf == 10)
+    starts = np.concatenate([[0], ends[:-1] + 1])
+    length = ends - starts
+    first = buf[starts]
+    second = buf[np.minimum(starts + 1, len(buf) - 1)]
+    spaced = (length >= 2) & (second == 32)
+    is_v = (first == ord("v")) & spaced
+    is_f = (first == ord("f")) & spaced
+    other = (length == 0) | (first == ord("#")) | (spaced & ((first == ord("o")) | (first == ord("g")) |
+                                                              (first == ord("s"))))
+    nv, nf = int(is_v.sum()), int(is_f.sum())
+    if not np.all(is_v | is_f | other) or nv == 0 or nf == 0:
+        return None
+    kind = np.repeat(np.where(is_v, 1, np.where(is_f, 2, 0)).astype(np.int8), length + 1)  # per byte
+    # v and f lines hold numbers only: digits, '.' and '-' (v), digits (f), spaces, their own letter
+    bad_v = np.ones(256, dtype=bool)
+    bad_v[np.frombuffer(b"0123456789.- \nv", dtype=np.uint8)] = False
+    bad_f = np.ones(256, dtype=bool)
+    bad_f[np.frombuffer(b"0123456789 \nf", dtype=np.uint8)] = False
+    if (bad_v[buf] & (kind == 1)).any() or (bad_f[buf] & (kind == 2)).any():
+        return None
+    if np.count_nonzero((buf == ord("v")) & (kind == 1)) != nv or np.count_nonzero((buf == ord("f")) & (kind == 2)) != nf:
+        return None  # a v or f other than the line's own letter
+    # three numbers after the letter on every such line: token starts are non-spaces after a space
+    space = (buf == 32) | (buf == 10)
+    token_start = ~space & np.concatenate([[True], space[:-1]])
+    tokens = np.add.reduceat(token_start, starts, dtype=np.int32)
+    if np.any(tokens[is_v] != 4) or np.any(tokens[is_f] != 4):
+        return None
+    # each kind's lines with their letter blanked: the same tokens trimesh hands np.fromstring
+    payload = np.where(kind > 0, np.where((buf == ord("v")) | (buf == ord("f")), np.uint8(32), buf), np.uint8(32))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a token it cannot read ends the array: the counts below catch it
+            v = np.fromstring(payload[kind == 1].tobytes().decode("ascii"), sep=" ", dtype=np.float64)
+            f = np.fromstring(payload[kind == 2].tobytes().decode("ascii"), sep=" ", dtype=np.int64)
+    except ValueError:  # numpy versions that refuse such a token outright
+        return None
+    if len(v) != 3 * nv or len(f) != 3 * nf or not np.isfinite(v).all():
+        return None
+    v = v.reshape(-1, 3)
+    f = f.reshape(-1, 3)
+    if f.min() < 1 or f.max() > len(v):
+        return None
+    f = f - 1
+    used = np.zeros(len(v), dtype=bool)  # trimesh keeps the vertices the faces use, renumbered in order
+    used[f] = True
+    renumber = np.zeros(len(v), dtype=np.int64)
+    renumber[used] = np.arange(used.sum())
+    return v[used].copy(), renumber[f]
+
+
 def _read_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    plain = _read_plain_obj(path)
+    if plain is not None:
+        return plain
     import trimesh
 
     try:
