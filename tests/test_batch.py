@@ -285,7 +285,7 @@ def test_only_a_batch_that_asks_starts_the_warm_forkserver(clips, tmp_path, monk
     """run_batch's callers keep their process's forkserver as it is unless they set warm_forkserver (the
     command line does), and then only for synthesize on the local pool with enough clips a worker."""
     calls = []
-    monkeypatch.setattr(batch, "start_warm_forkserver", lambda: calls.append(1) or True)
+    monkeypatch.setattr(batch, "start_warm_forkserver", lambda dask=False: calls.append(1) or True)
     monkeypatch.setattr(batch, "KERNEL_AT_START_CLIPS", 1)
     options = BatchOptions(job="convert", out=tmp_path / "a", workers=1, job_options=usdhands.ConvertOptions(),
                            to="usda")
@@ -308,24 +308,76 @@ def test_only_a_batch_that_asks_starts_the_warm_forkserver(clips, tmp_path, monk
 def test_the_command_line_starts_the_warm_forkserver_first_only_for_a_batch_that_forks_from_it(
         clips, tmp_path, monkeypatch, capsys):
     """entry_point's head start reads argv with the batch parser alone: a synthesize batch on the local
-    pool with enough clips a worker starts the warm forkserver (and gets the function that stops it);
-    any other command, engine, job, a small batch, missing inputs or --help start nothing and print nothing."""
+    pool or a LocalCluster with enough clips a worker starts the warm forkserver (with Dask for the
+    cluster) and gets the function that stops it; any other command, a running cluster, another job, a
+    small batch, missing inputs or --help start nothing and print nothing."""
     calls = []
-    monkeypatch.setattr(batch, "start_warm_forkserver", lambda: calls.append(1) or True)
+    monkeypatch.setattr(batch, "start_warm_forkserver", lambda dask=False: calls.append(dask) or True)
     monkeypatch.setattr(batch, "KERNEL_AT_START_CLIPS", 2)
     run = ["batch", str(clips), "--job", "synthesize", "--out", str(tmp_path / "o")]
     assert usdhands.cli.head_start(run + ["--workers", "2", "-q"]) is batch.stop_warm_forkserver
     assert usdhands.cli.head_start(["-v"] + run + ["--k", "3", "--workers=1"]) is batch.stop_warm_forkserver
-    assert calls == [1, 1]
+    assert usdhands.cli.head_start(run + ["--workers", "2", "--sched", "local"]) is batch.stop_warm_forkserver
+    assert calls == [False, False, True]
     for argv in (run + ["--workers", "3"],                            # 4 clips: under 2 a worker
-                 run + ["--workers", "2", "--scheduler", "local"], run + ["--workers", "2", "--sched", "tcp://h:1"],
+                 run + ["--workers", "3", "--scheduler", "local"], run + ["--workers", "2", "--sched", "tcp://h:1"],
                  ["batch", str(clips), "--job", "convert", "--to", "usda", "--out", str(tmp_path / "o")],
                  ["batch", str(tmp_path / "none"), "--job", "synthesize", "--out", str(tmp_path / "o")],
                  run + ["--workers", "two"], run + ["-h"], run + ["--help"], ["--version"] + run,
                  ["synthesize", str(clips / "ok_00.glb"), "-o", str(tmp_path / "batch")], ["batch"]):
         assert usdhands.cli.head_start(argv) is None, argv
-    assert calls == [1, 1]
+    assert calls == [False, False, True]
     assert capsys.readouterr() == ("", "")
+
+
+def test_a_warm_local_cluster_forks_its_worker_processes_from_the_warm_forkserver(clips, tmp_path, monkeypatch):
+    """A synthesize batch asking for the warm forkserver on a LocalCluster of worker processes starts it with
+    Dask loaded and makes the cluster with multiprocessing-method forkserver (its nannies fork their workers
+    from it); a cluster of threads of this process or a caller that did not ask: Dask's spawn, and this
+    process's Dask config is as it was."""
+    dask = pytest.importorskip("dask")
+    distributed = pytest.importorskip("distributed")
+    calls, made = [], []
+
+    class Made(Exception):
+        pass
+
+    def cluster(**kwargs):
+        made.append((kwargs["processes"], dask.config.get("distributed.worker.multiprocessing-method")))
+        raise Made
+
+    monkeypatch.setattr(batch, "start_warm_forkserver", lambda dask=False: calls.append(dask) or True)
+    monkeypatch.setattr(batch, "KERNEL_AT_START_CLIPS", 1)
+    monkeypatch.setattr(distributed, "LocalCluster", cluster)
+    before = dask.config.get("distributed.worker.multiprocessing-method")
+    options = BatchOptions(job="synthesize", out=tmp_path / "a", workers=1, scheduler="local", warm_forkserver=True,
+                           job_options=usdhands.SynthesizeOptions(k=3))
+    for n, change in enumerate(({}, {"dask_processes": False}, {"warm_forkserver": False})):
+        with pytest.raises(Made):
+            run_batch([clips / "ok_00.glb"], dataclasses.replace(options, out=tmp_path / str(n), **change))
+    assert calls == [True]
+    assert made == [(True, "forkserver"), (False, before), (True, before)]
+    assert dask.config.get("distributed.worker.multiprocessing-method") == before
+
+
+def test_a_local_cluster_whose_workers_fork_from_the_warm_forkserver_synthesizes_like_the_job_alone(clips, tmp_path):
+    """The worker processes forked from the warm forkserver (Dask, synthesis and numba loaded) run the
+    clips as spawned ones do: the job's own outputs."""
+    pytest.importorskip("numba")
+    pytest.importorskip("distributed")
+    code = (
+        "import json, usdhands\n"
+        "from pathlib import Path\n"
+        "from usdhands.jobs import batch\n"
+        "batch.KERNEL_AT_START_CLIPS = 1\n"
+        f"report = batch.run_batch([{str(clips / 'ok_00.glb')!r}, {str(clips / 'ok_01.glb')!r}], batch.BatchOptions("
+        f"job='synthesize', out=Path({str(tmp_path / 'out')!r}), workers=2, scheduler='local', warm_forkserver=True,"
+        " job_options=usdhands.SynthesizeOptions(k=3)))\n"
+        "print(json.dumps([c.status for c in report.clips]))\n")
+    assert _run_fresh(code) == ["done", "done"]
+    for name in ("ok_00", "ok_01"):
+        usdhands.synthesize(clips / f"{name}.glb", tmp_path / "alone.glb", usdhands.SynthesizeOptions(k=3))
+        assert (tmp_path / "out" / f"{name}.glb").read_bytes() == (tmp_path / "alone.glb").read_bytes()
 
 
 def test_the_command_line_stops_the_forkserver_it_started_when_the_command_is_refused(tmp_path):
@@ -342,7 +394,7 @@ def test_the_command_line_stops_the_forkserver_it_started_when_the_command_is_re
         "from usdhands.jobs import batch\n"
         "started = []\n"
         "start = batch.start_warm_forkserver\n"
-        "batch.start_warm_forkserver = lambda: start() and not started.append(forkserver._forkserver._forkserver_pid)\n"
+        "batch.start_warm_forkserver = lambda dask=False: start(dask) and not started.append(forkserver._forkserver._forkserver_pid)\n"
         f"sys.argv = ['usdhands', 'batch', {str(src)!r}, '--job', 'synthesize', '--steps', 'range<5',\n"
         f"            '--out', {str(tmp_path / 'out')!r}, '--workers', '2']\n"
         "from usdhands.cli import entry_point\n"

@@ -183,7 +183,7 @@ def head_start(args):
         clips = len(collect_inputs(args.inputs))
     except (UsdHandsError, OSError):
         return None
-    if wants_warm_forkserver(options, clips) and start_warm_forkserver():
+    if wants_warm_forkserver(options, clips) and start_warm_forkserver(dask=options.scheduler is not None):
         return stop_warm_forkserver
     return None
 

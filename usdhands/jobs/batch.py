@@ -99,9 +99,10 @@ class BatchOptions:
     dask_processes : bool
         ``scheduler="local"``: worker processes (True) or threads of this process (False, for tests).
     warm_forkserver : bool
-        Local pool, ``synthesize``, 20 clips or more a worker: start this process's multiprocessing
-        forkserver at once with synthesis, the bundled database and numba loaded
-        (:func:`start_warm_forkserver`), so that the workers fork from it warm. It changes the
+        ``synthesize`` on the local pool or on a LocalCluster of worker processes, 20 clips or more a
+        worker: start this process's multiprocessing forkserver at once with synthesis, the bundled
+        database and numba loaded (and Dask, for the LocalCluster: :func:`start_warm_forkserver`), so
+        that the workers fork from it warm. It changes the
         process's forkserver for the rest of its life: for a process that runs batch and nothing
         else (the command line sets it); library callers keep False.
     """
@@ -203,8 +204,8 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
     out = Path(options.out)
     for src, rel in collect_inputs(inputs, extensions):
         pairs.append((src, out / output_name(rel, options)))
-    if wants_warm_forkserver(options, len(pairs)):
-        start_warm_forkserver()  # it loads while the outputs are checked and the pool is made
+    # it loads while the outputs are checked and the pool or the cluster is made
+    warm = wants_warm_forkserver(options, len(pairs)) and start_warm_forkserver(dask=options.scheduler is not None)
     if not pairs:
         named = [Path(p) for p in inputs]
         raise UsdHandsError(f"no input clips found ({', '.join(extensions)})",
@@ -239,7 +240,7 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
         if options.scheduler is None:
             _run_local(todo, task, options.workers, report)
         else:
-            _run_dask(todo, task, options, report)
+            _run_dask(todo, task, options, report, warm)
     seconds = time.perf_counter() - start
     result = BatchReport(options.job, tuple(records[src] for src, _ in pairs), seconds, options.workers,
                          options.scheduler)
@@ -524,16 +525,18 @@ WARM_FORKSERVER_MODULE = "usdhands.jobs.batch_forkserver"
 
 def wants_warm_forkserver(options: BatchOptions, clips: int) -> bool:
     """Whether a batch of ``clips`` clips forks its workers from the warm forkserver: it asked
-    (:attr:`BatchOptions.warm_forkserver`), ``synthesize`` on the local pool, and
-    :data:`KERNEL_AT_START_CLIPS` clips or more a worker (a smaller batch would wait for numba's
-    ~0.5 s start that its workers, searching in NumPy, never need)."""
-    return (options.warm_forkserver and options.scheduler is None and options.job == "synthesize"
+    (:attr:`BatchOptions.warm_forkserver`), ``synthesize`` on the local pool or on a LocalCluster of
+    worker processes, and :data:`KERNEL_AT_START_CLIPS` clips or more a worker (a smaller batch would
+    wait for numba's ~0.5 s start that its workers, searching in NumPy, never need)."""
+    return (options.warm_forkserver and options.job == "synthesize"
+            and (options.scheduler is None or (options.scheduler == "local" and options.dask_processes))
             and options.workers >= 1 and clips >= KERNEL_AT_START_CLIPS * options.workers)
 
 
-def start_warm_forkserver() -> bool:
+def start_warm_forkserver(dask: bool = False) -> bool:
     """Start this process's multiprocessing forkserver now, preloading :data:`WARM_FORKSERVER_MODULE`
-    (:func:`_warm_forkserver_process`); False where there is no forkserver (the pool spawns).
+    (:func:`_warm_forkserver_process`) and, with ``dask``, Dask's ``distributed`` for the worker
+    processes of a LocalCluster (:func:`_run_dask`); False where there is no forkserver (the pool spawns).
 
     The pool's workers then fork from a process that has imported synthesis and loaded numba,
     its CPU target and a kernel, instead of each importing and loading them after it starts;
@@ -547,7 +550,8 @@ def start_warm_forkserver() -> bool:
         return False
     from multiprocessing import forkserver
 
-    forkserver.set_forkserver_preload(["__main__", WARM_FORKSERVER_MODULE])  # __main__: multiprocessing's default
+    # __main__: multiprocessing's default
+    forkserver.set_forkserver_preload(["__main__", *(["distributed"] if dask else []), WARM_FORKSERVER_MODULE])
     forkserver.ensure_running()
     return True
 
@@ -673,7 +677,10 @@ def _pool(workers: int, job: str, job_options, clips_each: int = 1) -> ProcessPo
 
 
 # ----------------------------------------------------------------------------- Dask
-def _run_dask(todo, task, options: BatchOptions, report) -> None:
+def _run_dask(todo, task, options: BatchOptions, report, warm: bool = False) -> None:
+    """The clips on a Dask cluster; ``warm``: this process's warm forkserver runs, with Dask loaded, and a
+    LocalCluster's nannies fork their worker processes from it (``multiprocessing-method``: forkserver)
+    instead of spawning interpreters that import Dask, then synthesis and numba (restarted workers spawn)."""
     try:
         import dask
         from distributed import Client, LocalCluster, as_completed
@@ -692,9 +699,10 @@ def _run_dask(todo, task, options: BatchOptions, report) -> None:
             # os.environ before they start (and restart) a worker process (Dask's pre-spawn-environ and
             # PYTHONHASHSEED): the caller's environment is given back when the cluster has closed
             stack.enter_context(_environ_kept())
+            forked = {"distributed.worker.multiprocessing-method": "forkserver"} if warm else {}
             with dask.config.set({"distributed.scheduler.allowed-failures": 1,
                                   "distributed.scheduler.worker-saturation": 1.0, **QUIET_LOCAL_CLUSTER,
-                                  "distributed.nanny.pre-spawn-environ": worker_environ()}):
+                                  "distributed.nanny.pre-spawn-environ": worker_environ(), **forked}):
                 cluster = stack.enter_context(LocalCluster(
                     n_workers=options.workers, threads_per_worker=1, processes=options.dask_processes,
                     dashboard_address=None))
