@@ -298,8 +298,8 @@ def test_decode_ints_equals_decoding_one_by_one(width):
     from usdhands.formats.usdc_crate import decode_ints
 
     rng = np.random.default_rng(width)
-    for trial in range(400):
-        n = int(rng.integers(0, 40))
+    for trial in range(400):  # up to 40 (32-bit ones decoded one by one in Python), 60-300 (NumPy)
+        n = int(rng.integers(0, 40)) if trial % 2 else int(rng.integers(60, 300))
         codes = rng.integers(0, 4, n)
         sizes = ([0, 1, 2, 4] if width == 4 else [0, 2, 4, 8])
         body = b"".join(int(rng.integers(-(1 << (8 * sizes[c] - 1)), 1 << (8 * sizes[c] - 1))).to_bytes(
@@ -330,3 +330,49 @@ def test_a_layer_composing_a_path_with_a_nul_reads(tmp_path):
     p.write_bytes(b"#usda 1.0\n(\n    subLayers = [@./x\x00y.usdc@]\n)\n")
     asset = read_asset(p)
     assert asset.skeletons == () and asset.clips == ()
+
+
+def test_sorted_unique_is_numpys_unique():
+    from usdhands.formats.usdc_crate import _sorted_unique
+
+    rng = np.random.default_rng(0)
+    for n in (0, 1, 2, 5, 40, 1800):
+        a = rng.integers(0, 1 << 63, n, dtype=np.uint64)
+        a[::3] = a[0] if n else a[::3]
+        got = _sorted_unique(a)
+        assert got.dtype == np.uint64 and got.tolist() == np.unique(a).tolist()
+
+
+def _seed_reps(good: bytes):
+    from usdhands.formats.usdc_crate import _Crate
+
+    crate = _Crate(good)
+    crate.table_of_contents()
+    return crate, np.frombuffer(crate.structural(), dtype="<u8").tolist()
+
+
+def test_a_short_run_of_indices_past_its_table_is_refused(sample_assets, tmp_path):
+    """Runs of up to 8 indices are read by struct, longer ones by NumPy: a token vector of the seed
+    (one or two entries) and a dictionary key (one string index) naming entries past their tables."""
+    import struct
+
+    good = crate_seed(sample_assets, tmp_path)
+    crate, reps = _seed_reps(good)
+
+    def payload(kind):
+        return next(r & ((1 << 48) - 1) for r in reps
+                    if (r >> 48) & 0xFF == kind and not r & (3 << 62) and r & ((1 << 48) - 1))
+
+    vector = payload(41)  # a token vector: count, then uint32 token indices
+    size = struct.unpack_from("<Q", good, vector)[0]
+    assert 1 <= size <= 8
+    for k in range(size):
+        data = bytearray(good)
+        struct.pack_into("<I", data, vector + 8 + 4 * k, 1_000_000)
+        with pytest.raises(AssetReadError, match=f"a vector value names token 1000000 of {crate.tables['token']}"):
+            check_crate_bytes(bytes(data))
+    dictionary = payload(31)  # a dictionary: count, then a string index per key
+    data = bytearray(good)
+    struct.pack_into("<I", data, dictionary + 8, 70_000)
+    with pytest.raises(AssetReadError, match=f"a dictionary key names string 70000 of {crate.tables['string']}"):
+        check_crate_bytes(bytes(data))

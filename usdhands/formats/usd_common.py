@@ -8,6 +8,7 @@ holds xyzw in memory, which is the model's order, so quaternion arrays move as t
 from __future__ import annotations
 
 import contextlib
+import itertools
 import os
 import sys
 import threading
@@ -154,7 +155,9 @@ def _children(spec, key: str, path: Path) -> list[str]:
         findings in 5 minutes: TypeError and UnicodeDecodeError tracebacks).
     """
     try:
-        names = list(spec.GetInfo(key)) if spec.HasInfo(key) else []
+        if not spec.HasInfo(key):
+            return []
+        names = list(spec.GetInfo(key))
     except Tf.ErrorException:  # not a field of this kind of spec
         return []
     except UnicodeDecodeError:
@@ -162,7 +165,7 @@ def _children(spec, key: str, path: Path) -> list[str]:
                              path=path) from None
     except TypeError:  # not iterable, or a value Python cannot hold
         raise AssetReadError(f"cannot read as USD: {key} of <{spec.path}> holds no list of names", path=path) from None
-    if not all(isinstance(n, str) for n in names):
+    if not all(map(isinstance, names, itertools.repeat(str, len(names)))):
         raise AssetReadError(f"cannot read as USD: {key} of <{spec.path}> holds no list of names", path=path)
     return names
 
