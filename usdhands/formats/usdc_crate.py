@@ -70,6 +70,7 @@ _PAYLOAD_KIND = 47
 # vectors of indices: type -> (indices per entry, table); of numbers: type -> bytes per entry
 _INDEX_VECTORS = {40: (1, "path"), 41: (1, "token"), 50: (1, "string"), 45: (2, "string"), 58: (2, "path")}
 _VECTORS = {48: 8, 49: 16}
+_DOUBLE_VECTOR = 48  # a time samples' times
 # list ops: of indices -> table; of numbers -> bytes per item; references, payloads, values walked
 _INDEX_LIST_OPS = {32: "token", 33: "string", 34: "path"}
 _NUMBER_LIST_OPS = {36: 4, 37: 8, 38: 4, 39: 8}
@@ -513,12 +514,19 @@ class _Crate:
             if jump < 8:
                 raise _Corrupt(f"time samples offset {jump} points backwards")
             times = at + jump
-            self.value(self.u64(times, "time samples times"), depth + 1, seen)
+            times_rep = self.u64(times, "time samples times")
+            self.value(times_rep, depth + 1, seen)
             jump = self.i64(times + 8, "time samples values offset")
             if jump < 8:
                 raise _Corrupt(f"time samples values offset {jump} points backwards")
             where = times + 8 + jump
             n = self.count(self.u64(where, "time sample count"), where + 8, 8, "time samples")
+            if (times_rep >> 48) & 0xFF == _DOUBLE_VECTOR and not times_rep & (_INLINED | _ARRAY):
+                # USD reads the value of each time by its index (usdc fuzz: a times vector moved onto the
+                # header claimed thousands, a SdfReadOutOfBoundsError traceback past the 4 values)
+                held = self.u64(times_rep & _PAYLOAD, "time samples times")
+                if held > n:
+                    raise _Corrupt(f"time samples claim {held} times for {n} values")
             self.many(np.frombuffer(self.data, dtype="<u8", count=n, offset=where + 8), depth + 1, seen)
         elif kind in _INDEX_VECTORS:
             n = self.u64(at, "vector size")
