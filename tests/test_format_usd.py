@@ -858,3 +858,79 @@ def test_written_scales_are_one_value_when_their_half_floats_are(tmp_path, case)
     assert attr.GetNumTimeSamples() == (T if case == "differ" else 0)
     back = read_asset(out).clip()
     assert np.array_equal(back.scales, clip.scales.astype(np.float16).astype(np.float64))
+
+
+def test_all_close_answers_as_numpys_allclose():
+    """The readers' all_close is np.allclose's answer: finite references (its own test, both ways),
+    infinite and NaN ones on either side, zero and negative tolerances."""
+    from usdhands.formats.usd_common import all_close
+
+    rng = np.random.default_rng(3)
+    specials = [0.0, 1.0, -1.0, 1e-13, 1e300, np.inf, -np.inf, np.nan]
+    for trial in range(3000):
+        shape = [(), (3,), (4, 4), (2, 4, 4)][trial % 4]
+        b = rng.normal(size=shape)
+        a = b + rng.normal(size=shape) * 10.0 ** -rng.integers(3, 15)
+        if trial % 3 == 0:
+            a = np.where(rng.random(shape) < 0.2, rng.choice(specials, size=shape), a)
+        if trial % 5 == 0:
+            b = np.where(rng.random(shape) < 0.2, rng.choice(specials, size=shape), b)
+        rtol, atol = [(1e-5, 1e-8), (0.0, 1e-12), (1e-6, 1e-9), (0.0, 0.0), (-1e-5, 1e-8), (1e-5, -1e-8)][trial % 6]
+        with np.errstate(all="ignore"):
+            assert all_close(a, b, rtol=rtol, atol=atol) == bool(np.allclose(a, b, rtol=rtol, atol=atol)), (a, b)
+
+
+def test_joint_transform_check_fast_path_agrees_with_the_full_check(monkeypatch):
+    """_xforms_ok (the whole array at once) passes exactly the transforms the full check passes:
+    random rest poses with non-finite, zero-scale, collapsed and projective joints mixed in."""
+    from usdhands.formats import usd_read
+
+    rng = np.random.default_rng(5)
+    full = usd_read._check_xforms
+
+    def passes_full(m):
+        monkeypatch.setattr(usd_read, "_xforms_ok", lambda m: False)
+        try:
+            full(m, [f"j{k}" for k in range(len(m))], "restTransforms", None, "/Skel")
+            return True
+        except AssetReadError:
+            return False
+        finally:
+            monkeypatch.undo()
+
+    for trial in range(400):
+        J = int(rng.integers(1, 8))
+        m = trs_to_xform(rng.normal(size=(J, 3)), rng.normal(size=(J, 4)), rng.uniform(0.5, 2, size=(J, 3)))
+        j = int(rng.integers(0, J))
+        defect = trial % 8
+        if defect == 1:
+            m[j, int(rng.integers(0, 4)), int(rng.integers(0, 4))] = rng.choice([np.nan, np.inf, -np.inf])
+        elif defect == 2:
+            m[j, :3, int(rng.integers(0, 3))] = 0.0  # a zero scale
+        elif defect == 3:
+            m[j, :3, 1] = m[j, :3, 0] * rng.uniform(0.5, 2)  # collapsed axes
+        elif defect == 4:
+            m[j, 3, int(rng.integers(0, 4))] += rng.choice([1e-3, -1e-7, 5e-7, 3e-6, -2e-6, 1.0])  # fourth column
+        elif defect == 5:
+            m[j] *= 1e300  # overflows in the column lengths
+        assert usd_read._xforms_ok(m) == passes_full(m), (trial, m)
+
+
+def test_fold_into_roots_splits_a_transform_that_does_not_move_once():
+    """A world transform equal at every frame gives the numbers of folding each frame on its own."""
+    from usdhands.formats.usd_common import fold_into_roots
+    from usdhands.model.rotations import quat_to_matrix
+
+    rng = np.random.default_rng(2)
+    T, J = 7, 5
+    parents = np.array([-1, 0, 0, -1, 3])
+    t, q, s = rng.normal(size=(T, J, 3)), rng.normal(size=(T, J, 4)), rng.uniform(0.5, 2, (T, J, 3))
+    world = np.eye(4)
+    world[:3, :3] = quat_to_matrix(rng.normal(size=4)) * 0.01
+    world[:3, 3] = rng.normal(size=3)
+    whole = fold_into_roots(parents, np.repeat(world[None], T, axis=0), t, q, s)
+    for f in range(T):
+        alone = fold_into_roots(parents, world[None], t[f:f + 1], q[f:f + 1], s[f:f + 1])
+        for a, b in zip(whole, alone):
+            assert a[f:f + 1].tobytes() == b.tobytes()
+

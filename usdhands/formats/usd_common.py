@@ -385,16 +385,17 @@ _EYE4 = np.eye(4)
 
 def all_close(a, b, rtol: float = 1e-5, atol: float = 1e-8) -> bool:
     """``np.allclose(a, b, rtol, atol)``, without its ``isclose`` machinery where every ``b`` is finite
-    (a few microseconds instead of ~25: the readers call it for each skeleton and clip).
+    (a few microseconds instead of ~15-25: the readers call it for each skeleton and clip).
 
-    ``|a - b| <= atol + rtol |b|`` everywhere with ``b`` finite is numpy's own test (an infinite or
-    NaN ``a`` fails it); any other case is numpy's answer.
+    ``|a - b| <= atol + rtol |b|`` everywhere is numpy's own answer where every ``b`` is finite and
+    the tolerances are not negative (its ``| (a == b)`` adds nothing there: an equal ``a`` passes the
+    test, an infinite or NaN ``a`` fails both); any other case is numpy's answer.
     """
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
-    with np.errstate(invalid="ignore", over="ignore"):
-        if np.isfinite(b).all() and (np.abs(a - b) <= atol + rtol * np.abs(b)).all():
-            return True
+    if np.isfinite(b).all() and atol >= 0 and rtol >= 0:
+        with np.errstate(invalid="ignore", over="ignore"):
+            return bool((np.abs(a - b) <= atol + rtol * np.abs(b)).all())
     return bool(np.allclose(a, b, rtol=rtol, atol=atol))
 
 
@@ -412,7 +413,8 @@ def _world_might_vary(prim: Usd.Prim) -> bool:
     return False
 
 
-def skeleton_world_xforms(prim: Usd.Prim, time_codes: Sequence[float] | None = None) -> np.ndarray | None:
+def skeleton_world_xforms(prim: Usd.Prim, time_codes: Sequence[float] | None = None,
+                          earliest: np.ndarray | None = None) -> np.ndarray | None:
     """The local-to-world transform of a Skeleton prim (its own xformOps and its ancestors').
 
     Parameters
@@ -420,6 +422,9 @@ def skeleton_world_xforms(prim: Usd.Prim, time_codes: Sequence[float] | None = N
     prim : Usd.Prim
     time_codes : (T,) float, optional
         Times to evaluate at; the earliest time when omitted.
+    earliest : (4, 4) float, optional
+        What this function gave for ``prim`` without ``time_codes`` (not None: a transform that
+        is not the identity), so that a transform that does not vary is not computed again.
 
     Returns
     -------
@@ -429,10 +434,12 @@ def skeleton_world_xforms(prim: Usd.Prim, time_codes: Sequence[float] | None = N
         A transform that does not vary over time is computed once and repeated.
     """
     if time_codes is None or not _world_might_vary(prim):
+        n = 1 if time_codes is None else len(time_codes)
+        if earliest is not None:
+            return np.repeat(np.asarray(earliest, dtype=np.float64)[None], n, axis=0)
         m = matrices_to_numpy([UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.EarliestTime())])
         if all_close(m[0], _EYE4, rtol=0, atol=1e-12):
             return None
-        n = 1 if time_codes is None else len(time_codes)
         return np.repeat(m, n, axis=0)
     cache = UsdGeom.XformCache()
     out = np.empty((len(time_codes), 4, 4))
@@ -477,7 +484,10 @@ def fold_into_roots(parents: np.ndarray, world: np.ndarray, translations: np.nda
     world = np.asarray(world, dtype=np.float64)
     m = world[:, None] @ trs_to_xform(t[:, roots], q[:, roots], s[:, roots])
     nt, nq, ns = xform_to_trs(m)
-    qw = quat_canonical(xform_to_trs(world)[1])  # w >= 0: the inverse transform gives the conjugate
+    # w >= 0: the inverse transform gives the conjugate. A transform that does not move (a Z-up
+    # skeleton's) is split once: the same numbers as split at every frame
+    one = len(world) > 1 and bool((world == world[:1]).all())
+    qw = quat_canonical(xform_to_trs(world[:1] if one else world)[1])
     ref = quat_multiply(np.broadcast_to(qw[:, None], q[:, roots].shape), q[:, roots])
     nq = np.where((np.sum(nq * ref, axis=-1) < 0)[..., None], -nq, nq)
     t[:, roots], q[:, roots], s[:, roots] = nt, nq, ns
