@@ -934,3 +934,20 @@ def test_fold_into_roots_splits_a_transform_that_does_not_move_once():
         for a, b in zip(whole, alone):
             assert a[f:f + 1].tobytes() == b.tobytes()
 
+
+def test_mesh_extent_is_numpys_min_and_max_to_the_bit():
+    """The written extent equals pts.min(axis=0) / pts.max(axis=0) bit for bit: signed zeros at the
+    bounds (either order), NaN and infinite points, one point, many."""
+    from usdhands.formats.usd_write import _extent
+
+    rng = np.random.default_rng(7)
+    for trial in range(600):
+        n = int(rng.integers(1, 5000)) if trial % 3 else int(rng.integers(1, 6))
+        pts = rng.normal(size=(n, 3)).astype(np.float32)
+        if trial % 4 == 1:  # bounds at zero, signed both ways
+            pts = np.abs(pts) * rng.choice([1, -1])
+            pts[rng.integers(0, n, 3), rng.integers(0, 3, 3)] = rng.choice([0.0, -0.0], 3)
+        if trial % 7 == 2:
+            pts[rng.integers(0, n), rng.integers(0, 3)] = rng.choice([np.nan, np.inf, -np.inf])
+        lo, hi = _extent(pts)
+        assert lo.tobytes() == pts.min(axis=0).tobytes() and hi.tobytes() == pts.max(axis=0).tobytes(), trial

@@ -492,6 +492,39 @@ def _write_blend_shapes(stage: Usd.Stage, mesh: UsdGeom.Mesh, binding: UsdSkel.B
     binding.CreateBlendShapeTargetsRel().SetTargets(targets)
 
 
+def _ties_go_to_the_last_zero() -> bool:
+    """Whether NumPy's ``min(axis=0)`` / ``max(axis=0)`` of ``(N, 3)`` floats whose bound is zero give
+    the sign of the column's last zero (+0 and -0 compare equal: the order they are met in decides);
+    probed on rows that hold both signs in several orders."""
+    probe = np.zeros((20, 3), dtype=np.float32)
+    probe[[0, 3, 9], 0] = -0.0
+    probe[[1, 19], 1] = -0.0
+    probe[[19], 2] = 1.0
+    probe[[2, 18], 2] = -0.0
+    last = np.signbit([probe[19, 0], probe[19, 1], probe[18, 2]])  # each column's last zero
+    return bool((np.signbit(probe.min(axis=0)) == last).all() and (np.signbit((-probe).max(axis=0)) == ~last).all())
+
+
+_LAST_ZERO = _ties_go_to_the_last_zero()
+
+
+def _extent(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``pts.min(axis=0), pts.max(axis=0)`` of ``(N, 3)`` points, taken along each coordinate's own
+    contiguous column: NumPy's reduction down the first axis of 3 columns ran a 3-element loop per
+    row (CesiumMan's 3,273 points: 135 us for both against 6). A bound of zero gets the sign of its
+    column's last zero, as NumPy's reduction gives it (+0 and -0 tie; :func:`_ties_go_to_the_last_zero`);
+    non-finite bounds, or a NumPy that breaks ties otherwise, are taken as before."""
+    columns = np.ascontiguousarray(pts.T)
+    lo, hi = columns.min(axis=1), columns.max(axis=1)
+    if not (_LAST_ZERO and np.isfinite(lo).all() and np.isfinite(hi).all()):
+        return pts.min(axis=0), pts.max(axis=0)
+    for bound in (lo, hi):
+        for j in np.flatnonzero(bound == 0).tolist():
+            column = columns[j]
+            bound[j] = column[np.flatnonzero(column == 0)[-1]]
+    return lo, hi
+
+
 def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMesh, skel_path: Sdf.Path | None,
                 num_joints: int, source_name: str | None = None, material_paths: Sequence[Sdf.Path] = (),
                 materials: Sequence = ()) -> None:
@@ -516,7 +549,7 @@ def _write_mesh(stage: Usd.Stage, parent: Sdf.Path, used: set[str], m: SkinnedMe
                                                                                         dtype=np.int32)))
     mesh.CreateSubdivisionSchemeAttr().Set(UsdGeom.Tokens.none)
     if len(pts):
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        lo, hi = _extent(pts)
         mesh.CreateExtentAttr().Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]))
     if m.normals is not None:
         mesh.CreateNormalsAttr().Set(Vt.Vec3fArray.FromNumpy(_f32(m.normals).reshape(-1, 3)))
