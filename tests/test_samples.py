@@ -376,21 +376,160 @@ def test_generated_files_round_trip(tmp_path, gltf_validator):
     assert quat_angle_deg(bo.rotations[:, fj], bo.rotations[:1, fj]).max() < 1e-3  # frozen
 
 
-def test_byte_identical_to_committed(tmp_path):
-    """A fresh process regenerates committed files byte for byte."""
+_REGENERATED = ["props/*", "humanoid.*", "gestures/labels.csv", "gestures/wipe_07.glb", "conversation.labels.csv",
+                "gestures_bodyonly/turn_05_bodyonly.bvh", "interaction/table_rest.glb"]
+
+
+def _regenerate(folder: Path) -> list[Path]:
+    """The committed files of ``_REGENERATED`` written again by a fresh process into ``folder``."""
+    code = ("import sys; from usdhands.samples.generate import generate_samples; "
+            "generate_samples(sys.argv[1], only=tuple(sys.argv[2:]))")
+    subprocess.run([sys.executable, "-c", code, str(folder), *_REGENERATED], check=True)
+    return sorted(p.relative_to(folder) for p in folder.rglob("*") if p.is_file())
+
+
+def test_regenerated_twice_byte_identical(tmp_path):
+    """Two fresh processes on one machine write the same bytes."""
+    first, second = _regenerate(tmp_path / "a"), _regenerate(tmp_path / "b")
+    assert first == second and len(first) == 12
+    for rel in first:
+        assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
+
+
+def test_regenerated_match_committed(tmp_path):
+    """A fresh process regenerates the committed files: byte for byte where this machine's arithmetic is
+    the committing machine's, otherwise the same text, structure and integers with every number equal to
+    within its last bits (OpenBLAS's kernel and NumPy's SIMD functions are chosen by CPU: an AVX-512 AMD
+    and an Intel machine differ in the 16th digit of some rest-pose products)."""
     committed = ROOT / "sample_assets"
     if not (committed / "humanoid.usda").is_file():
         pytest.skip("sample_assets/ not generated")
-    pats = ["props/*", "humanoid.*", "gestures/labels.csv", "gestures/wipe_07.glb", "conversation.labels.csv",
-            "gestures_bodyonly/turn_05_bodyonly.bvh", "interaction/table_rest.glb"]
-    code = ("import sys; from usdhands.samples.generate import generate_samples; "
-            "generate_samples(sys.argv[1], only=tuple(sys.argv[2:]))")
-    subprocess.run([sys.executable, "-c", code, str(tmp_path), *pats], check=True)
-    files = sorted(p for p in tmp_path.rglob("*") if p.is_file())
+    files = _regenerate(tmp_path)
     assert len(files) == 12
-    for p in files:
-        rel = p.relative_to(tmp_path)
-        assert p.read_bytes() == (committed / rel).read_bytes(), rel
+    for rel in files:
+        assert_same_sample(tmp_path / rel, committed / rel)
+
+
+_NUMBER = re.compile(rb"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|[-+]?\b(?:nan|inf)\b")
+
+
+def _close(a, b, rtol: float, atol: float) -> bool:
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return a.shape == b.shape and bool(np.all(np.isclose(a, b, rtol=rtol, atol=atol, equal_nan=True)))
+
+
+def _same_content(a, b, path: str) -> None:
+    """Dataclasses, sequences, dicts and arrays of two readings equal: integers, text and shapes exactly,
+    floats to 1e-6 relative / 1e-9 absolute, quaternions (fields named ``*rotations``) up to sign."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(a):
+        assert type(a) is type(b), path
+        for f in dataclasses.fields(a):
+            if f.name not in ("path", "_index"):
+                _same_content(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
+    elif isinstance(a, dict):
+        assert a.keys() == b.keys(), path
+        for k in a:
+            _same_content(a[k], b[k], f"{path}[{k!r}]")
+    elif isinstance(a, (list, tuple)):
+        assert isinstance(b, (list, tuple)) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same_content(x, y, f"{path}[{i}]")
+    elif isinstance(a, np.ndarray) and a.dtype.kind == "f":
+        assert isinstance(b, np.ndarray) and a.shape == b.shape, path
+        if path.endswith("rotations") and a.shape[-1:] == (4,):
+            flip = np.sum(a * b, axis=-1, keepdims=True) < 0
+            b = np.where(flip, -b, b)
+        assert _close(a, b, 1e-6, 1e-9), (path, float(np.max(np.abs(a - b))))
+    elif isinstance(a, np.ndarray):
+        assert isinstance(b, np.ndarray) and np.array_equal(a, b), path
+    elif isinstance(a, float):
+        assert _close(a, b, 1e-9, 1e-12), (path, a, b)
+    else:
+        assert a == b, (path, a, b)
+
+
+def assert_same_sample(new: Path, old: Path) -> None:
+    """``new`` holds what ``old`` holds: identical bytes; or else the same text with its numbers replaced
+    (JSON keys and structure for GLB) and, read by usdhands, the same skeletons, clips and meshes to
+    1e-6 relative / 1e-9 absolute (quaternions up to sign: a BVH angle of 0 can come out as 360); other
+    text files (OBJ, CSV) the same text with numbers equal to that tolerance."""
+    a, b = new.read_bytes(), old.read_bytes()
+    if a == b:
+        return
+    if new.suffix == ".glb":
+        import json
+        import struct
+
+        def doc(data: bytes) -> dict:
+            return json.loads(data[20:20 + struct.unpack_from("<I", data, 12)[0]])
+
+        def shape(x):
+            if isinstance(x, dict):
+                return {k: shape(v) for k, v in x.items()}
+            if isinstance(x, list):
+                return [shape(v) for v in x]
+            return x if isinstance(x, (str, bool, int)) and not isinstance(x, float) else "number"
+
+        da, db_ = doc(a), doc(b)
+        for view in (*da.get("accessors", []), *db_.get("accessors", [])):
+            view.pop("min", None), view.pop("max", None)
+        assert shape(da) == shape(db_), f"{old.name}: structure differs"
+    else:
+        assert _NUMBER.split(a) == _NUMBER.split(b), f"{old.name}: text differs"
+    if new.suffix in (".glb", ".usda", ".usdc", ".bvh"):
+        from usdhands.formats.io import read_asset
+
+        _same_content(read_asset(new), read_asset(old), old.name)
+        return
+    num_a, num_b = _NUMBER.findall(a), _NUMBER.findall(b)
+    assert _close([float(x) for x in num_a], [float(x) for x in num_b], 1e-6, 1e-9), f"{old.name}: numbers differ"
+
+
+def test_same_sample_comparison_catches_changes(tmp_path):
+    """The comparison above fails on a changed number, a changed word, a changed index and a changed
+    float32 value, and passes a last-bit change."""
+    committed = ROOT / "sample_assets"
+    if not (committed / "humanoid.usda").is_file():
+        pytest.skip("sample_assets/ not generated")
+    import json
+    import struct
+
+    def variant(src: Path, name: str, edit) -> Path:
+        out = tmp_path / name
+        out.write_bytes(edit(src.read_bytes()))
+        return out
+
+    usda, glb = committed / "humanoid.usda", committed / "gestures" / "wipe_07.glb"
+    text = usda.read_bytes()
+    m = re.search(rb"\b\d\.\d{3,}", text)
+    value = float(m.group())
+    for new, ok in (((value * (1 + 1e-12)), True), (value * 1.001, False)):
+        edited = variant(usda, f"n{ok}.usda", lambda d: d[:m.start()] + repr(new).encode() + d[m.end():])
+        if ok:
+            assert_same_sample(edited, usda)
+        else:
+            with pytest.raises(AssertionError):
+                assert_same_sample(edited, usda)
+    with pytest.raises(AssertionError):
+        assert_same_sample(variant(usda, "w.usda", lambda d: d.replace(b"Skeleton", b"Skeletom", 1)), usda)
+
+    data = glb.read_bytes()
+    n = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + n])
+    f32_at = 20 + n + 8 + doc["bufferViews"][doc["accessors"][2]["bufferView"]].get("byteOffset", 0) + 16
+    x = np.frombuffer(data, "<f4", 1, f32_at)[0]
+    for new, ok in ((np.nextafter(x, np.float32(2)), True), (x + np.float32(0.01), False)):
+        edited = variant(glb, f"b{ok}.glb", lambda d: d[:f32_at] + np.float32(new).tobytes() + d[f32_at + 4:])
+        if ok:
+            assert_same_sample(edited, glb)
+        else:
+            with pytest.raises(AssertionError):
+                assert_same_sample(edited, glb)
+    with pytest.raises(AssertionError):  # a node's child index: an integer of the JSON
+        assert b'"children":[1,' in data
+        assert_same_sample(variant(glb, "c.glb", lambda d: d.replace(b'"children":[1,', b'"children":[2,', 1)), glb)
 
 
 def test_committed_set_is_small_and_labelled():
