@@ -95,8 +95,8 @@ def test_importing_usdhands_imports_neither_pxr_nor_pygltflib():
 
 def test_importing_usdhands_and_its_command_line_loads_neither_numpy_nor_the_model():
     """``import usdhands`` (which ``python -m usdhands`` and the console script run first) loads its names
-    on first use, so that the command line's batch starts its warm forkserver before numpy loads
-    (usdhands.cli.head_start); every name and subpackage still resolves, an unknown one does not."""
+    on first use, so that a command loads only what it uses; every name and subpackage still resolves, an
+    unknown one does not."""
     code = ("import sys, usdhands, usdhands.cli\n"
             "print(sorted(m for m in ('numpy', 'usdhands.model', 'usdhands.formats', 'usdhands.jobs.synthesis')"
             " if m in sys.modules))\n"

@@ -25,9 +25,8 @@ __version__ = "0.1.0"
 
 from usdhands.errors import UsdHandsError  # noqa: E402
 
-#: names loaded on first use (module __getattr__), so that ``import usdhands`` stays fast: the
-#: command line's ``batch`` starts its warm forkserver before numpy and the model load
-#: (:func:`usdhands.cli.head_start`)
+#: names loaded on first use (module __getattr__), so that ``import usdhands`` stays fast (neither
+#: numpy nor the model: ``import usdhands.cli`` 0.080 -> 0.006 s)
 _LAZY = {
     **dict.fromkeys(("read_asset", "read_clip", "write_asset", "write_clip"), "usdhands.formats.io"),
     **dict.fromkeys(("FINGERS", "SIDES", "Clip", "FingerCurves", "HandMap", "HandSide", "Skeleton",

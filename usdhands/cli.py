@@ -214,51 +214,15 @@ def _main_thread() -> bool:
 def entry_point() -> None:
     """Console-script entry point (and ``python -m usdhands``).
 
-    A ``batch`` whose local pool forks its workers warm starts that forkserver first
-    (:func:`head_start`), and stops it at the end. The process then exits without Python's last
-    garbage collections over what it loaded (``gc.freeze``; exit handlers, flushed streams and the
-    exit status as before): with Dask loaded, as after ``batch --scheduler``, they took ~0.14 of a
-    0.15 s exit.
+    The process then exits without Python's last garbage collections over what it loaded
+    (``gc.freeze``; exit handlers, flushed streams and the exit status as before): with
+    Dask loaded, as after ``batch --scheduler``, they took ~0.14 of a 0.15 s exit.
     """
     import gc
 
-    stop = head_start(sys.argv[1:])
-    try:
-        code = main()
-    finally:
-        if stop is not None:
-            stop()
+    code = main()
     gc.freeze()
     sys.exit(code)
-
-
-class _HeadStartParser(_Parser):
-    """A parser that never prints: no ``--help`` (nor ``--version``), every refusal a :class:`UsageError`."""
-
-    def __init__(self, *args, **kwargs):
-        kwargs["add_help"] = False
-        super().__init__(*args, **kwargs)
-
-
-def head_start(argv: list[str]):
-    """What a command starts before the command line loads: ``batch``'s warm forkserver
-    (:func:`usdhands.commands.batch.head_start`). A function that stops it at the end, or None.
-
-    ``argv`` is read by the ``batch`` parser alone, which refuses anything else and any
-    ``--help``; a refused or other command starts nothing here and is run (or refused, in one
-    line) by :func:`main` as always.
-    """
-    if "batch" not in argv:
-        return None
-    from usdhands.commands import batch
-
-    parser = _HeadStartParser(prog="usdhands")
-    batch.register(parser.add_subparsers(dest="command"))
-    try:
-        args = parser.parse_args(argv)
-    except UsageError:
-        return None
-    return batch.head_start(args)
 
 
 if __name__ == "__main__":

@@ -162,32 +162,6 @@ def _workers(args) -> int:
     return args.workers or os.cpu_count() or 1
 
 
-def head_start(args):
-    """Start the warm forkserver of a batch that will fork its workers from it, before the rest of
-    the command line loads (:func:`usdhands.cli.entry_point`): a function that stops it, or None.
-
-    ``args``: the command line as this command's parser alone read it. The forkserver's imports
-    (numba's ~0.5 s) then run on the other core while this process imports the commands, parses
-    again, checks the options and outputs: that is the start-up every clip waits for. The
-    batch's own test (:func:`usdhands.jobs.batch.wants_warm_forkserver`) decides, on the inputs
-    listed here; a command that lists none is left to the run, which says why.
-    """
-    from usdhands.errors import UsdHandsError
-    from usdhands.jobs.batch import (
-        BatchOptions, collect_inputs, start_warm_forkserver, stop_warm_forkserver, wants_warm_forkserver,
-    )
-
-    options = BatchOptions(job=args.job, out=args.out, workers=_workers(args), scheduler=args.scheduler,
-                           warm_forkserver=True)
-    try:
-        clips = len(collect_inputs(args.inputs))
-    except (UsdHandsError, OSError):
-        return None
-    if wants_warm_forkserver(options, clips) and start_warm_forkserver(dask=options.scheduler is not None):
-        return stop_warm_forkserver
-    return None
-
-
 class _progress_bar:
     """``progress(finished, total, failed, what)`` drawn with tqdm on a terminal (a line per 10% otherwise)."""
 

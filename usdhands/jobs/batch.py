@@ -556,29 +556,6 @@ def start_warm_forkserver(dask: bool = False) -> bool:
     return True
 
 
-def stop_warm_forkserver() -> None:
-    """Stop this process's forkserver at once, if it runs: terminated (SIGTERM) and reaped.
-
-    For the command line's process at its end, when it started the warm forkserver itself
-    (:func:`usdhands.cli.entry_point`): a forkserver still importing numba (a command refused after
-    it started) would otherwise outlive the process by up to ~0.5 s, holding its stderr, and one
-    that has forked the batch's workers takes ~25 ms to exit after the process (Python's exit with
-    numba loaded). Its workers have been joined by then; a worker still running is not its child
-    to wait for and ends when the batch process's pipes close, as before.
-    """
-    import signal
-    from multiprocessing import forkserver
-
-    server = forkserver._forkserver  # the process's forkserver (multiprocessing keeps one, like its start)
-    pid = getattr(server, "_forkserver_pid", None)
-    if pid is None:
-        return
-    with contextlib.suppress(OSError):
-        os.kill(pid, signal.SIGTERM)
-    with contextlib.suppress(OSError):
-        server._stop()  # closes its alive pipe and reaps it (multiprocessing's own, Python 3.8-3.13)
-
-
 def _warm_forkserver_process() -> None:
     """The warm forkserver's preload: the synthesize job's modules, the bundled database, numba and
     one serial kernel of synthesis (numba's import and CPU target: ~0.5 s once instead of in each
