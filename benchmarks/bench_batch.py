@@ -77,6 +77,7 @@ def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None,
         cmd += ["--scheduler", scheduler]
     start = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    sampler = ProcessTreeCpu(proc.pid) if scheduler == "local" else None
     marks, lines = [], []
     for line in proc.stderr:  # "synthesize: 20/200 done, 0 failed, ..." at each tenth (stderr is not a terminal)
         lines.append(line)
@@ -85,7 +86,7 @@ def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None,
             finished, total = int(done[0]), int(done[1])
             if (not marks and finished >= total // 10) or (len(marks) == 1 and finished >= total - total // 10):
                 marks.append((finished, time.perf_counter(), thread_cpu([proc.pid, *cluster_pids])))
-    _, status, usage = os.wait4(proc.pid, 0)  # the CPU of the batch process and every child it waited for
+    _, status, _ = os.wait4(proc.pid, 0)
     proc.returncode = os.waitstatus_to_exitcode(status)
     if proc.returncode != 0:
         raise RuntimeError(f"batch failed ({proc.returncode}): {''.join(lines[-20:])}")
@@ -94,9 +95,40 @@ def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None,
     assert report["failed"] == 0 and report["done"] == len(report["clips"]), report
     (n0, t0, a), (n1, t1, b) = marks
     acc = cpu_by_role(a, b, n1 - n0, t1 - t0, proc.pid)
-    if scheduler == "local":  # its nannies wait for their workers (the pool's are the forkserver's children,
-        acc["whole run cpu"] = usage.ru_utime + usage.ru_stime  # a running cluster's not the batch's)
+    if sampler is not None:  # the LocalCluster's processes are all the batch process's descendants
+        acc["whole run cpu"] = sampler.stop()
     return seconds, acc
+
+
+class ProcessTreeCpu:
+    """The CPU seconds (user + system) of a process and all its descendants, sampled every 50 ms in a
+    thread until :meth:`stop`: each process's last reading (a process's last <= 50 ms are missed). The
+    batch's own wait4 figures cannot give it: a LocalCluster's workers fork from the warm forkserver,
+    whose children the batch process never waits for."""
+
+    def __init__(self, pid: int):
+        import threading
+
+        self.pid, self.seen, self.done = pid, {}, threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        import psutil
+
+        while not self.done.is_set():
+            with contextlib.suppress(psutil.Error):
+                root = psutil.Process(self.pid)
+                for p in (root, *root.children(recursive=True)):
+                    with contextlib.suppress(psutil.Error):
+                        t = p.cpu_times()
+                        self.seen[(p.pid, p.create_time())] = t.user + t.system
+            self.done.wait(0.05)
+
+    def stop(self) -> float:
+        self.done.set()
+        self.thread.join()
+        return sum(self.seen.values())
 
 
 def thread_cpu(roots: list[int]) -> dict:
@@ -173,7 +205,7 @@ def print_cpu(acc: dict, clips: int) -> None:
           f"bound for 2 workers on 2 cores {2 / (1 + overhead / max(work, 1e-9)):.2f}x one clip thread")
     if "whole run cpu" in acc:
         whole = acc["whole run cpu"]
-        print(f"    CPU of the whole run, the batch process and its children: {whole:.1f} s, of which start-up and "
+        print(f"    CPU of the whole run, the batch process and its descendants (sampled): {whole:.1f} s, of which start-up and "
               f"close ~{whole - clips * (work + overhead) / 1000:.1f} s (beyond {clips} clips at the middle's CPU)")
 
 
