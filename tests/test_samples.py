@@ -399,8 +399,9 @@ def test_regenerated_twice_byte_identical(tmp_path):
 def test_regenerated_match_committed(tmp_path):
     """A fresh process regenerates the committed files: byte for byte where this machine's arithmetic is
     the committing machine's, otherwise the same text, structure and integers with every number equal to
-    within its last bits (OpenBLAS's kernel and NumPy's SIMD functions are chosen by CPU: an AVX-512 AMD
-    and an Intel machine differ in the 16th digit of some rest-pose products)."""
+    within its last bits (OpenBLAS's kernel and NumPy's SIMD functions are chosen by CPU: on an AMD EPYC
+    with AVX-512, OpenBLAS's default kernel and its SkylakeX kernel, which reproduces the committed files,
+    differ in the 16th digit of some rest-pose products)."""
     committed = ROOT / "sample_assets"
     if not (committed / "humanoid.usda").is_file():
         pytest.skip("sample_assets/ not generated")

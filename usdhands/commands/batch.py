@@ -137,8 +137,9 @@ def run(args) -> int:
     check_side_files({"--handmap": args.handmap, "--config": args.config, "--model": args.model,
                       "--interaction-config": args.interaction_config, "--props": args.props, "--db": args.db},
                      args.out)
-    options = BatchOptions(job=args.job, out=args.out, job_options=job_options(args), workers=_workers(args),
-                           scheduler=args.scheduler, to=args.to, model=args.model, warm_forkserver=True)
+    options = BatchOptions(job=args.job, out=args.out, job_options=job_options(args),
+                           workers=args.workers or os.cpu_count() or 1, scheduler=args.scheduler, to=args.to,
+                           model=args.model, warm_forkserver=True)
     bar = _progress_bar(args.job)
     try:
         report = run_batch(args.inputs, options, progress=bar)
@@ -155,11 +156,6 @@ def run(args) -> int:
               f"({s['clips_per_second']:.2f} clips/s, {report.workers} worker(s)"
               f"{', Dask ' + report.scheduler if report.scheduler else ''}); report: {args.out / 'report.json'}")
     return 1 if report.count("failed") else 0
-
-
-def _workers(args) -> int:
-    """``--workers``, or the CPU count."""
-    return args.workers or os.cpu_count() or 1
 
 
 class _progress_bar:

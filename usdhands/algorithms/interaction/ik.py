@@ -294,7 +294,7 @@ class ChainPoser:
         hi = np.ones(len(idx))
         step = 2.0 ** -iterations
         for _ in range(iterations):
-            live = np.nonzero(hi - lo > step)[0] if lo.any() else np.arange(len(idx))
+            live = np.nonzero(hi - lo > step)[0]  # a frame started above 0 may be done sooner
             if len(live) == 0:
                 break
             mid = 0.5 * (lo[live] + hi[live])
