@@ -16,13 +16,17 @@ def convert_or_die(source, output, options):
 
 
 def worker_state() -> dict:
-    """In a pool worker: its kernel threads, whether the search kernel is loaded, and what its parent
-    process (the forkserver it was forked from) has mapped: numba (llvmlite) and numba's threading layers."""
+    """In a pool worker: whether it had imported numba, its kernel threads, whether the search kernel is
+    loaded, and what its parent process (the forkserver it was forked from) has mapped: numba (llvmlite)
+    and numba's threading layers."""
+    import sys
+
     from usdhands.algorithms.synthesis import segment_cost
     from usdhands.jit import kernel_threads
 
+    had_numba = "numba" in sys.modules
     with open(f"/proc/{os.getppid()}/maps") as f:
         parent = f.read()
-    return {"kernel_threads": kernel_threads(), "search_kernel": segment_cost._kernel_loaded(),
+    return {"had_numba": had_numba, "kernel_threads": kernel_threads(), "search_kernel": segment_cost._kernel_loaded(),
             "parent_has_numba": "llvmlite" in parent,
             "parent_started_threads": any(layer in parent for layer in ("omppool", "tbbpool", "workqueue"))}

@@ -222,8 +222,9 @@ def test_workers_run_kernels_on_one_thread_and_the_callers_process_is_untouched(
 
 def test_a_synthesize_worker_loads_the_search_kernel_at_start_with_the_signature_of_every_search(
         sample_assets, tmp_path):
-    """A worker process of its own loads the numba search kernel while it starts (it searched its first
-    ~45 clips in NumPy at 2.5x the CPU before), with the argument types synthesis then calls it with:
+    """Without the kernels compiled ahead of time (USDHANDS_COMPILED_KERNELS=0, as an install without a C
+    compiler): a worker process of its own loads the numba search kernel while it starts (it searched its
+    first ~45 clips in NumPy at 2.5x the CPU before), with the argument types synthesis then calls it with:
     one signature after a clip (another would be compiled or loaded again, per clip). A worker that
     expects fewer than 20 clips keeps to NumPy (0.5 s of numba for ~28 ms saved a clip), and so does
     the caller's process warmed the same way."""
@@ -243,16 +244,41 @@ def test_a_synthesize_worker_loads_the_search_kernel_at_start_with_the_signature
         "loaded = len(_dtw_kernel.search.signatures)\n"
         f"usdhands.synthesize({str(sample_assets / 'conversation_bodyonly.bvh')!r}, {str(tmp_path / 'o.bvh')!r})\n"
         "print(json.dumps([caller, few, worker, loaded, len(_dtw_kernel.search.signatures)]))")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
+                          env=dict(os.environ, USDHANDS_COMPILED_KERNELS="0"))
     assert done.returncode == 0, done.stderr[-2000:]
     assert json.loads(done.stdout.splitlines()[-1]) == [False, False, True, 1, 1]
 
 
-def _run_fresh(code: str) -> object:
-    """``code`` run by a fresh interpreter (its own forkserver) with the tests folder importable: the JSON
-    of its last printed line."""
+def test_a_synthesize_worker_with_the_kernels_compiled_ahead_of_time_never_imports_numba(sample_assets, tmp_path):
+    """Where the kernels compiled at install were built, a worker warmed for many clips loads no numba and
+    its clips run without it (the same output as numba's kernels: tests/test_compiled_kernels.py)."""
+    from usdhands.compiled import KERNEL_MODULES, kernel_module
+
+    if any(kernel_module(name) is None for name in KERNEL_MODULES):
+        pytest.skip("the kernels compiled ahead of time were not built (no C compiler at install)")
+    code = (
+        "import json, sys, usdhands\n"
+        "from usdhands.jobs import batch\n"
+        "batch.become_worker_process()\n"
+        "batch._warm_worker('synthesize', usdhands.SynthesizeOptions(), batch.KERNEL_AT_START_CLIPS)\n"
+        "warm = 'numba' in sys.modules\n"
+        "for n in range(2):\n"
+        f"    r = batch.run_clip('synthesize', usdhands.SynthesizeOptions(), None,\n"
+        f"                       usdhands.jobs.batch.Path({str(sample_assets / 'conversation_bodyonly.bvh')!r}),\n"
+        f"                       usdhands.jobs.batch.Path({str(tmp_path)!r}) / f'o{{n}}.bvh')\n"
+        "    assert r.status == 'done', r\n"
+        "print(json.dumps([warm, 'numba' in sys.modules]))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert json.loads(done.stdout.splitlines()[-1]) == [False, False]
+
+
+def _run_fresh(code: str, **environ) -> object:
+    """``code`` run by a fresh interpreter (its own forkserver) with the tests folder importable and
+    ``environ`` added to its environment: the JSON of its last printed line."""
     here = os.path.dirname(os.path.abspath(__file__))
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([here, os.environ.get("PYTHONPATH", "")]))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([here, os.environ.get("PYTHONPATH", "")]), **environ)
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, env=env)
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.splitlines()[-1])
@@ -260,10 +286,14 @@ def _run_fresh(code: str) -> object:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
 def test_a_worker_forked_from_the_warm_forkserver_has_the_kernel_and_one_kernel_thread():
-    """The warm forkserver loaded numba but started none of its threads (a process forked after they
-    started would have none); its workers load the search kernel and run kernels on one thread. A pool
-    in a process that did not ask for it forks from a forkserver without numba."""
+    """Without the kernels compiled ahead of time: the warm forkserver loaded numba but started none of its
+    threads (a process forked after they started would have none); its workers load the search kernel and
+    run kernels on one thread. A pool in a process that did not ask for it forks from a forkserver without
+    numba. With them: neither the forkserver nor its workers import numba; a worker that does (a kernel
+    of another job) runs its kernels on one thread."""
     pytest.importorskip("numba")
+    from usdhands.compiled import KERNEL_MODULES, kernel_module
+
     code = (
         "import json, usdhands\n"
         "from usdhands.jobs import batch\n"
@@ -273,12 +303,18 @@ def test_a_worker_forked_from_the_warm_forkserver_has_the_kernel_and_one_kernel_
         "with batch._pool(2, 'synthesize', usdhands.SynthesizeOptions(), batch.KERNEL_AT_START_CLIPS) as pool:\n"
         "    states = [f.result() for f in [pool.submit(batch_dying_job.worker_state) for _ in range(4)]]\n"
         "print(json.dumps(states[0]))\n")
-    warm = _run_fresh(code.format(warm=True))
-    assert warm == {"kernel_threads": 1, "search_kernel": True, "parent_has_numba": True,
+    without = {"USDHANDS_COMPILED_KERNELS": "0"}
+    warm = _run_fresh(code.format(warm=True), **without)
+    assert warm == {"had_numba": True, "kernel_threads": 1, "search_kernel": True, "parent_has_numba": True,
                     "parent_started_threads": False}
-    cold = _run_fresh(code.format(warm=False))
-    assert cold == {"kernel_threads": 1, "search_kernel": True, "parent_has_numba": False,
+    cold = _run_fresh(code.format(warm=False), **without)
+    assert cold == {"had_numba": True, "kernel_threads": 1, "search_kernel": True, "parent_has_numba": False,
                     "parent_started_threads": False}
+    if all(kernel_module(name) is not None for name in KERNEL_MODULES):
+        for warm in (True, False):
+            assert _run_fresh(code.format(warm=warm)) == {
+                "had_numba": False, "kernel_threads": 1, "search_kernel": False, "parent_has_numba": False,
+                "parent_started_threads": False}
 
 
 def test_only_a_batch_that_asks_starts_the_warm_forkserver(clips, tmp_path, monkeypatch):

@@ -1,6 +1,7 @@
 """The BVH reader's compiled twins: the motion parser against float() and np.loadtxt, the clip's
 arrays against the NumPy conversion, whole reads against the NumPy reader and the
-token-by-token reader (real files, variants, mutated bytes), and when the process uses them."""
+token-by-token reader (real files, variants, mutated bytes; the reader compiled at install
+against numba's), and when the process uses them."""
 
 from __future__ import annotations
 
@@ -16,11 +17,14 @@ import numpy as np
 import pytest
 
 import usdhands.formats.bvh as bvh_module
+from usdhands.compiled import kernel_module
 from usdhands.errors import AssetReadError
 from usdhands.formats import _bvh_kernel as kernel
 from usdhands.formats.bvh import HANDLER, parse_bvh
 
 ROOT = Path(__file__).resolve().parent.parent
+#: The reader compiled at install (the reader of USE_COMPILED None), or None where it was not built
+AHEAD_OF_TIME = kernel_module("formats._bvh_compiled")
 sys.path.insert(0, str(Path(__file__).resolve().parent / "fuzz"))
 
 
@@ -200,6 +204,8 @@ def test_compiled_reader_equals_the_numpy_reader_on_real_files_and_variants(samp
             p.write_bytes(text.encode("utf-8"))
             compiled = _outcome(p, True, monkeypatch)
             assert_same_outcome(compiled, _outcome(p, False, monkeypatch), (src.name, name))
+            if AHEAD_OF_TIME is not None:  # the kernels compiled at install: numba's numbers to the bit
+                assert_same_outcome(_outcome(p, None, monkeypatch), compiled, (src.name, name), exact=True)
             assert_same_outcome(_outcome(p, False, monkeypatch), _outcome(p, False, monkeypatch, fast=False),
                                 (src.name, name), exact=True)
             checked += not isinstance(compiled, str)
@@ -231,6 +237,9 @@ def test_fast_paths_equal_the_token_reader_on_mutated_files(sample_assets, tmp_p
         p.write_bytes(data)
         slow = _outcome(p, False, monkeypatch, fast=False)
         assert_same_outcome(_outcome(p, True, monkeypatch), slow, p.read_bytes()[:300])
+        if AHEAD_OF_TIME is not None:
+            assert_same_outcome(_outcome(p, None, monkeypatch), _outcome(p, True, monkeypatch), p.read_bytes()[:300],
+                                exact=True)
         assert_same_outcome(_outcome(p, False, monkeypatch), slow, p.read_bytes()[:300], exact=True)
         readable += not isinstance(slow, str)
     assert 50 < readable < 200  # both readable and broken files were tried
@@ -255,10 +264,16 @@ def test_hierarchy_one_statement_a_line_equals_the_token_parser(sample_assets):
 
 
 def test_when_the_process_reads_with_the_kernels(monkeypatch):
-    """Not before numba runs a kernel of the package or enough motion text was read: then always;
-    USE_COMPILED forces either way."""
+    """The kernels compiled ahead of time wherever they were built; without them, numba's not before
+    numba runs a kernel of the package or enough motion text was read, then always; USE_COMPILED forces
+    numba's or NumPy."""
+    import usdhands.compiled
     import usdhands.jit
 
+    built = usdhands.compiled.kernel_module("formats._bvh_compiled")
+    if built is not None:
+        assert bvh_module._kernels() is built
+    monkeypatch.setattr(usdhands.compiled, "ENABLED", False)
     monkeypatch.setattr(usdhands.jit, "kernels_running", lambda: False)
     monkeypatch.setattr(bvh_module, "_motion_bytes_read", 0)
     assert bvh_module._kernels() is None
@@ -274,24 +289,30 @@ def test_when_the_process_reads_with_the_kernels(monkeypatch):
     assert bvh_module._kernels() is kernel
 
 
-def test_a_fresh_process_reads_a_bvh_file_without_numba(sample_assets, tmp_path):
-    """Reading a file (start-up of every BVH command) imports no numba; once a kernel of the package
-    has run, jit.kernels_running() says so and the reader uses its kernels."""
+@pytest.mark.parametrize("compiled", ["1", "0"])
+def test_a_fresh_process_reads_a_bvh_file_without_numba(sample_assets, tmp_path, compiled):
+    """Reading a file (start-up of every BVH command) imports no numba, with the kernels compiled ahead
+    of time (which it reads with) or without them (NumPy); once a kernel of the package has run,
+    jit.kernels_running() says so and, without the kernels compiled ahead of time, the reader uses numba's."""
     script = (
         "import sys\n"
         "from usdhands import jit\n"
         "import usdhands.formats.bvh as bvh\n"
         f"bvh.HANDLER.read({str(sample_assets / 'conversation_bodyonly.bvh')!r})\n"
-        "print('numba' in sys.modules, jit.kernels_running(), bvh._kernels() is None)\n"
+        "from usdhands.compiled import kernel_module\n"
+        "built = kernel_module('formats._bvh_compiled')\n"
+        "print('numba' in sys.modules, jit.kernels_running(), bvh._kernels() is built)\n"
         "from usdhands.formats import _bvh_kernel as k\n"
         "import numpy as np\n"
         "k.parse_rows(np.frombuffer(b'1', np.uint8), 0, 1, np.empty((1, 1)), k.POW10)\n"
-        "print(jit.kernels_running(), bvh._kernels() is k)\n")
-    env = dict(os.environ)
+        "print(jit.kernels_running(), bvh._kernels() is (built or k), built is None)\n")
+    env = dict(os.environ, USDHANDS_COMPILED_KERNELS=compiled)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")])
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=300)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["False", "False", "True", "True", "True"]
+    assert out.stdout.split()[:5] == ["False", "False", "True", "True", "True"]
+    if compiled == "0":
+        assert out.stdout.split()[5] == "True"
 
 
 @pytest.mark.parametrize("frames", ["1000000000000", "3"])

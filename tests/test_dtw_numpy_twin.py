@@ -8,6 +8,7 @@ so the output of a synthesis does not depend on which one ran.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -108,8 +109,13 @@ def test_moving_average_equals_scipy_uniform_filter_to_the_bit():
 
 
 def test_search_choice_follows_the_work(monkeypatch):
+    """Without the kernels compiled ahead of time (an install with no C compiler): NumPy for small
+    searches, numba's beyond (the choice with them: tests/test_compiled_kernels.py)."""
+    import usdhands.compiled
+
     qb = np.array([[0, 30], [30, 60]])
     ds = np.array([[0, 30], [30, 55], [55, 90]])
+    monkeypatch.setattr(usdhands.compiled, "ENABLED", False)
     monkeypatch.setattr(segment_cost, "_kernel_loaded", lambda: False)
     monkeypatch.setattr(segment_cost, "_numpy_cells_searched", [0.0])
     assert segment_cost._search_kernel(qb, ds, 1.5, 0.3, "kim") is twin.search
@@ -127,9 +133,12 @@ def test_search_choice_follows_the_work(monkeypatch):
 
 
 def test_synthesize_with_either_search_writes_the_same_file(sample_assets, tmp_path, monkeypatch):
+    """NumPy's search and numba's (the kernels compiled ahead of time: tests/test_compiled_kernels.py)."""
     import usdhands
+    import usdhands.compiled
 
     src = sample_assets / "conversation_bodyonly.bvh"
+    monkeypatch.setattr(usdhands.compiled, "ENABLED", False)
     monkeypatch.setattr(segment_cost, "_kernel_loaded", lambda: False)
     monkeypatch.setattr(segment_cost, "_numpy_cells_searched", [0.0])
     usdhands.synthesize(src, tmp_path / "numpy.bvh")
@@ -138,10 +147,13 @@ def test_synthesize_with_either_search_writes_the_same_file(sample_assets, tmp_p
     assert (tmp_path / "numpy.bvh").read_bytes() == (tmp_path / "kernel.bvh").read_bytes()
 
 
-def test_a_small_synthesize_imports_neither_numba_nor_scipy(sample_assets, tmp_path):
+@pytest.mark.parametrize("compiled", ["1", "0"])
+def test_a_small_synthesize_imports_neither_numba_nor_scipy(sample_assets, tmp_path, compiled):
+    """With the kernels compiled ahead of time, and without them (NumPy)."""
+    env = dict(os.environ, USDHANDS_COMPILED_KERNELS=compiled)
     code = ("import sys, json, usdhands\n"
             f"usdhands.synthesize({str(sample_assets / 'conversation_bodyonly.bvh')!r}, {str(tmp_path / 'o.bvh')!r})\n"
             "print(json.dumps(sorted({m.split('.')[0] for m in sys.modules} & {'numba', 'scipy', 'pxr', 'pygltflib'})))")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
     assert done.returncode == 0, done.stderr[-2000:]
     assert json.loads(done.stdout.splitlines()[-1]) == []

@@ -28,6 +28,7 @@ import contextlib
 import os
 import sys
 import tempfile
+import threading
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -73,7 +74,7 @@ def njit(*args, cache: bool = True, **kwargs):
 
     Used exactly like ``numba.njit``: ``@njit``, ``@njit(parallel=True)``.
     """
-    import numba
+    numba = _numba()
     from numba.core import config
 
     _install_listener()
@@ -103,17 +104,13 @@ def __getattr__(name: str):
     # ``prange`` must be numba's own object for numba to see a parallel loop; numba is
     # imported only when a kernel module asks for it
     if name == "prange":
-        import numba
-
-        return numba.prange
+        return _numba().prange
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def kernel_threads() -> int:
     """How many threads numba's parallel kernels use when called from this thread."""
-    import numba
-
-    return int(numba.get_num_threads())
+    return int(_numba().get_num_threads())
 
 
 def set_kernel_threads(n: int) -> None:
@@ -122,10 +119,29 @@ def set_kernel_threads(n: int) -> None:
 
     For batch workers, which run one clip per core: the kernels' own threads would fight
     over the same cores. Library code running in a caller's process must not call it.
+
+    Where numba is not imported yet, it is not imported for this (a worker that runs only
+    the kernels compiled ahead of time never pays for numba's start): the setting is kept for
+    this thread and made when the package first imports numba in it (:func:`njit`, :func:`kernel_threads`).
     """
+    if "numba" not in sys.modules:
+        _pending_threads[threading.get_ident()] = int(n)
+        return
+    _set_threads(_numba(), n)
+
+
+def _set_threads(numba, n: int) -> None:
+    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+
+
+def _numba():
+    """numba, imported; with the kernel threads this thread asked for before (:func:`set_kernel_threads`)."""
     import numba
 
-    numba.set_num_threads(max(1, min(int(n), numba.config.NUMBA_NUM_THREADS)))
+    pending = _pending_threads.pop(threading.get_ident(), None)
+    if pending is not None:
+        _set_threads(numba, pending)
+    return numba
 
 
 def kernels_running() -> bool:
@@ -139,6 +155,7 @@ def kernels_running() -> bool:
 
 
 _listeners: list[Callable[[str], None]] = []
+_pending_threads: dict[int, int] = {}  # thread id -> kernel threads asked for before numba was imported
 _dispatchers: list = []  # every dispatcher njit made
 _installed = False
 _kernels: set[int] = set()  # id() of the Python functions compiled through njit here

@@ -36,10 +36,11 @@ A well-formed file (one statement a line in the hierarchy, as exporters write it
 from its bytes: the hierarchy line by line, the motion values by the NumPy parser of
 :mod:`usdhands.formats._bvh_numpy_motion` (the numbers exporters write, the same values as
 ``np.loadtxt``, which reads anything else) and the Euler angles converted with NumPy; or,
-in a process where numba already runs a kernel of
-the package (or that has read 128 MB of BVH motion, :data:`COMPILED_AFTER_BYTES`), with
-the compiled twins of :mod:`usdhands.formats._bvh_kernel` (the same numbers; about 2x
-faster). Anything unusual is read by the token-by-token parser, which names the line of
+with the kernels compiled ahead of time (:mod:`usdhands.compiled`; the same numbers,
+about 2x faster), or where they were not built (no C compiler at install), in a process
+where numba already runs a kernel of the package (or that has read 128 MB of BVH motion,
+:data:`COMPILED_AFTER_BYTES`), with their numba twins in :mod:`usdhands.formats._bvh_kernel`.
+Anything unusual is read by the token-by-token parser, which names the line of
 a problem. A fresh process reading a file imports no numba.
 
 Writing
@@ -73,6 +74,7 @@ from pathlib import Path
 
 import numpy as np
 
+from usdhands.compiled import kernel_module
 from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats._bvh_numpy_motion import parse_rows as parse_motion_rows
 from usdhands.formats.fixed_point_text import format_rows_6f
@@ -385,20 +387,31 @@ def _parse_bvh_fast(path: Path) -> BvhFile | None:
 #: Where a kernel of the package already runs in the process (:func:`usdhands.jit.kernels_running`)
 #: the reader's own kernels load in a few milliseconds and are used from the first file.
 COMPILED_AFTER_BYTES = 128_000_000
-#: ``True``: the compiled reader always; ``False``: never (NumPy alone); ``None``: as above.
+#: ``True``: numba's compiled reader always; ``False``: never a compiled one (NumPy alone); ``None``:
+#: the reader compiled ahead of time where it was built, else as above (:func:`_kernels`).
 USE_COMPILED: bool | None = None
 _motion_bytes_read = 0
 
 
 def _kernels():
-    """:mod:`usdhands.formats._bvh_kernel` when this process reads with it (see COMPILED_AFTER_BYTES), else None."""
+    """The module of compiled kernels this process reads BVH motion with, or None for NumPy.
+
+    The kernels compiled ahead of time (:mod:`usdhands.compiled`: nothing to start) wherever
+    they were built; else numba's (:mod:`usdhands.formats._bvh_kernel`) once numba runs a kernel
+    of the package or past :data:`COMPILED_AFTER_BYTES`. :data:`USE_COMPILED` ``True`` forces
+    numba's, ``False`` NumPy. All read the same numbers.
+    """
     if USE_COMPILED is False:
         return None
-    if USE_COMPILED is None and _motion_bytes_read < COMPILED_AFTER_BYTES:
-        from usdhands.jit import kernels_running
+    if USE_COMPILED is None:
+        built = kernel_module("formats._bvh_compiled")
+        if built is not None:
+            return built
+        if _motion_bytes_read < COMPILED_AFTER_BYTES:
+            from usdhands.jit import kernels_running
 
-        if not kernels_running():
-            return None
+            if not kernels_running():
+                return None
     from usdhands.formats import _bvh_kernel
 
     return _bvh_kernel

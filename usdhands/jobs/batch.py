@@ -508,13 +508,13 @@ def _warm_worker(job: str, job_options, clips_each: int) -> None:
     with contextlib.suppress(ImportError, AttributeError):  # a failing import is each clip's error
         _job_function(job)
     if job == "synthesize":
+        from usdhands.algorithms.synthesis.segment_cost import compiled_search_built, load_search_kernel
         from usdhands.jobs.inputs import cached_database
 
         with contextlib.suppress(UsdHandsError):
             cached_database(getattr(job_options, "db", None))
-        if _own_worker_process and clips_each >= KERNEL_AT_START_CLIPS:  # never in the caller's process
-            from usdhands.algorithms.synthesis.segment_cost import load_search_kernel
-
+        # never in the caller's process; never where the kernels compiled ahead of time search
+        if _own_worker_process and clips_each >= KERNEL_AT_START_CLIPS and not compiled_search_built():
             _one_kernel_thread()  # Dask warms its workers on another thread than their tasks'
             load_search_kernel()
 
@@ -557,12 +557,14 @@ def start_warm_forkserver(dask: bool = False) -> bool:
 
 
 def _warm_forkserver_process() -> None:
-    """The warm forkserver's preload: the synthesize job's modules, the bundled database, numba and
-    one serial kernel of synthesis (numba's import and CPU target: ~0.5 s once instead of in each
-    worker). numba's threads are not started here (the parallel search kernel is not loaded): a
-    process forked after they started would have none; each worker starts its own, one kernel
-    thread, and loads the search kernel (:func:`_warm_worker`). Never raises (a forkserver whose
-    preload failed would start no worker): what failed is loaded again by each worker.
+    """The warm forkserver's preload: the synthesize job's modules, the bundled database and the
+    kernels compiled ahead of time (:mod:`usdhands.compiled`), which the workers then run without
+    numba. Where those were not built: numba and one serial kernel of synthesis instead (numba's
+    import and CPU target: ~0.5 s once instead of in each worker); numba's threads are not started
+    here (the parallel search kernel is not loaded): a process forked after they started would have
+    none; each worker starts its own, one kernel thread, and loads the search kernel
+    (:func:`_warm_worker`). Never raises (a forkserver whose preload failed would start no worker):
+    what failed is loaded again by each worker.
 
     At its exit the forkserver skips Python's last garbage collections (:func:`freeze_at_exit`).
     """
@@ -570,11 +572,14 @@ def _warm_forkserver_process() -> None:
         import numpy as np
 
         from usdhands.algorithms.synthesis.output_warp import limit_steps_fast
+        from usdhands.compiled import KERNEL_MODULES, kernel_module
         from usdhands.jobs.inputs import cached_database
 
         _job_function("synthesize")
         cached_database(None)
-        limit_steps_fast(np.zeros((2, 1)), np.zeros(1))
+        # where the kernels compiled ahead of time were built (imported here), the workers run them: no numba
+        if not all(kernel_module(name) is not None for name in KERNEL_MODULES):
+            limit_steps_fast(np.zeros((2, 1)), np.zeros(1))
     freeze_at_exit()
 
 

@@ -26,10 +26,11 @@ fist merges two real steps into one: a pop of twice the real speed). Here instea
   what remains of a pop (a seam blend, a fast warp) is spread over a few frames,
   never larger than what the captured motion does.
 
-:func:`play_segments_fast` and :func:`limit_steps_fast` are the compiled twins (numba,
-:mod:`~usdhands.algorithms.synthesis._play_kernel`, parallel over input segments) that
-synthesis runs once the search has loaded numba (:func:`compiled_kernels_loaded`);
-before that, the NumPy functions, which the tests hold the twins to.
+:func:`play_segments_fast` and :func:`limit_steps_fast` are the compiled twins that
+synthesis runs (:func:`play_kernels`): numba's (:mod:`~usdhands.algorithms.synthesis._play_kernel`,
+parallel over input segments) once the search has loaded numba, else the ones compiled
+ahead of time (:mod:`usdhands.compiled`); without either (no C compiler at install, numba
+not loaded), the NumPy functions, which the tests hold the twins to.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ import itertools
 import numpy as np
 
 __all__ = ["smooth_warp", "moving_average_nearest", "sample_rows", "step_limits", "limit_steps", "limit_steps_fast",
-           "play_segments", "play_segments_fast", "compiled_kernels_loaded"]
+           "play_segments", "play_segments_fast", "play_kernels"]
 
 #: Share of the straight warp (constant speed) mixed into the smoothed DTW warp, so the
 #: warp's slope never falls to zero: a DTW path that waits on one database frame for
@@ -181,10 +182,10 @@ def limit_steps(curves: np.ndarray, limits: np.ndarray) -> np.ndarray:
     return out
 
 
-def limit_steps_fast(curves: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """:func:`limit_steps` compiled with numba: same arguments, same result."""
-    from usdhands.algorithms.synthesis import _play_kernel as kern
-
+def limit_steps_fast(curves: np.ndarray, limits: np.ndarray, kernels=None) -> np.ndarray:
+    """:func:`limit_steps` compiled: same arguments, same result. ``kernels``: the module of
+    :func:`play_kernels` (numba's :mod:`~usdhands.algorithms.synthesis._play_kernel` when None)."""
+    kern = _numba_kernels() if kernels is None else kernels
     x = np.ascontiguousarray(curves, dtype=np.float64)
     lim = np.ascontiguousarray(limits, dtype=np.float64)
     if x.ndim != 2 or lim.shape != (x.shape[1],):
@@ -268,10 +269,10 @@ def play_segments(query_weighted: np.ndarray, db_weighted: np.ndarray, fingers: 
 
 def play_segments_fast(query_weighted: np.ndarray, db_weighted: np.ndarray, fingers: np.ndarray,
                        seg_ranges: np.ndarray, query_bounds: np.ndarray, cand: np.ndarray, weights: np.ndarray,
-                       bands: np.ndarray, fps: float, smoothing_s: float) -> np.ndarray:
-    """:func:`play_segments` compiled with numba (parallel over input segments): same arguments, same result."""
-    from usdhands.algorithms.synthesis import _play_kernel as kern
-
+                       bands: np.ndarray, fps: float, smoothing_s: float, kernels=None) -> np.ndarray:
+    """:func:`play_segments` compiled: same arguments, same result. ``kernels``: the module of
+    :func:`play_kernels` (numba's, parallel over input segments, when None)."""
+    kern = _numba_kernels() if kernels is None else kernels
     qf, df, rows, sr, qb, c, w, bd = _play_arrays(query_weighted, db_weighted, fingers, seg_ranges, query_bounds,
                                                   cand, weights, bands)
     out = np.zeros((len(qf), rows.shape[1]))
@@ -280,10 +281,25 @@ def play_segments_fast(query_weighted: np.ndarray, db_weighted: np.ndarray, fing
     return out
 
 
-def compiled_kernels_loaded() -> bool:
-    """Whether this process has loaded synthesis's numba kernels (the search's): then the
-    compiled twins cost nothing to start and are the faster choice."""
+def play_kernels():
+    """The compiled play, stitch and step-limit kernels this process runs, or None for the NumPy functions.
+
+    numba's (:mod:`~usdhands.algorithms.synthesis._play_kernel`, parallel) where the search has
+    loaded numba (then they cost nothing to start and are the fastest); else the ones compiled
+    ahead of time (:mod:`usdhands.compiled`: nothing to start) where they were built; else None.
+    All give the same numbers.
+    """
     import sys
 
     kernel = sys.modules.get("usdhands.algorithms.synthesis._dtw_kernel")
-    return kernel is not None and bool(kernel.search.signatures)
+    if kernel is not None and kernel.search.signatures:
+        return _numba_kernels()
+    from usdhands.compiled import kernel_module
+
+    return kernel_module("algorithms.synthesis._play_compiled")
+
+
+def _numba_kernels():
+    from usdhands.algorithms.synthesis import _play_kernel
+
+    return _play_kernel

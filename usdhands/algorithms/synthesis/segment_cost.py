@@ -15,9 +15,11 @@ the local cost is a plain squared Euclidean distance.
 
 Search. :func:`knn_segments` compares every input segment with every database
 segment whose length is within ``length_factor`` of it and keeps the ``k`` cheapest.
-It runs in one numba-compiled kernel, parallel over input segments, or, for a search
-too small to pay for loading numba (about 0.5 s), in its NumPy twin
-(:mod:`~usdhands.algorithms.synthesis._dtw_numpy`), which gives the same result and
+It runs in one kernel compiled ahead of time (:mod:`usdhands.compiled`: serial, nothing
+to start) up to :data:`COMPILED_SEARCH_MAX_CELLS`, beyond it in its numba twin, parallel
+over input segments; where the package was installed without a C compiler, a search too
+small to pay for loading numba (about 0.5 s) runs in the NumPy twin
+(:mod:`~usdhands.algorithms.synthesis._dtw_numpy`). All three give the same result and
 statistics to the bit. For each input
 segment it visits the candidates in order of the distance between segment means (a
 cheap guess that finds good neighbours early, so the ``k``-th best cost drops fast).
@@ -48,9 +50,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from usdhands.compiled import kernel_module
+
 __all__ = [
     "weight_features", "band_window", "dtw_align", "dtw_align_fast", "dtw_align_many", "lb_keogh", "knn_segments",
-    "SearchResult", "load_search_kernel",
+    "SearchResult", "load_search_kernel", "compiled_search_built",
 ]
 
 
@@ -328,47 +332,72 @@ def knn_segments(query_features: np.ndarray, query_bounds: np.ndarray,
     return SearchResult(out_idx, out_cost, stats[:, 0], stats[:, 3], stats[:, 1], stats[:, 2])
 
 
-#: Largest search (band cells of all candidate pairs, :func:`_dtw_numpy.estimated_cells`)
-#: done in NumPy when the numba kernel is not loaded yet: importing numba and loading the
-#: kernel takes about 0.5 s, the NumPy search about 25 ns per cell (the sample
-#: conversation against the bundled database: 1.9 M cells a hand, 50 ms).
+#: Largest search (band cells of all candidate pairs, :func:`_dtw_numpy.estimated_cells`) done in
+#: the kernel compiled ahead of time when numba's is not loaded yet. It runs about 0.7 ns an
+#: estimated cell on one thread (the estimate ignores pruning; measured on 12-D wrist-like
+#: features, a 40 M-cell search in 27 ms, numba's twin on one thread 33 ms); numba's start
+#: (about 0.35-0.5 s) pays for itself on any machine of 2 cores or more beyond about 0.35 s
+#: of serial search. A batch clip is about 0.3 M cells a hand, the sample conversation 1.9 M.
+COMPILED_SEARCH_MAX_CELLS = 5e8
+#: Largest search done in NumPy when neither the compiled kernel (not built: no C compiler at
+#: install) nor numba's is loaded: importing numba and loading the kernel takes about 0.5 s,
+#: the NumPy search about 25 ns per cell (the sample conversation against the bundled
+#: database: 1.9 M cells a hand, 50 ms).
 NUMPY_SEARCH_MAX_CELLS = 8e6
-#: Cells a process searches in NumPy in all before it loads the kernel instead (about the
-#: kernel's loading time): a command on one short clip never loads numba, a process that
-#: synthesizes many loads it after the first few clips (a batch worker loads it at its start,
-#: :func:`load_search_kernel`). Either way the results are the same to the bit.
+#: Cells a process searches in NumPy in all before it loads numba's kernel instead (about the
+#: kernel's loading time), without the compiled kernel: a command on one short clip never loads
+#: numba, a process that synthesizes many loads it after the first few clips (a batch worker
+#: loads it at its start, :func:`load_search_kernel`). Either way the results are the same to the bit.
 NUMPY_SEARCH_PROCESS_CELLS = 20e6
 _numpy_cells_searched = [0.0]
 
 
 def load_search_kernel() -> None:
     """Load the numba search kernel into this process now (from the kernel cache; compiled there
-    on the first run), so that every later search runs in it, and synthesis's compiled twins
-    with it (:func:`~usdhands.algorithms.synthesis.output_warp.compiled_kernels_loaded`).
+    on the first run), so that every later search runs in it, and synthesis's numba twins
+    with it (:func:`~usdhands.algorithms.synthesis.output_warp.play_kernels`).
 
-    For a process that will synthesize many clips (a batch worker, at its start): otherwise its
-    first :data:`NUMPY_SEARCH_PROCESS_CELLS` cells are searched in NumPy (about 45 of the batch
-    benchmark's clips at 2.5 times the kernel's CPU, paid again by every worker). The results
-    are the same either way. Costs about 0.3 s (importing numba, loading the kernel).
+    For a process that will synthesize many clips (a batch worker, at its start) where the
+    kernels compiled ahead of time were not built (:func:`compiled_search_built`): otherwise
+    its first :data:`NUMPY_SEARCH_PROCESS_CELLS` cells are searched in NumPy (about 45 of the
+    batch benchmark's clips at 2.5 times the kernel's CPU, paid again by every worker). The
+    results are the same either way. Costs about 0.3 s (importing numba, loading the kernel).
     """
     one = np.zeros((2, 1))
-    # "keogh" always runs in the kernel; the bound is an int argument, so this is the
+    # "keogh" always runs in a compiled kernel; the bound is an int argument, so this is the
     # signature of every search (float64 and int64 arrays made here, as knn_segments makes them)
-    knn_segments(one, np.array([[0, 2]]), one, np.array([[0, 2]]), k=1, bound="keogh")
+    from usdhands.algorithms.synthesis import _dtw_kernel
+
+    qb = np.array([[0, 2]], dtype=np.int64)
+    _dtw_kernel.search(one, qb, np.array([-1], dtype=np.int64), one, qb, np.array([-2], dtype=np.int64), 1, 1.5, 1.0, BOUNDS["keogh"],
+                       np.full((1, 1), -1, dtype=np.int64), np.full((1, 1), np.inf), np.zeros((1, 4), dtype=np.int64))
+
+
+def compiled_search_built() -> bool:
+    """Whether the search kernel compiled ahead of time is there (:mod:`usdhands.compiled`)."""
+    return kernel_module("algorithms.synthesis._search_compiled") is not None
 
 
 def _search_kernel(query_bounds: np.ndarray, db_segments: np.ndarray, length_factor: float, band: float,
                    bound: str):
-    """The search function for this work: the NumPy twin for small searches, else the numba kernel.
+    """The search function for this work: the kernel compiled ahead of time up to
+    :data:`COMPILED_SEARCH_MAX_CELLS` (else the NumPy twin for small searches), numba's beyond,
+    or wherever numba's is loaded already.
 
-    Both give the same result and statistics to the bit (``tests/test_dtw_numpy_twin.py``).
+    All give the same result and statistics to the bit (``tests/test_dtw_numpy_twin.py``,
+    ``tests/test_compiled_kernels.py``).
     """
     from usdhands.algorithms.synthesis import _dtw_numpy
 
-    if bound != "keogh" and not _kernel_loaded():
+    if not _kernel_loaded():
         cells = _dtw_numpy.estimated_cells(query_bounds[:, 1] - query_bounds[:, 0],
                                            db_segments[:, 1] - db_segments[:, 0], length_factor, band)
-        if cells <= NUMPY_SEARCH_MAX_CELLS and _numpy_cells_searched[0] + cells <= NUMPY_SEARCH_PROCESS_CELLS:
+        compiled = kernel_module("algorithms.synthesis._search_compiled")
+        if compiled is not None:
+            if cells <= COMPILED_SEARCH_MAX_CELLS:
+                return compiled.search
+        elif (bound != "keogh" and cells <= NUMPY_SEARCH_MAX_CELLS
+              and _numpy_cells_searched[0] + cells <= NUMPY_SEARCH_PROCESS_CELLS):
             _numpy_cells_searched[0] += cells
             return _dtw_numpy.search
     from usdhands.algorithms.synthesis import _dtw_kernel

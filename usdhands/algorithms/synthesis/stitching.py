@@ -99,12 +99,16 @@ def stitch_fragments(fragments: list[np.ndarray], fps: float, blend_mean_deg: fl
 
 def stitch_fragments_fast(curves: np.ndarray, bounds: np.ndarray, fps: float, blend_mean_deg: float = 5.0,
                           blend_max_deg: float = 20.0, blend_duration_s: float = 0.5,
-                          mask: np.ndarray | None = None) -> tuple[np.ndarray, SeamReport]:
+                          mask: np.ndarray | None = None, kernels=None) -> tuple[np.ndarray, SeamReport]:
     """:func:`stitch_fragments` of the fragments ``curves[bounds[i]:bounds[i + 1]]`` ``(T, C)``, compiled.
 
-    Same result (the seam means are summed in another order: equal to rounding).
+    Same result (the seam means are summed in another order: equal to rounding). ``kernels``:
+    the module of :func:`~usdhands.algorithms.synthesis.output_warp.play_kernels` (numba's
+    :mod:`~usdhands.algorithms.synthesis._play_kernel` when None).
     """
-    from usdhands.algorithms.synthesis import _play_kernel as kern
+    if kernels is None:
+        from usdhands.algorithms.synthesis import _play_kernel as kernels
+    kern = kernels
 
     x = np.ascontiguousarray(curves, dtype=np.float64)
     b = np.ascontiguousarray(bounds, dtype=np.int64)

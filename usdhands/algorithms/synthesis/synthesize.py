@@ -31,7 +31,7 @@ from usdhands.algorithms.synthesis.finger_transfer import (
 )
 from usdhands.algorithms.synthesis.motion_graph import least_cost_path, transition_costs_between
 from usdhands.algorithms.synthesis.output_warp import (
-    compiled_kernels_loaded, limit_steps, limit_steps_fast, play_segments, play_segments_fast,
+    limit_steps, limit_steps_fast, play_kernels, play_segments, play_segments_fast,
 )
 from usdhands.algorithms.synthesis.segmentation import wrist_speed
 from usdhands.algorithms.synthesis.segment_cost import SearchResult, knn_segments, weight_features
@@ -256,18 +256,24 @@ def synthesize_hand(features: np.ndarray, db: FingerDatabase, side: str, config:
     lens = db.segments[np.maximum(cand, 0), 1] - db.segments[np.maximum(cand, 0), 0]  # (N, k)
     n = (qb[:, 1] - qb[:, 0])[:, None]
     bands = np.where((sc.length_factor * lens >= n) & (lens <= sc.length_factor * n), sc.dtw_band, 1.0)
-    compiled = compiled_kernels_loaded()  # numba only where the search loaded it anyway
-    play = play_segments_fast if compiled else play_segments
-    out = play(qw, dw, db.fingers, db.segments[:, :2], qb, cand, played, bands, db.fps, st.warp_smoothing_s)
+    kernels = play_kernels()  # numba's only where the search loaded numba anyway
+    if kernels is not None:
+        out = play_segments_fast(qw, dw, db.fingers, db.segments[:, :2], qb, cand, played, bands, db.fps,
+                                 st.warp_smoothing_s, kernels)
+    else:
+        out = play_segments(qw, dw, db.fingers, db.segments[:, :2], qb, cand, played, bands, db.fps,
+                            st.warp_smoothing_s)
     _log.info("%s hand: %d segment(s) of the wrist motion; chose database segments %s (path cost %.3g)", side, N,
               " ".join(str(int(c)) for c in chosen), float(sum(costs[i, path[i]] for i in range(N))))
-    if compiled:
+    limits = db.step_limits(st.step_percentile, usable)
+    if kernels is not None:
         compact, seams = stitch_fragments_fast(out, bounds, db.fps, st.blend_mean_deg, st.blend_max_deg,
-                                               st.blend_duration_s, moving)
+                                               st.blend_duration_s, moving, kernels)
+        compact = limit_steps_fast(compact, limits, kernels)
     else:
         compact, seams = stitch_fragments([out[q0:q1] for q0, q1 in qb], db.fps, st.blend_mean_deg,
                                           st.blend_max_deg, st.blend_duration_s, moving)
-    compact = (limit_steps_fast if compiled else limit_steps)(compact, db.step_limits(st.step_percentile, usable))
+        compact = limit_steps(compact, limits)
     curves = np.zeros((len(feats), NUM_DOFS))
     curves[:, db.dof_index] = compact
     return HandSynthesis(side, bounds, speed, cand, costs, transitions, path, chosen, curves, seams, res)

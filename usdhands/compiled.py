@@ -1,0 +1,53 @@
+"""The kernels compiled ahead of time: built from Cython when the package is installed (``setup.py``).
+
+Three modules, each the twin of a numba kernel module with the same functions, arguments
+and results to the bit:
+
+- ``algorithms.synthesis._search_compiled``: the synthesis search and one pair's warp
+  (:mod:`usdhands.algorithms.synthesis._dtw_kernel`);
+- ``algorithms.synthesis._play_compiled``: playing, stitching and step-limiting the chosen
+  fragments (:mod:`usdhands.algorithms.synthesis._play_kernel`);
+- ``formats._bvh_compiled``: reading BVH motion (:mod:`usdhands.formats._bvh_kernel`).
+
+A process that runs these never imports numba: nothing to start (numba's import, CPU target
+and cached kernels cost about 0.35 s of CPU a process, measured), one thread each where
+numba's search and play run in parallel. So a command on one clip, and every worker of
+``usdhands batch``, runs them; a process that searches much more than a batch clip's work
+loads numba's parallel twins instead (see ``segment_cost.COMPILED_SEARCH_MAX_CELLS``).
+
+They are optional: an install without a C compiler (the build is allowed to fail) gives
+``None`` here, and the package runs the numba and NumPy twins (the same results); so does
+``USDHANDS_COMPILED_KERNELS=0`` in the environment.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from types import ModuleType
+
+__all__ = ["kernel_module", "ENABLED", "KERNEL_MODULES"]
+
+#: The compiled modules, by their names under ``usdhands``.
+KERNEL_MODULES = ("algorithms.synthesis._search_compiled", "algorithms.synthesis._play_compiled",
+                  "formats._bvh_compiled")
+#: ``False``: never use them (as an install without a C compiler does), for tests and comparisons;
+#: set from the environment variable ``USDHANDS_COMPILED_KERNELS=0`` (the processes a batch starts
+#: inherit it).
+ENABLED = os.environ.get("USDHANDS_COMPILED_KERNELS", "1").strip() != "0"
+_loaded: dict[str, ModuleType | None] = {}
+
+
+def kernel_module(name: str) -> ModuleType | None:
+    """The compiled module ``usdhands.<name>`` (one of :data:`KERNEL_MODULES`), or None where it was
+    not built (no C compiler at install) or :data:`ENABLED` is False. Imports no numba."""
+    if name not in KERNEL_MODULES:
+        raise ValueError(f"unknown compiled kernel module {name!r}; expected one of {KERNEL_MODULES}")
+    if not ENABLED:
+        return None
+    if name not in _loaded:
+        try:
+            _loaded[name] = importlib.import_module(f"usdhands.{name}")
+        except ImportError:
+            _loaded[name] = None
+    return _loaded[name]
