@@ -613,3 +613,32 @@ def test_a_failed_usd_write_takes_the_texture_folder_it_made_with_it(tmp_path, m
     with pytest.raises(OSError, match="disk full"):
         write_asset(asset, tmp_path / "out.usda")
     assert listing(tmp_path) == ["scene.glb"]
+
+
+def test_atomic_write_bytes_gives_the_mode_of_a_plain_open_and_leaves_nothing_on_failure(tmp_path):
+    """The texture writer's one-open atomic write: the file gets what ``open()`` under the umask
+    gives (mkstemp's 0600 would fail it), the old bytes stay when the write fails (a str is not
+    bytes: TypeError inside the write), and no temporary file is left either way."""
+    from usdhands.errors import OutputPathError
+    from usdhands.formats.registry import atomic_write_bytes
+
+    target, plain = tmp_path / "tex.png", tmp_path / "plain.png"
+    old = os.umask(0o027)
+    try:
+        atomic_write_bytes(target, b"\x89PNG first")
+        plain.write_bytes(b"x")
+    finally:
+        os.umask(old)
+    assert target.read_bytes() == b"\x89PNG first"
+    assert (target.stat().st_mode & 0o777) == (plain.stat().st_mode & 0o777) == 0o640
+    atomic_write_bytes(target, b"second")
+    assert target.read_bytes() == b"second"
+    with pytest.raises(TypeError):
+        atomic_write_bytes(target, "not bytes")
+    assert target.read_bytes() == b"second"
+    assert listing(tmp_path) == ["plain.png", "tex.png"]
+    with pytest.raises(OutputPathError, match="cannot write into folder"):
+        atomic_write_bytes(tmp_path / "missing" / "tex.png", b"x")
+    with pytest.raises(OutputPathError, match="is a folder"):
+        atomic_write_bytes(tmp_path, b"x")
+    assert listing(tmp_path) == ["plain.png", "tex.png"]

@@ -31,7 +31,7 @@ from typing import Sequence
 import numpy as np
 from pxr import Ar, Gf, Sdf, Usd, UsdGeom, UsdShade
 
-from usdhands.formats.registry import atomic_output
+from usdhands.formats.registry import atomic_write_bytes
 from usdhands.model.material import ALPHA_MODES, Image, Material, TextureRef
 
 __all__ = ["write_materials", "bind_material", "MaterialReader", "texture_folder"]
@@ -65,24 +65,25 @@ def _image_file_name(image: Image, used: set[str]) -> str:
 
 def _write_images(images: Sequence[Image], final_path: Path, inputs: Sequence[Path]) -> list[str]:
     """Asset paths (relative to the output's folder) of every image; bytes are written to files."""
-    out_dir = final_path.parent.resolve()
     folder = texture_folder(final_path)
-    keep = {Path(p).resolve() for p in inputs}
+    out_dir = keep = None  # each made once, when first needed
     used: set[str] = set()
     paths = []
     for image in images:
         if image.path is not None and os.path.isfile(image.path) and "[" not in image.path:
+            out_dir = final_path.parent.resolve() if out_dir is None else out_dir
             rel = os.path.relpath(os.path.abspath(image.path), out_dir)
             paths.append(Path(rel).as_posix() if rel.startswith("..") else f"./{Path(rel).as_posix()}")
             continue
         name = _image_file_name(image, used)
         target = folder / name
-        if target.resolve() in keep:
-            raise ValueError(f"texture {target} would overwrite an input")
+        if os.path.lexists(target):  # a path that is not there overwrites nothing
+            keep = {Path(p).resolve() for p in inputs} if keep is None else keep
+            if target.resolve() in keep:
+                raise ValueError(f"texture {target} would overwrite an input")
         folder.mkdir(exist_ok=True)
         data = image.content() if image.data is None else image.data
-        with atomic_output(target) as tmp:  # a fresh temporary name: threads of one process write side by side
-            tmp.write_bytes(data)
+        atomic_write_bytes(target, data)  # a fresh temporary name: threads of one process write side by side
         paths.append(f"./{folder.name}/{name}")
     return paths
 
