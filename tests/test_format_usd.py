@@ -935,6 +935,40 @@ def test_fold_into_roots_splits_a_transform_that_does_not_move_once():
             assert a[f:f + 1].tobytes() == b.tobytes()
 
 
+def test_fold_into_roots_gives_the_numbers_of_splitting_each_product_on_its_own():
+    """The roots' products and the world transforms are split in one xform_to_trs call: the same bits
+    as splitting the products, then the world (the hemisphere reference), each in a call of its own,
+    for worlds that move, that do not move, that mirror, and one frame."""
+    from usdhands.formats.usd_common import fold_into_roots
+    from usdhands.model.rotations import quat_canonical, quat_multiply, trs_to_xform, xform_to_trs
+
+    def separately(parents, world, t, q, s):
+        t, q, s = (np.array(a, dtype=np.float64) for a in (t, q, s))
+        roots = np.flatnonzero(parents < 0)
+        m = world[:, None] @ trs_to_xform(t[:, roots], q[:, roots], s[:, roots])
+        nt, nq, ns = xform_to_trs(m)
+        one = len(world) > 1 and bool((world == world[:1]).all())
+        qw = quat_canonical(xform_to_trs(world[:1] if one else world)[1])
+        ref = quat_multiply(np.broadcast_to(qw[:, None], q[:, roots].shape), q[:, roots])
+        nq = np.where((np.sum(nq * ref, axis=-1) < 0)[..., None], -nq, nq)
+        t[:, roots], q[:, roots], s[:, roots] = nt, nq, ns
+        return t, q, s
+
+    rng = np.random.default_rng(3)
+    for trial in range(120):
+        T, J = int(rng.integers(1, 25)), int(rng.integers(1, 6))
+        parents = np.array([-1] + [int(rng.integers(-1, j)) for j in range(1, J)])
+        t, q, s = rng.normal(size=(T, J, 3)), rng.normal(size=(T, J, 4)), rng.uniform(0.5, 2, (T, J, 3))
+        if trial % 3 == 0:  # does not move
+            world = np.repeat(trs_to_xform(rng.normal(size=3), rng.normal(size=4), np.full(3, 0.01))[None], T, 0)
+        else:  # moves; every third mirrored
+            world = trs_to_xform(rng.normal(size=(T, 3)), rng.normal(size=(T, 4)), rng.uniform(0.5, 2, (T, 3)))
+            if trial % 3 == 2:
+                world = world @ np.diag([1.0, -1.0, 1.0, 1.0])
+        for a, b in zip(fold_into_roots(parents, world, t, q, s), separately(parents, world, t, q, s)):
+            assert a.shape == b.shape and a.tobytes() == b.tobytes(), trial
+
+
 def test_mesh_extent_is_numpys_min_and_max_to_the_bit():
     """The written extent equals pts.min(axis=0) / pts.max(axis=0) bit for bit: signed zeros at the
     bounds (either order), NaN and infinite points, one point, many."""

@@ -483,11 +483,17 @@ def fold_into_roots(parents: np.ndarray, world: np.ndarray, translations: np.nda
         return t, q, s
     world = np.asarray(world, dtype=np.float64)
     m = world[:, None] @ trs_to_xform(t[:, roots], q[:, roots], s[:, roots])
-    nt, nq, ns = xform_to_trs(m)
     # w >= 0: the inverse transform gives the conjugate. A transform that does not move (a Z-up
-    # skeleton's) is split once: the same numbers as split at every frame
+    # skeleton's) is split once: the same numbers as split at every frame. The world transforms are
+    # split in the same call as the roots' (every step works matrix by matrix: the same numbers,
+    # ~45 NumPy calls fewer)
     one = len(world) > 1 and bool((world == world[:1]).all())
-    qw = quat_canonical(xform_to_trs(world[:1] if one else world)[1])
+    own = world[:1] if one else world
+    nt, nq, ns = xform_to_trs(np.concatenate([m.reshape(-1, 4, 4), own]))
+    n = m.shape[0] * m.shape[1]
+    qw = quat_canonical(nq[n:])
+    shape = m.shape[:2]
+    nt, nq, ns = nt[:n].reshape(shape + (3,)), nq[:n].reshape(shape + (4,)), ns[:n].reshape(shape + (3,))
     ref = quat_multiply(np.broadcast_to(qw[:, None], q[:, roots].shape), q[:, roots])
     nq = np.where((np.sum(nq * ref, axis=-1) < 0)[..., None], -nq, nq)
     t[:, roots], q[:, roots], s[:, roots] = nt, nq, ns

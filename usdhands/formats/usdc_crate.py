@@ -388,7 +388,7 @@ class _Crate:
         n = self.count(self.u64(toc, "section count"), toc + 8, _SECTION, "table of contents")
         for k in range(n):
             at = toc + 8 + k * _SECTION
-            name = self.data[at:at + 16].split(b"\0", 1)[0].decode("latin-1")
+            name = bytes(self.data[at:at + 16]).split(b"\0", 1)[0].decode("latin-1")
             start, size = struct.unpack_from("<qq", self.data, at + 16)
             if start < 0 or size < 0 or start + size > self.size:
                 raise _Corrupt(f"section {name!r} claims bytes {start} to {start + size}, outside the "
@@ -709,7 +709,11 @@ def _check_package(path: Path) -> None:
     import zipfile
 
     try:
-        with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        with open(path, "rb") as f:
+            # not closed here, as check_crate's map: each member is checked through a view of the map (a
+            # copy of CesiumMan.usdz's 220 KB crate and its page faults cost more than the check's reads),
+            # which arrays the check made (an error's traceback) may still hold; it closes with the last
+            data = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
             members = {}  # (start, size) -> name
             try:
                 with zipfile.ZipFile(f) as package:
@@ -727,7 +731,7 @@ def _check_package(path: Path) -> None:
                 if size < 8 or data[start:start + 8] != CRATE_MAGIC:
                     continue  # USD reads only stored members (it refuses the others itself)
                 try:
-                    check_crate_bytes(data[start:start + size])
+                    check_crate_bytes(memoryview(data)[start:start + size])
                 except AssetReadError as e:
                     shown = name if name.isprintable() else repr(name)[1:-1]  # a name holding a line break (usdz fuzz)
                     raise AssetReadError(f"{shown}: {e.message}", path=path) from None
