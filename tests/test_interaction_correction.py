@@ -489,3 +489,48 @@ def test_finger_joints_that_are_not_a_chain_are_refused():
     clip, hm = _with_roll_joint(flat=True)
     with pytest.raises(UnsupportedRigError, match="left index finger's joints are not a chain: '.*LeftHandIndex2'"):
         correct_clip(clip, hm, colliders_for(clip, cylinder_under_palm()))
+
+
+def test_fingers_posed_where_asked_and_the_reach_that_bounds_every_pose():
+    """correct_clip poses a chain's joints only at the frames where some pose of it can reach a collider
+    (posing.FingersPosed, chain_reach): rows equal full forward kinematics bit for bit at any frames, and
+    every joint and tip of every pose lies within the reach of the chain's parent joint, scaled and
+    animated translations included (a reach from the rest bones alone fails it)."""
+    from interaction_data import grasping_clip
+
+    from usdhands.algorithms.interaction.correction import _given_points, _poser
+    from usdhands.algorithms.interaction.finger_geometry import finger_chains
+    from usdhands.algorithms.interaction.posing import FingersPosed, chain_reach
+
+    source = grasping_clip(2.0)
+    hm = humanoid_handmap(source.skeleton)
+    rng = np.random.default_rng(5)
+    fingers = [source.skeleton.index(j) for h in hm.sides for j in h.finger_joints]
+    rotations = np.array(source.rotations)
+    rotations[:, fingers] = np.roll(rotations[:, fingers], 7, axis=0)
+    translations = np.array(source.translations)
+    translations[:, fingers] *= rng.uniform(0.8, 1.6, size=(source.num_frames, len(fingers), 1))
+    scales = np.array(source.scales)
+    scales[:, fingers] = rng.uniform(0.7, 1.5, size=(source.num_frames, len(fingers), 3))
+    clip = source.replace(rotations=rotations, translations=translations, scales=scales)
+    full = clip.world_xforms()
+    posed = FingersPosed(clip, hm, source.world_xforms())
+    frames = np.sort(rng.choice(clip.num_frames, size=17, replace=False))
+    for j, w in zip(fingers, posed.at(fingers, frames)):
+        assert w.tobytes() == np.ascontiguousarray(full[frames, j]).tobytes()
+    for hand in hm.sides:
+        for chain in finger_chains(clip.skeleton, hand):
+            poser = _poser(clip, chain, posed, given=False)
+            reach = chain_reach(clip, chain.joints, chain.tip_offset, poser.parent_world)
+            for _ in range(3):  # the pose given and random ones
+                pts = _given_points(chain, posed)
+                far = np.linalg.norm(pts - poser.parent_world[:, None, :3, 3], axis=2).max(axis=1)
+                assert np.all(far <= reach * (1 + 1e-12))
+                angles = rng.uniform(-170, 170, size=(clip.num_frames, len(chain.joints), 3))
+                a, b = poser.capsules(np.arange(clip.num_frames), angles)
+                far = np.linalg.norm(np.concatenate([a, b[:, -1:]], axis=1) - poser.parent_world[:, None, :3, 3],
+                                     axis=2).max(axis=1)
+                assert np.all(far <= reach * (1 + 1e-12))
+            rest = np.linalg.norm(clip.skeleton.rest_translations[list(chain.joints)], axis=1).sum() + \
+                np.linalg.norm(chain.tip_offset)
+            assert far.max() > rest  # the scaled bones reach farther than the rest ones

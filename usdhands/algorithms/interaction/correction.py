@@ -37,6 +37,7 @@ from usdhands.algorithms.interaction.finger_geometry import FingerChain, Interac
 from usdhands.algorithms.interaction.ik import ChainPoser
 from usdhands.algorithms.interaction.known_distances import ChainDistances
 from usdhands.algorithms.interaction.palm import palm_depth_mm
+from usdhands.algorithms.interaction.posing import FingersPosed, chain_reach, reachable_frames
 from usdhands.algorithms.interaction.smoothing import bounded_smooth, rts_smooth, smoothness_weight
 from usdhands.model.clip import Clip
 from usdhands.model.finger_dofs import finger_curves
@@ -126,23 +127,33 @@ def chain_posers(clip: Clip, handmap: HandMap, config: InteractionConfig,
                  world: np.ndarray | None = None) -> list[ChainPoser]:
     """A :class:`ChainPoser` for every finger chain of every hand of ``clip`` (``world``: the clip's
     world transforms ``(T, J, 4, 4)`` when the caller has them)."""
-    world = clip.world_xforms() if world is None else world
-    out = []
-    for hand in handmap.sides:
-        for chain in finger_chains(clip.skeleton, hand, config):
-            js = list(chain.joints)
-            parent = int(clip.skeleton.parents[js[0]])
-            pw = world[:, parent] if parent >= 0 else np.broadcast_to(np.eye(4), (clip.num_frames, 4, 4))
-            last = world[:, js[-1]]
-            tip = last[:, :3, :3] @ chain.tip_offset + last[:, :3, 3]
-            given = np.concatenate([world[:, js][:, :, :3, 3], tip[:, None]], axis=1)
-            out.append(ChainPoser(chain, np.ascontiguousarray(pw), np.asarray(clip.translations[:, js]),
-                                  np.asarray(clip.scales[:, js]), np.asarray(clip.skeleton.rest_rotations[js]),
-                                  given_points=given, between=_between(clip, chain, world)))
-    return out
+    posed = FingersPosed(clip, None, world)
+    return [_poser(clip, chain, posed, given=True) for hand in handmap.sides
+            for chain in finger_chains(clip.skeleton, hand, config)]
 
 
-def _between(clip: Clip, chain: FingerChain, world: np.ndarray) -> np.ndarray | None:
+def _poser(clip: Clip, chain: FingerChain, posed: FingersPosed, given: bool) -> ChainPoser:
+    """The chain's :class:`ChainPoser` on the world transforms ``posed`` gives, with its joints' positions
+    in the pose given at every frame (``given``) or none (:func:`_near_posed` poses them where needed)."""
+    js = list(chain.joints)
+    parent = int(clip.skeleton.parents[js[0]])
+    pw = posed.at([parent])[0] if parent >= 0 else np.broadcast_to(np.eye(4), (clip.num_frames, 4, 4))
+    return ChainPoser(chain, np.ascontiguousarray(pw), np.asarray(clip.translations[:, js]),
+                      np.asarray(clip.scales[:, js]), np.asarray(clip.skeleton.rest_rotations[js]),
+                      given_points=_given_points(chain, posed) if given else None,
+                      between=_between(clip, chain, posed))
+
+
+def _given_points(chain: FingerChain, posed: FingersPosed, frames: np.ndarray | None = None) -> np.ndarray:
+    """The chain's joint positions and tip in the pose given, world, ``(K, n + 1, 3)`` at ``frames``
+    (all by default)."""
+    ws = posed.at(chain.joints, frames)
+    last = ws[-1]
+    tip = last[:, :3, :3] @ chain.tip_offset + last[:, :3, 3]
+    return np.concatenate([np.stack([w[:, :3, 3] for w in ws], axis=1), tip[:, None]], axis=1)
+
+
+def _between(clip: Clip, chain: FingerChain, posed: FingersPosed) -> np.ndarray | None:
     """The transforms from each chain joint to the next one's parent where that parent is a joint
     below it rather than itself, ``(T, n, 4, 4)`` (None when every joint is the child of the one before).
 
@@ -171,8 +182,28 @@ def _between(clip: Clip, chain: FingerChain, world: np.ndarray) -> np.ndarray | 
                 f"needs each finger joint parented under the one before")
         if out is None:
             out = np.broadcast_to(np.eye(4), (clip.num_frames, len(js), 4, 4)).copy()
-        out[:, k] = np.linalg.inv(world[:, js[k - 1]]) @ world[:, p]
+        before, parent = posed.at([js[k - 1], p])
+        out[:, k] = np.linalg.inv(before) @ parent
     return out
+
+
+def _reachable(clip: Clip, poser: ChainPoser, colliders, reach: float) -> np.ndarray:
+    """Frames ``(K,)`` where some pose of the chain could come within ``reach`` (radius added) of some
+    collider's box: every other frame is clear in every pose (:func:`~usdhands.algorithms.interaction.posing.chain_reach`)."""
+    chain = poser.chain
+    radius = chain_reach(clip, chain.joints, chain.tip_offset, poser.parent_world) + float(chain.radii.max()) + reach
+    return reachable_frames(colliders, poser.parent_world[:, :3, 3], radius)
+
+
+def _near_posed(poser: ChainPoser, posed: FingersPosed, colliders, reach: float,
+                candidates: np.ndarray) -> np.ndarray:
+    """:func:`_near_frames` of the chain as ``posed`` gives it, posed only at ``candidates`` (the frames
+    :func:`_reachable` with the same ``reach`` finds; no other frame can be near)."""
+    if len(candidates) == 0:
+        return candidates
+    pts = _given_points(poser.chain, posed, candidates)
+    r = float(poser.chain.radii.max()) + reach
+    return candidates[colliders.bbox_gap(candidates, pts.min(axis=1) - r, pts.max(axis=1) + r) <= 0]
 
 
 def _near_frames(poser: ChainPoser, colliders, reach: float) -> np.ndarray:
@@ -229,13 +260,15 @@ def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolu
 
 
 def _chain_depth_mm(clip: Clip, poser: ChainPoser, colliders, resolution_mm: float = 0.05,
-                    known: ChainDistances | None = None, angles: np.ndarray | None = None) -> np.ndarray:
+                    known: ChainDistances | None = None, angles: np.ndarray | None = None,
+                    frames: np.ndarray | None = None) -> np.ndarray:
     """Deepest penetration of one chain's capsules per frame, ``(T,)`` mm (:func:`penetration_depth_mm`);
     ``known``: what was measured on the chain, one row per frame (the same depths, fewer queries);
-    ``angles``: the chain's :func:`finger_angles` when the caller has them."""
+    ``angles``: the chain's :func:`finger_angles` when the caller has them; ``frames``: the chain's
+    :func:`_near_frames` at reach 0 when the caller has them."""
     mm = 0.001 / clip.skeleton.meters_per_unit
     depth = np.zeros(clip.num_frames)
-    frames = _near_frames(poser, colliders, 0.0)
+    frames = _near_frames(poser, colliders, 0.0) if frames is None else frames
     if len(frames) == 0:
         return depth
     angles = _chain_angles(clip, poser.chain) if angles is None else angles
@@ -262,7 +295,11 @@ def finger_jitter(clip: Clip, joints: list[int]) -> float:
 
 def _jitter_sums(clip: Clip, joints: list[int]) -> np.ndarray:
     """Sum over frames and axes of the absolute second differences of each joint's curves, ``(len(joints),)``."""
-    v = finger_angles(clip, joints)
+    return _jitter_sums_of(finger_angles(clip, joints))
+
+
+def _jitter_sums_of(v: np.ndarray) -> np.ndarray:
+    """:func:`_jitter_sums` of the joints' :func:`finger_angles` ``v`` ``(T, n, 3)``."""
     return np.abs(np.diff(v, 2, axis=0)).sum(axis=(0, 2))
 
 
@@ -298,8 +335,8 @@ def _running_max(x: np.ndarray, h: int) -> np.ndarray:
 
 def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.ndarray, bound: np.ndarray,
                     weight: float, margin: float, resolution: float, via: np.ndarray | None = None,
-                    hold: int = 0, rounds: int = 6,
-                    known: ChainDistances | None = None) -> tuple[np.ndarray, np.ndarray]:
+                    hold: int = 0, rounds: int = 6, known: ChainDistances | None = None,
+                    in_reach: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The smoothed opening ``u`` ``(K,)`` above ``bound`` and its poses ``(K, n, 3)``, every frame clear.
 
     Opening further than the bound can touch something else (clearance along the path need
@@ -307,7 +344,8 @@ def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.n
     clear opening nearest below it, and the curve is smoothed again between the bounds; a
     frame still failing after ``rounds`` takes its bound, which was tested. The opening is held
     near a target: the bound's running maximum over ``hold`` frames either side, smoothed
-    (:data:`HOLD_OF_TIME_SCALE`, :data:`PRE_SMOOTH`, :data:`FIT_IN_CONTACT`).
+    (:data:`HOLD_OF_TIME_SCALE`, :data:`PRE_SMOOTH`, :data:`FIT_IN_CONTACT`). ``in_reach`` ``(K,)`` bool:
+    the frames where some pose of the chain can touch a collider (no other frame is tested).
     """
     upper = np.ones(len(frames))
     u = np.array(bound)
@@ -316,6 +354,8 @@ def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.n
         floor = bounded_smooth(_running_max(bound, hold), upper, weight / PRE_SMOOTH ** 4)
         u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0), target=floor)
         changed = np.nonzero(u > bound)[0]
+        if in_reach is not None:
+            changed = changed[in_reach[changed]]  # the other frames are clear in every pose
         v = None if via is None else via[changed]
         ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed], v), margin, resolution,
                          known=known)
@@ -364,9 +404,13 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     mm = 0.001 / clip.skeleton.meters_per_unit
     margin = margin_mm * mm
     resolution = cfg.tolerance_mm * mm
-    world = with_fingers_posed(clip, handmap, world)
-    posers = chain_posers(clip, handmap, cfg, world)
+    # the fingers posed only where a chain can come near a collider
+    posed = FingersPosed(clip, handmap, world)
+    posers = [_poser(clip, chain, posed, given=False) for hand in handmap.sides
+              for chain in finger_chains(clip.skeleton, hand, cfg)]
     T = clip.num_frames
+    finger_joints = sorted({j for p in posers for j in p.chain.joints})
+    all_angles = finger_angles(clip, finger_joints)  # (T, len(finger_joints), 3): every chain's, and the jitter's
     rotations = np.array(clip.rotations)
     unresolved, corrected = [], []
     opened = np.zeros(T, dtype=bool)
@@ -374,13 +418,16 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     # per chain near a collider, what was measured at each frame: the tests below, the report's depths
     known = {}
     input_angles = {}
+    reachable = {}  # per chain near a collider, the frames where some pose of it could touch (with the margin)
     to_correct = []
     for poser in posers:
-        near = _near_frames(poser, colliders, margin)
+        candidates = _reachable(clip, poser, colliders, margin)
+        near = _near_posed(poser, posed, colliders, margin, candidates)
         if len(near) == 0:
             continue
+        reachable[poser.chain.name] = candidates
         seen = known[poser.chain.name] = ChainDistances(T, len(poser.chain.joints) + 1)
-        angles = input_angles[poser.chain.name] = _chain_angles(clip, poser.chain)
+        angles = input_angles[poser.chain.name] = all_angles[:, np.searchsorted(finger_joints, poser.chain.joints)]
         ok = poser.clear(colliders, near, angles[near], margin, resolution, known=seen)
         if not ok.all():
             to_correct.append((poser, near, ok))
@@ -400,66 +447,78 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         n = len(poser.chain.joints)
         lo, hi = poser.chain.limits[..., 0], poser.chain.limits[..., 1]
         if smooth:
-            # the whole curve: the input's own noise is smoothed too, within the joint limits
+            # the whole curve: the input's own noise is smoothed too, within the joint limits; only the
+            # frames where the chain can reach a collider are tested (every other pose is clear)
             frames = np.arange(T)
             base = angles
             if smoothing:
                 base = smoothed[poser.chain.name].reshape(T, n, 3)
             base = np.clip(base, lo, hi)
+            work = reachable[poser.chain.name]
         else:
             frames = near[~ok]
             base = angles[frames]
+            work = np.arange(len(frames))
+        in_reach = np.zeros(len(frames), dtype=bool)
+        in_reach[work] = True
         via = None
         if cfg.ik == "ccd":
             # cyclic coordinate descent where the pose penetrates, smoothed over twice the time scale
             # (its choice of joint can change from one frame to the next); the path goes through it
-            touching = np.nonzero(~poser.clear(colliders, frames, base, margin, resolution, known=seen))[0]
+            touching = work[~poser.clear(colliders, frames[work], base[work], margin, resolution, known=seen)]
             via = np.clip(base, lo, hi)
             via[touching], _ = poser.ccd(colliders, frames[touching], via[touching], margin, resolution, known=seen)
             if smoothing:
                 via = rts_smooth(via.reshape(T, -1), clip.fps, 2 * cfg.smoothing_s).reshape(T, n, 3)
                 via = np.clip(via, lo, hi)
-        bound, resolved = poser.least_opening(colliders, frames, base, margin, resolution, iterations, via=via,
-                                              known=seen, every=BISECT_EVERY)
+        bound, resolved = np.zeros(len(frames)), np.ones(len(frames), dtype=bool)
+        bound[work], resolved[work] = poser.least_opening(colliders, frames[work], base[work], margin, resolution,
+                                                          iterations, via=None if via is None else via[work],
+                                                          known=seen, every=BISECT_EVERY)
         for f in frames[~resolved]:
             unresolved.append((poser.chain.name, int(f)))
         u, new = _smooth_opening(poser, colliders, frames, base, bound, weight, margin, resolution, via=via,
-                                 hold=int(round(HOLD_OF_TIME_SCALE * cfg.smoothing_s * clip.fps)), known=seen)
+                                 hold=int(round(HOLD_OF_TIME_SCALE * cfg.smoothing_s * clip.fps)), known=seen,
+                                 in_reach=in_reach)
         opened[frames[bound > 0]] = True
         q = poser.local_rotations(new)
         rotations[np.ix_(frames, list(poser.chain.joints))] = q
     out = clip.replace(rotations=rotations)
-    finger_joints = sorted({j for p in posers for j in p.chain.joints})
     change = quat_angle_deg(np.asarray(clip.rotations)[:, finger_joints], rotations[:, finger_joints])
     # what was not corrected is bit for bit the input: measured once, before
     changed = [p for p in posers if p.chain.name in corrected]
     moved = sorted({j for p in changed for j in p.chain.joints})
+    moved_angles = finger_angles(out, moved) if moved else None  # the report's depths after and jitter
     depth_before = depth_after = np.zeros(T)
     if measure:
         depth_before, depth_after = np.zeros(T), np.zeros(T)
-        after = {}
-        if changed:  # only the corrected hands' fingers differ from the clip's world transforms
-            hands = HandMap(**{p.chain.side: handmap[p.chain.side] for p in changed})
-            after = {p.chain.name: p for p in chain_posers(out, hands, cfg, with_fingers_posed(out, hands, world))}
+        posed_out = FingersPosed(out, handmap, posed.world)  # only the corrected chains differ from the clip
         for poser in posers:
-            seen = known.get(poser.chain.name)
-            d = _chain_depth_mm(clip, poser, colliders, known=seen, angles=input_angles.get(poser.chain.name))
+            name = poser.chain.name
+            if name not in known:
+                continue  # never near a collider: clear before and after
+            candidates = _reachable(clip, poser, colliders, 0.0)
+            d = _chain_depth_mm(clip, poser, colliders, known=known[name], angles=input_angles[name],
+                                frames=_near_posed(poser, posed, colliders, 0.0, candidates))
             np.maximum(depth_before, d, out=depth_before)
-            if poser.chain.name in corrected:
-                d = _chain_depth_mm(out, after[poser.chain.name], colliders, known=seen)
+            if name in corrected:
+                after = _poser(out, poser.chain, posed_out, given=False)
+                d = _chain_depth_mm(out, after, colliders, known=known[name],
+                                    angles=moved_angles[:, np.searchsorted(moved, poser.chain.joints)],
+                                    frames=_near_posed(after, posed_out, colliders, 0.0, candidates))
             np.maximum(depth_after, d, out=depth_after)
         for hand in handmap.sides:  # the palm: body joints, the same before and after
-            palm = palm_depth_mm(world, clip.skeleton, hand, [p.chain for p in posers], colliders, cfg)
+            palm = palm_depth_mm(posed, clip.skeleton, hand, [p.chain for p in posers], colliders, cfg)
             np.maximum(depth_before, palm, out=depth_before)
             np.maximum(depth_after, palm, out=depth_after)
             unresolved.extend((f"{hand.side} palm", int(f)) for f in np.nonzero(palm > 0.5 * cfg.tolerance_mm)[0])
     jitter_before = jitter_after = 0.0
     if T >= 3 and finger_joints:
-        sums = _jitter_sums(clip, finger_joints)
+        sums = _jitter_sums_of(all_angles)
         scale = clip.fps ** 2 / ((T - 2) * 3 * len(finger_joints))
         jitter_before = jitter_after = float(sums.sum() * scale)
         if moved:
-            sums[np.searchsorted(finger_joints, moved)] = _jitter_sums(out, moved)
+            sums[np.searchsorted(finger_joints, moved)] = _jitter_sums_of(moved_angles)
             jitter_after = float(sums.sum() * scale)
     report = CorrectionReport(
         penetration_before_mm=depth_before,

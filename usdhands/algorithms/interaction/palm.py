@@ -34,15 +34,24 @@ def palm_axes(world: np.ndarray, skeleton: Skeleton, hand: HandSide, chains: lis
 
     Parameters
     ----------
-    world : (T, J, 4, 4) float
-        The clip's world transforms.
+    world : (T, J, 4, 4) float or FingersPosed
+        The clip's world transforms (or :class:`~usdhands.algorithms.interaction.posing.FingersPosed`,
+        which poses the joints needed).
     chains : list of FingerChain
         The hand's finger chains (:func:`~usdhands.algorithms.interaction.finger_geometry.finger_chains`).
     """
     wrist = skeleton.index(hand.wrist)
     bases = [c.joints[0] for c in chains if c.finger != "thumb" and c.side == hand.side]
-    a = np.broadcast_to(world[:, wrist, :3, 3][:, None], (len(world), len(bases), 3))
-    b = world[:, bases][..., :3, 3]
+    if hasattr(world, "at"):  # a FingersPosed: the joints posed where needed
+        ws = world.at([wrist] + bases)
+        T = len(ws[0])
+        b = np.stack([w[:, :3, 3] for w in ws[1:]], axis=1) if bases else np.zeros((T, 0, 3))
+        wrist_at = ws[0][:, :3, 3]
+    else:
+        T = len(world)
+        b = world[:, bases][..., :3, 3]
+        wrist_at = world[:, wrist, :3, 3]
+    a = np.broadcast_to(wrist_at[:, None], (T, len(bases), 3))
     return np.stack([a, b], axis=2)
 
 
