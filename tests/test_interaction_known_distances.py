@@ -108,7 +108,9 @@ def test_candidates_sharing_a_frame_keep_their_own_rows():
 @pytest.mark.parametrize("case", ["cylinder", "mug"])
 def test_bisections_of_many_chains_in_step_equal_each_alone(case):
     """The collision term opens every chain's candidates together (ik.least_openings: one query per step
-    for all chains): each chain's openings, resolved frames and query count are those of its own bisection."""
+    for all chains): each chain's openings and resolved frames are those of its own bisection, with fewer
+    queries (a joint the path has not moved, and a chain's base at a frame several candidates share, is
+    measured once)."""
     from usdhands.algorithms.interaction.ik import least_openings
 
     if case != "cylinder" and not MUG.exists():
@@ -129,7 +131,7 @@ def test_bisections_of_many_chains_in_step_equal_each_alone(case):
     queries = _queries(cols)
     cols = colliders_for(clip, prop)
     together = least_openings(posers, cols, frames, bases, 0.3 * mm, 2.0 * mm, iterations=5)
-    assert _queries(cols) == queries and any((u > 0).any() for u, _ in alone)
+    assert _queries(cols) < queries and any((u > 0).any() for u, _ in alone)
     for (u, ok), (u2, ok2) in zip(alone, together):
         assert u.tobytes() == u2.tobytes() and ok.tobytes() == ok2.tobytes()
 

@@ -21,7 +21,7 @@ from usdhands.algorithms.interaction.finger_geometry import FingerChain
 from usdhands.algorithms.interaction.known_distances import ChainDistances, joint_cutoffs
 from usdhands.model.rotations import DEFAULT_EULER_ORDER, euler_deg_to_quat, quat_multiply, trs_to_xform
 
-__all__ = ["ChainPoser", "opening_weights", "clear_together", "least_openings"]
+__all__ = ["ChainPoser", "opening_weights", "clear_together", "least_openings", "JointsSeen"]
 
 
 def opening_weights(u: np.ndarray, n: int) -> np.ndarray:
@@ -322,33 +322,96 @@ class ChainPoser:
 
 
 def clear_together(posers: list, colliders, frames: list, angles: list, margin: float,
-                   resolution: float) -> list:
+                   resolution: float, joints_seen: list | None = None) -> list:
     """:meth:`ChainPoser.clear` of several chains at once (each with its own frames and poses), with one
     collider query for all their joints and one clearance search for all their capsules.
 
     Each capsule's search is its own (its intervals, its queries), so every answer is the one
     :meth:`ChainPoser.clear` gives the chain alone, bit for bit; only the calls are fewer.
 
+    ``joints_seen``: per chain, a :class:`JointsSeen` of its frames' rows (``frames[i]`` at the rows
+    ``rows``), or None: a joint met again at the very position measured before takes that value.
+
     Returns
     -------
     list of (K_i,) bool
     """
     parts = []
-    for poser, f, ang in zip(posers, frames, angles):
+    for i, (poser, f, ang) in enumerate(zip(posers, frames, angles)):
         f = np.asarray(f, dtype=np.int64)
         if len(f) == 0:
             parts.append(None)
             continue
         a, b = poser.capsules(f, ang)
-        parts.append((f, a, b, np.tile(poser.chain.radii + margin, (len(f), 1))))
+        seen = None if joints_seen is None else joints_seen[i]
+        parts.append((f, a, b, np.tile(poser.chain.radii + margin, (len(f), 1)), seen))
     return _capsules_clear(colliders, parts, resolution)
+
+
+class JointsSeen:
+    """The distances last measured at a chain's joints (tip counted), for rows of poses tested again and
+    again at the same frames (a bisection): a joint found at the very position it had, with a value that
+    was exact (below its cutoff then) or is beyond its cutoff now, takes it instead of a query, as
+    :class:`~usdhands.algorithms.interaction.known_distances.ChainDistances` does (a value beyond the
+    cutoff, whichever lower bound it is, only closes the capsules it ends at their first level: the
+    same answers). The joints the opening path has not turned yet keep their positions.
+
+    Parameters
+    ----------
+    rows : int
+    joints : int
+        The chain's joints plus its tip.
+    """
+
+    def __init__(self, rows: int, joints: int):
+        self.position = np.full((rows, joints, 3), np.nan)
+        self.value = np.zeros((rows, joints))
+        self.cutoff = np.full((rows, joints), -np.inf)
+        self.rows = np.arange(rows)  # the rows of the poses of the next test (set by the caller)
+
+    def known(self, joints: np.ndarray, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For the joints ``(K, m, 3)`` of the poses at :attr:`rows` and their cutoffs ``(K, m)``: which
+        have a value ``(K, m)`` bool, and the values ``(K, m)``."""
+        old_v, old_c = self.value[self.rows], self.cutoff[self.rows]
+        same = np.all(self.position[self.rows] == joints, axis=2) & ((old_v < old_c) | (old_v >= cut))
+        return same, old_v
+
+    def remember(self, joints: np.ndarray, cut: np.ndarray, values: np.ndarray, measured: np.ndarray) -> None:
+        """Keep the ``measured`` ``(K, m)`` joints' positions, cutoffs and values."""
+        kk, jj = np.nonzero(measured)
+        r = self.rows[kk]
+        self.position[r, jj] = joints[kk, jj]
+        self.cutoff[r, jj] = cut[kk, jj]
+        self.value[r, jj] = values[kk, jj]
+
+
+def _share_base(frames: np.ndarray, joints: np.ndarray, cut: np.ndarray, have: np.ndarray):
+    """Rows of several poses at one frame whose base joint (the same point: the chain's first joint does
+    not move with the chain's angles) is not known: ``(rows, their representative row)`` for all but the
+    first row at each frame with that very position, None if there are none; the representative's cutoff
+    ``cut[:, 0]`` is raised to the largest of its group (in place), so its value is exact below every
+    row's cutoff and a lower bound beyond them all."""
+    k = np.nonzero(~have[:, 0])[0]
+    if len(k) < 2:
+        return None
+    _, first, inv = np.unique(frames[k], return_index=True, return_inverse=True)
+    rep = k[first][inv]
+    same = np.all(joints[k, 0] == joints[rep, 0], axis=1) & (rep != k)
+    if not same.any():
+        return None
+    top = cut[k[first], 0].copy()
+    np.maximum.at(top, inv[same], cut[k[same], 0])
+    cut[k[first], 0] = top
+    cut[k[same], 0] = top[inv[same]]  # remembered under the cutoff the value was measured with
+    return k[same], rep[same]
 
 
 def _capsules_clear(colliders, parts: list, resolution: float) -> list:
     """Whether each frame's capsules clear the colliders by their ``need`` (up to ``resolution / 2``),
-    for several sets at once: ``parts`` holds ``(frames (K,), a (K, n, 3), b (K, n, 3), need (K, n))``
+    for several sets at once: ``parts`` holds ``(frames (K,), a (K, n, 3), b (K, n, 3), need (K, n)[, seen])``
     or None (no frames); one collider query for all their joints (each joint, the end of one segment
-    and the start of the next, measured once) and one clearance search for all their capsules.
+    and the start of the next, measured once; with a :class:`JointsSeen` ``seen``, only those not met
+    before at the same position) and one clearance search for all their capsules.
 
     Returns
     -------
@@ -357,19 +420,39 @@ def _capsules_clear(colliders, parts: list, resolution: float) -> list:
     live = []
     for q in parts:
         if q is not None:
-            f, a, b, need = q
+            f, a, b, need = q[:4]
             n = a.shape[1]
             joints = np.concatenate([a, b[:, -1:]], axis=1)  # (K, n + 1, 3)
-            live.append((f, a, b, n, need, joints, joint_cutoffs(need, np.linalg.norm(b - a, axis=2))))
+            cut = joint_cutoffs(need, np.linalg.norm(b - a, axis=2))
+            seen = q[4] if len(q) > 4 else None
+            share = None
+            if seen is None:
+                have, values = np.zeros(cut.shape, dtype=bool), np.zeros(cut.shape)
+            else:
+                have, values = seen.known(joints, cut)
+                share = _share_base(f, joints, cut, have)
+            live.append((f, a, b, n, need, joints, cut, have, values, seen, share))
     if not live:
         return [np.zeros(0, dtype=bool) for _ in parts]
-    d_all = colliders.signed_distance(np.concatenate([np.repeat(f, n + 1) for f, _, _, n, _, _, _ in live]),
-                                      np.concatenate([j.reshape(-1, 3) for *_, j, _ in live]),
-                                      np.concatenate([c.reshape(-1) for *_, c in live]))
-    d_split = np.split(d_all, np.cumsum([len(f) * (n + 1) for f, _, _, n, _, _, _ in live])[:-1])
+    ask = [~x[7] for x in live]
+    for x, m in zip(live, ask):
+        if x[10] is not None:
+            m[x[10][0], 0] = False  # the base joint measured once per frame
+    d_all = colliders.signed_distance(
+        np.concatenate([np.broadcast_to(x[0][:, None], x[7].shape)[m] for x, m in zip(live, ask)]),
+        np.concatenate([x[5][m] for x, m in zip(live, ask)]),
+        np.concatenate([x[6][m] for x, m in zip(live, ask)]))
+    d_split = np.split(d_all, np.cumsum([int(m.sum()) for m in ask])[:-1])
     ends0, ends1, fr, aa, bb, nn = [], [], [], [], [], []
-    for (f, a, b, n, need, _, _), d in zip(live, d_split):
-        d = d.reshape(len(f), n + 1)
+    for (f, a, b, n, need, joints, cut, have, values, seen, share), m, d_new in zip(live, ask, d_split):
+        d = np.array(values)
+        d[m] = d_new
+        if share is not None:
+            rows, rep = share
+            d[rows, 0] = d[rep, 0]
+            m[rows, 0] = True  # remembered as measured, with the cutoff it was measured under
+        if seen is not None:
+            seen.remember(joints, cut, d, m)
         ends0.append(d[:, :-1].reshape(-1))
         ends1.append(d[:, 1:].reshape(-1))
         fr.append(np.repeat(f, n))
@@ -384,7 +467,7 @@ def _capsules_clear(colliders, parts: list, resolution: float) -> list:
         if q is None:
             out.append(np.zeros(0, dtype=bool))
             continue
-        f, a, _, need = q
+        f, a, _, need = q[:4]
         n = a.shape[1]
         k = len(f) * n
         lo, up = lower[at:at + k].reshape(len(f), n), upper[at:at + k].reshape(len(f), n)
@@ -396,7 +479,9 @@ def _capsules_clear(colliders, parts: list, resolution: float) -> list:
 def least_openings(posers: list, colliders, frames: list, bases: list, margin: float, resolution: float,
                    iterations: int = 9) -> list:
     """:meth:`ChainPoser.least_opening` (no IK pose to pass through, nothing remembered) of several chains
-    at once, their bisections in step (:func:`clear_together`): the same answers, bit for bit.
+    at once, their bisections in step (:func:`clear_together`): the same answers, bit for bit. A joint
+    the path has not moved yet (the chain's base always, the next ones while only the joints after them
+    turn) is measured once per pose (:class:`JointsSeen`).
 
     Returns
     -------
@@ -405,22 +490,27 @@ def least_openings(posers: list, colliders, frames: list, bases: list, margin: f
     frames = [np.asarray(f, dtype=np.int64) for f in frames]
     u = [np.zeros(len(f)) for f in frames]
     resolved = [np.ones(len(f), dtype=bool) for f in frames]
-    bad = [~ok for ok in clear_together(posers, colliders, frames, bases, margin, resolution)]
+    seen = [JointsSeen(len(f), len(p.chain.joints) + 1) for p, f in zip(posers, frames)]
+    bad = [~ok for ok in clear_together(posers, colliders, frames, bases, margin, resolution, seen)]
     idx = [np.nonzero(b)[0] for b in bad]
+    for s, i in zip(seen, idx):
+        s.rows = i
     open_ok = clear_together(posers, colliders, [f[i] for f, i in zip(frames, idx)],
                              [p.angles(b[i], np.ones(len(i))) for p, b, i in zip(posers, bases, idx)],
-                             margin, resolution)
+                             margin, resolution, seen)
     for c in range(len(posers)):
         u[c][idx[c]] = 1.0
         resolved[c][idx[c][~open_ok[c]]] = False
         idx[c] = idx[c][open_ok[c]]
+        seen[c].rows = idx[c]
     lo = [np.zeros(len(i)) for i in idx]
     hi = [np.ones(len(i)) for i in idx]
     if any(len(i) for i in idx):
         for _ in range(iterations):
             mid = [0.5 * (a + b) for a, b in zip(lo, hi)]
             ok = clear_together(posers, colliders, [f[i] for f, i in zip(frames, idx)],
-                                [p.angles(b[i], m) for p, b, i, m in zip(posers, bases, idx, mid)], margin, resolution)
+                                [p.angles(b[i], m) for p, b, i, m in zip(posers, bases, idx, mid)], margin, resolution,
+                                seen)
             hi = [np.where(o, m, h) for o, m, h in zip(ok, mid, hi)]
             lo = [np.where(o, low, m) for o, m, low in zip(ok, mid, lo)]
     for c in range(len(posers)):
