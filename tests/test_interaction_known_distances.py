@@ -157,3 +157,51 @@ def test_a_capsule_proved_clear_by_earlier_distances_costs_no_query():
     assert not poser.clear(cols, frames, moved, 50 * mm, 0.5 * mm, known=known)
     assert _queries(cols) > first
     assert not poser.clear(colliders_for(clip, prop), frames, moved, 50 * mm, 0.5 * mm)
+
+
+@pytest.mark.parametrize("case", ["cylinder", "mug"])
+def test_a_group_of_chains_bisects_and_tests_as_each_chain_alone(case):
+    """The correction bisects and re-tests all its chains of a size in step (ik.ChainGroup: chain c's frame
+    f is the virtual frame c * stride + f, one memo for all): the openings, resolved frames, clear_below's
+    answers and query count are those of each chain alone with its own memo, every=2's anchors and
+    neighbours included (an odd stride, which puts one chain's anchors on the next one's odd frames,
+    fails it)."""
+    from usdhands.algorithms.interaction.ik import ChainGroup, group_stride
+
+    if case != "cylinder" and not MUG.exists():
+        pytest.skip("shared assets not present")
+    clip, prop = CASES[case]()
+    hm = humanoid_handmap(clip.skeleton)
+    mm = 0.001 / clip.skeleton.meters_per_unit
+    rng = np.random.default_rng(3)
+    posers = chain_posers(clip, hm, InteractionConfig())
+    T = clip.num_frames
+    frames, bases = [], []
+    for k, poser in enumerate(posers):
+        angles = finger_angles(clip, poser.chain.joints)
+        f = np.arange(T) if k % 2 else np.sort(rng.choice(T, size=min(T, 30), replace=False))
+        frames.append(f)
+        bases.append(angles[f] + rng.normal(scale=15.0, size=(len(f),) + angles.shape[1:]))
+    cols = colliders_for(clip, prop)
+    alone = []
+    for p, f, b in zip(posers, frames, bases):
+        known = ChainDistances(T, len(p.chain.joints) + 1)
+        u, ok = p.least_opening(cols, f, b, 0.0, 0.5 * mm, every=2, known=known)
+        below = p.clear_below(cols, f, b, np.zeros(len(f)), np.ones(len(f)), 0.0, 0.5 * mm, known=known)
+        alone.append((u, ok, below))
+    queries = _queries(cols)
+    cols = colliders_for(clip, prop)
+    stride = group_stride(T, 2)
+    assert stride % 2 == 0 and stride >= T + 1
+    group = ChainGroup(posers, stride)
+    memo = ChainDistances(len(posers) * stride, len(posers[0].chain.joints) + 1)
+    vf = np.concatenate([group.frames_of(c, f) for c, f in enumerate(frames)])
+    u, ok = group.least_opening(cols, vf, np.concatenate(bases), 0.0, 0.5 * mm, every=2, known=memo)
+    below = group.clear_below(cols, vf, np.concatenate(bases), np.zeros(len(vf)), np.ones(len(vf)), 0.0, 0.5 * mm,
+                              known=memo)
+    assert _queries(cols) == queries and any((a[0] > 0).any() for a in alone)
+    sizes = np.cumsum([len(f) for f in frames])[:-1]
+    for (ua, oka, ba), ug, okg, bg in zip(alone, np.split(u, sizes), np.split(ok, sizes), np.split(below, sizes)):
+        assert ua.tobytes() == ug.tobytes() and oka.tobytes() == okg.tobytes() and ba.tobytes() == bg.tobytes()
+    view = memo.view(stride, stride + T)  # chain 1's rows: what the group measured, the chain's memo knows
+    assert np.array_equal(view.value, memo.value[stride:stride + T]) and np.isfinite(view.cutoff).any()

@@ -34,7 +34,7 @@ import numpy as np
 
 from usdhands.algorithms.interaction.clearance import axis_clearance
 from usdhands.algorithms.interaction.finger_geometry import FingerChain, InteractionConfig, finger_chains
-from usdhands.algorithms.interaction.ik import ChainPoser
+from usdhands.algorithms.interaction.ik import ChainGroup, ChainPoser, group_stride
 from usdhands.algorithms.interaction.known_distances import ChainDistances
 from usdhands.algorithms.interaction.palm import palm_depth_mm
 from usdhands.algorithms.interaction.posing import FingersPosed, chain_reach, reachable_frames
@@ -285,6 +285,40 @@ def _chain_depth_mm(clip: Clip, poser: ChainPoser, colliders, resolution_mm: flo
     return depth
 
 
+def _group_depth_mm(group: ChainGroup, colliders, items: dict, known: ChainDistances, mm: float, T: int,
+                    resolution_mm: float = 0.05) -> dict:
+    """:func:`_chain_depth_mm` of the chains of ``group`` in one search: ``items`` maps a chain's index to
+    its near frames ``(K,)`` and angles there ``(K, n, 3)``; ``known``: the group's memo (rows
+    ``c * stride + frame``, or None: nothing remembered); ``mm``: clip units per mm. Returns chain index ->
+    ``(T,)`` mm."""
+    out = {c: np.zeros(T) for c in items}
+    live = [c for c, (frames, _) in items.items() if len(frames)]
+    if not live:
+        return out
+    vf, real, aa, bb, need = [], [], [], [], []
+    for c in live:
+        frames, angles = items[c]
+        a, b = group.posers[c].capsules(frames, angles)
+        vf.append(group.frames_of(c, frames))
+        real.append(frames)
+        aa.append(a)
+        bb.append(b)
+        need.append(np.tile(group.posers[c].chain.radii, (len(frames), 1)))
+    need_all, a, b, real = np.concatenate(need), np.concatenate(aa), np.concatenate(bb), np.concatenate(real)
+    if known is None:
+        K, n = need_all.shape
+        lower, _ = axis_clearance(colliders, np.repeat(real, n), a.reshape(-1, 3), b.reshape(-1, 3),
+                                  need_all.reshape(-1), resolution_mm * mm, find_depth=True)
+        lower = lower.reshape(K, n)
+    else:
+        lower, _ = known.axis_bounds(colliders, np.concatenate(vf), real, a, b, need_all, resolution_mm * mm,
+                                     find_depth=True)
+    depth = np.maximum(need_all - lower, 0.0).max(axis=1) / mm
+    for c, part in zip(live, np.split(depth, np.cumsum([len(items[c][0]) for c in live])[:-1])):
+        out[c][items[c][0]] = part
+    return out
+
+
 def finger_jitter(clip: Clip, joints: list[int]) -> float:
     """Mean absolute angular acceleration of the finger curves of ``joints``, deg/s² (Euler
     curves as :func:`finger_angles` reads them)."""
@@ -333,40 +367,73 @@ def _running_max(x: np.ndarray, h: int) -> np.ndarray:
     return windows.max(axis=1)
 
 
-def _smooth_opening(poser: ChainPoser, colliders, frames: np.ndarray, base: np.ndarray, bound: np.ndarray,
-                    weight: float, margin: float, resolution: float, via: np.ndarray | None = None,
-                    hold: int = 0, rounds: int = 6, known: ChainDistances | None = None,
-                    in_reach: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The smoothed opening ``u`` ``(K,)`` above ``bound`` and its poses ``(K, n, 3)``, every frame clear.
+def _smooth_openings(group: ChainGroup, colliders, items: list, weight: float, margin: float, resolution: float,
+                     hold: int = 0, rounds: int = 6, known: ChainDistances | None = None) -> dict:
+    """For each chain of ``group``, the smoothed opening ``u`` ``(K,)`` above its bound and its poses
+    ``(K, n, 3)``, every frame clear; the chains' tests in step (one per round for all of them, each
+    frame's answer its own), each chain's rounds as it would run them alone.
+
+    ``items``: the group's index of each chain to smooth -> ``(frames (K,), base (K, n, 3), bound (K,), via
+    (K, n, 3) or None, in_reach (K,) bool)``, ``in_reach`` the frames where some pose of the chain can touch a collider (no other frame
+    is tested); ``known``: the group's memo (one row per virtual frame).
 
     Opening further than the bound can touch something else (clearance along the path need
     not be monotone): each frame whose smoothed pose fails the test gets an upper bound, the
     clear opening nearest below it, and the curve is smoothed again between the bounds; a
     frame still failing after ``rounds`` takes its bound, which was tested. The opening is held
     near a target: the bound's running maximum over ``hold`` frames either side, smoothed
-    (:data:`HOLD_OF_TIME_SCALE`, :data:`PRE_SMOOTH`, :data:`FIT_IN_CONTACT`). ``in_reach`` ``(K,)`` bool:
-    the frames where some pose of the chain can touch a collider (no other frame is tested).
+    (:data:`HOLD_OF_TIME_SCALE`, :data:`PRE_SMOOTH`, :data:`FIT_IN_CONTACT`).
     """
-    upper = np.ones(len(frames))
-    u = np.array(bound)
-    bad = np.zeros(0, dtype=np.int64)
+    upper = {c: np.ones(len(it[0])) for c, it in items.items()}
+    u = {c: np.array(it[2]) for c, it in items.items()}
+    bad = {c: np.zeros(0, dtype=np.int64) for c in items}
+    active = list(items) if weight > 0 else []
     for r in range(rounds if weight > 0 else 0):
-        floor = bounded_smooth(_running_max(bound, hold), upper, weight / PRE_SMOOTH ** 4)
-        u = bounded_smooth(bound, upper, weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0), target=floor)
-        changed = np.nonzero(u > bound)[0]
-        if in_reach is not None:
-            changed = changed[in_reach[changed]]  # the other frames are clear in every pose
-        v = None if via is None else via[changed]
-        ok = poser.clear(colliders, frames[changed], poser.angles(base[changed], u[changed], v), margin, resolution,
-                         known=known)
-        bad = changed[~ok]
-        if len(bad) == 0 or r == rounds - 1:
-            break
-        upper[bad] = poser.clear_below(colliders, frames[bad], base[bad], bound[bad], u[bad], margin, resolution,
-                                       via=None if via is None else via[bad], known=known)
-    u[bad] = bound[bad]  # every other frame passed the last test
-    new = poser.angles(base, u, via)
-    return u, new
+        changed = {}
+        for c in active:
+            frames, base, bound, via, in_reach = items[c]
+            floor = bounded_smooth(_running_max(bound, hold), upper[c], weight / PRE_SMOOTH ** 4)
+            u[c] = bounded_smooth(bound, upper[c], weight, fit=np.where(bound > 0, FIT_IN_CONTACT, 1.0), target=floor)
+            ch = np.nonzero(u[c] > bound)[0]
+            changed[c] = ch[in_reach[ch]]  # the other frames are clear in every pose
+        ok = _group_clear(group, colliders, {c: (items[c][0][ch], group.posers[c].angles(
+            items[c][1][ch], u[c][ch], None if items[c][3] is None else items[c][3][ch])) for c, ch in changed.items()},
+            margin, resolution, known)
+        for c in active:
+            bad[c] = changed[c][~ok[c]]
+        active = [c for c in active if len(bad[c]) and r != rounds - 1]
+        if active:
+            below = {c: bad[c] for c in active}
+            vf, base, lo, hi, via = [], [], [], [], []
+            for c in active:
+                frames, b, bound, v, _ = items[c]
+                vf.append(group.frames_of(c, frames[bad[c]]))
+                base.append(b[bad[c]])
+                lo.append(bound[bad[c]])
+                hi.append(u[c][bad[c]])
+                via.append(None if v is None else v[bad[c]])
+            up = group.clear_below(colliders, np.concatenate(vf), np.concatenate(base), np.concatenate(lo),
+                                   np.concatenate(hi), margin, resolution,
+                                   via=None if via[0] is None else np.concatenate(via), known=known)
+            for c, part in zip(active, np.split(up, np.cumsum([len(below[c]) for c in active])[:-1])):
+                upper[c][below[c]] = part
+    out = {}
+    for c, (frames, base, bound, via, _) in items.items():
+        u[c][bad[c]] = bound[bad[c]]  # every other frame passed the last test
+        out[c] = (u[c], group.posers[c].angles(base, u[c], via))
+    return out
+
+
+def _group_clear(group: ChainGroup, colliders, items: dict, margin: float, resolution: float,
+                 known: ChainDistances | None) -> dict:
+    """One :meth:`ChainGroup.clear` of chains' poses: ``items`` maps a chain's index in ``group`` to clip
+    frames ``(K,)`` and angles ``(K, n, 3)``; returns chain index -> ``(K,)`` bool."""
+    chains = list(items)
+    if not chains:
+        return {}
+    vf = np.concatenate([group.frames_of(c, items[c][0]) for c in chains])
+    ok = group.clear(colliders, vf, np.concatenate([items[c][1] for c in chains]), margin, resolution, known=known)
+    return dict(zip(chains, np.split(ok, np.cumsum([len(items[c][0]) for c in chains])[:-1])))
 
 
 def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 0.0,
@@ -415,22 +482,38 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     unresolved, corrected = [], []
     opened = np.zeros(T, dtype=bool)
     weight = smoothness_weight(clip.fps, cfg.smoothing_s) if smooth else 0.0
-    # per chain near a collider, what was measured at each frame: the tests below, the report's depths
-    known = {}
-    input_angles = {}
+    # per chain near a collider, what was measured at each frame: the tests below, the report's depths;
+    # chains with the same number of joints share one memo (chain c's frame f at row c * stride + f) so
+    # that their bisections and smoothing run in step (ChainGroup)
+    near_of = {}
     reachable = {}  # per chain near a collider, the frames where some pose of it could touch (with the margin)
-    to_correct = []
     for poser in posers:
         candidates = _reachable(clip, poser, colliders, margin)
         near = _near_posed(poser, posed, colliders, margin, candidates)
-        if len(near) == 0:
-            continue
-        reachable[poser.chain.name] = candidates
-        seen = known[poser.chain.name] = ChainDistances(T, len(poser.chain.joints) + 1)
-        angles = input_angles[poser.chain.name] = all_angles[:, np.searchsorted(finger_joints, poser.chain.joints)]
-        ok = poser.clear(colliders, near, angles[near], margin, resolution, known=seen)
-        if not ok.all():
-            to_correct.append((poser, near, ok))
+        if len(near):
+            near_of[poser.chain.name] = near
+            reachable[poser.chain.name] = candidates
+    stride = group_stride(T, BISECT_EVERY)
+    by_size: dict[int, list[ChainPoser]] = {}
+    for poser in posers:
+        if poser.chain.name in near_of:
+            by_size.setdefault(len(poser.chain.joints), []).append(poser)
+    known, memo, slot = {}, {}, {}
+    for n, ps in by_size.items():
+        memo[n] = ChainDistances(len(ps) * stride, n + 1)
+        for c, p in enumerate(ps):
+            known[p.chain.name] = None if memo[n] is None else memo[n].view(c * stride, c * stride + T)
+            slot[p.chain.name] = c
+    input_angles = {p.chain.name: all_angles[:, np.searchsorted(finger_joints, p.chain.joints)]
+                    for p in posers if p.chain.name in near_of}
+    found = {}  # each chain near a collider, tested as given: each size's chains in one test
+    for n, ps in by_size.items():
+        group = ChainGroup(ps, stride)
+        tested = _group_clear(group, colliders, {c: (near_of[p.chain.name], input_angles[p.chain.name][near_of[p.chain.name]])
+                                                 for c, p in enumerate(ps)}, margin, resolution, memo[n])
+        found.update((ps[c].chain.name, ok) for c, ok in tested.items())
+    to_correct = [(p, near_of[p.chain.name], found[p.chain.name]) for p in posers
+                  if p.chain.name in near_of and not found[p.chain.name].all()]
     smoothing = smooth and cfg.smoothing_s > 0 and T >= 3
     smoothed = {}
     if smoothing and to_correct:
@@ -440,6 +523,7 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         out_curves = np.split(rts_smooth(np.concatenate(curves, axis=1), clip.fps, cfg.smoothing_s),
                               np.cumsum([c.shape[1] for c in curves])[:-1], axis=1)
         smoothed = {p.chain.name: c for (p, _, _), c in zip(to_correct, out_curves)}
+    work_of = {}  # chain -> (frames, base, work, in_reach, via)
     for poser, near, ok in to_correct:
         seen = known[poser.chain.name]
         angles = input_angles[poser.chain.name]
@@ -471,18 +555,36 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
             if smoothing:
                 via = rts_smooth(via.reshape(T, -1), clip.fps, 2 * cfg.smoothing_s).reshape(T, n, 3)
                 via = np.clip(via, lo, hi)
-        bound, resolved = np.zeros(len(frames)), np.ones(len(frames), dtype=bool)
-        bound[work], resolved[work] = poser.least_opening(colliders, frames[work], base[work], margin, resolution,
-                                                          iterations, via=None if via is None else via[work],
-                                                          known=seen, every=BISECT_EVERY)
-        for f in frames[~resolved]:
-            unresolved.append((poser.chain.name, int(f)))
-        u, new = _smooth_opening(poser, colliders, frames, base, bound, weight, margin, resolution, via=via,
-                                 hold=int(round(HOLD_OF_TIME_SCALE * cfg.smoothing_s * clip.fps)), known=seen,
-                                 in_reach=in_reach)
-        opened[frames[bound > 0]] = True
-        q = poser.local_rotations(new)
-        rotations[np.ix_(frames, list(poser.chain.joints))] = q
+        work_of[poser.chain.name] = (frames, base, work, in_reach, via)
+    hold = int(round(HOLD_OF_TIME_SCALE * cfg.smoothing_s * clip.fps))
+    missed = {}  # per corrected chain, (chain, frame) where even the open pose touches
+    for n, ps in by_size.items():
+        members = [p for p in ps if p.chain.name in work_of]
+        if not members:
+            continue
+        group = ChainGroup(ps, stride)
+        parts = [work_of[p.chain.name] for p in members]
+        vf = np.concatenate([group.frames_of(slot[p.chain.name], fr[w]) for p, (fr, _, w, _, _) in zip(members, parts)])
+        found, resolved_all = group.least_opening(
+            colliders, vf, np.concatenate([b[w] for _, b, w, _, _ in parts]), margin, resolution, iterations,
+            via=None if parts[0][4] is None else np.concatenate([v[w] for _, _, w, _, v in parts]),
+            known=memo[n], every=BISECT_EVERY)
+        items = {}
+        sizes = np.cumsum([len(w) for _, _, w, _, _ in parts])[:-1]
+        for p, (frames, base, work, in_reach, via), found_c, resolved_c in zip(
+                members, parts, np.split(found, sizes), np.split(resolved_all, sizes)):
+            bound, resolved = np.zeros(len(frames)), np.ones(len(frames), dtype=bool)
+            bound[work], resolved[work] = found_c, resolved_c
+            missed[p.chain.name] = [(p.chain.name, int(f)) for f in frames[~resolved]]
+            items[slot[p.chain.name]] = (frames, base, bound, via, in_reach)
+        smoothed_openings = _smooth_openings(group, colliders, items, weight, margin, resolution, hold=hold,
+                                             known=memo[n])
+        for c, (frames, _, bound, _, _) in items.items():
+            _, new = smoothed_openings[c]
+            opened[frames[bound > 0]] = True
+            rotations[np.ix_(frames, list(ps[c].chain.joints))] = ps[c].local_rotations(new)
+    for name in corrected:
+        unresolved.extend(missed[name])
     out = clip.replace(rotations=rotations)
     change = quat_angle_deg(np.asarray(clip.rotations)[:, finger_joints], rotations[:, finger_joints])
     # what was not corrected is bit for bit the input: measured once, before
@@ -493,20 +595,23 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     if measure:
         depth_before, depth_after = np.zeros(T), np.zeros(T)
         posed_out = FingersPosed(out, handmap, posed.world)  # only the corrected chains differ from the clip
-        for poser in posers:
-            name = poser.chain.name
-            if name not in known:
-                continue  # never near a collider: clear before and after
-            candidates = _reachable(clip, poser, colliders, 0.0)
-            d = _chain_depth_mm(clip, poser, colliders, known=known[name], angles=input_angles[name],
-                                frames=_near_posed(poser, posed, colliders, 0.0, candidates))
-            np.maximum(depth_before, d, out=depth_before)
-            if name in corrected:
-                after = _poser(out, poser.chain, posed_out, given=False)
-                d = _chain_depth_mm(out, after, colliders, known=known[name],
-                                    angles=moved_angles[:, np.searchsorted(moved, poser.chain.joints)],
-                                    frames=_near_posed(after, posed_out, colliders, 0.0, candidates))
-            np.maximum(depth_after, d, out=depth_after)
+        for n, ps in by_size.items():  # each size's chains measured together, before and then after
+            before, after, after_posers = {}, {}, list(ps)
+            for c, p in enumerate(ps):
+                candidates = _reachable(clip, p, colliders, 0.0)
+                frames = _near_posed(p, posed, colliders, 0.0, candidates)
+                before[c] = (frames, input_angles[p.chain.name][frames])
+                if p.chain.name in corrected:
+                    after_posers[c] = _poser(out, p.chain, posed_out, given=False)
+                    frames = _near_posed(after_posers[c], posed_out, colliders, 0.0, candidates)
+                    after[c] = (frames, moved_angles[:, np.searchsorted(moved, p.chain.joints)][frames])
+            depth = _group_depth_mm(ChainGroup(ps, stride), colliders, before, memo[n], mm, T)
+            for c, d in depth.items():
+                np.maximum(depth_before, d, out=depth_before)
+                if c not in after:  # not corrected: the input's
+                    np.maximum(depth_after, d, out=depth_after)
+            for d in _group_depth_mm(ChainGroup(after_posers, stride), colliders, after, memo[n], mm, T).values():
+                np.maximum(depth_after, d, out=depth_after)
         for hand in handmap.sides:  # the palm: body joints, the same before and after
             palm = palm_depth_mm(posed, clip.skeleton, hand, [p.chain for p in posers], colliders, cfg)
             np.maximum(depth_before, palm, out=depth_before)

@@ -21,7 +21,8 @@ from usdhands.algorithms.interaction.finger_geometry import FingerChain
 from usdhands.algorithms.interaction.known_distances import ChainDistances, joint_cutoffs
 from usdhands.model.rotations import DEFAULT_EULER_ORDER, euler_deg_to_quat, quat_multiply, trs_to_xform
 
-__all__ = ["ChainPoser", "opening_weights", "clear_together", "least_openings", "JointsSeen"]
+__all__ = ["ChainPoser", "ChainGroup", "group_stride", "opening_weights", "clear_together", "least_openings",
+           "JointsSeen"]
 
 
 def opening_weights(u: np.ndarray, n: int) -> np.ndarray:
@@ -68,13 +69,15 @@ class ChainPoser:
     given_points: np.ndarray | None = None
     between: np.ndarray | None = None
 
-    def angles(self, base: np.ndarray, u: np.ndarray, via: np.ndarray | None = None) -> np.ndarray:
+    def angles(self, base: np.ndarray, u: np.ndarray, via: np.ndarray | None = None,
+               frames: np.ndarray | None = None) -> np.ndarray:
         """Euler angles ``(K, n, 3)`` degrees at path parameters ``u`` ``(K,)`` from ``base`` ``(K, n, 3)``.
 
         Without ``via`` the path opens ``base`` toward the rest pose (:func:`opening_weights`).
         With ``via`` ``(K, n, 3)`` (an IK pose within the limits, :meth:`ccd`) the first half
         of the path goes straight from ``base`` to ``via`` and the second half opens ``via``.
         ``u == 0`` returns ``base`` itself (not clamped); otherwise the path is clamped into the limits.
+        ``frames``: the rows' frames (unused here; :class:`ChainGroup` finds each row's chain by it).
         """
         base = np.asarray(base, dtype=np.float64)
         u = np.asarray(u, dtype=np.float64)
@@ -248,7 +251,7 @@ class ChainPoser:
         idx = np.nonzero(bad)[0]
         ones = np.ones(len(idx))
         v = None if via is None else via[idx]
-        open_ok = self.clear(colliders, frames[idx], self.angles(base[idx], ones, v), margin, resolution,
+        open_ok = self.clear(colliders, frames[idx], self.angles(base[idx], ones, v, frames[idx]), margin, resolution,
                              known=known, rows=rows[idx])
         u[idx] = 1.0
         resolved[idx[~open_ok]] = False
@@ -275,7 +278,7 @@ class ChainPoser:
                 hi_i = np.searchsorted(af, fb + every - 1, side="right")
                 cand = np.array([au[i:j].max() for i, j in zip(lo_i, hi_i)])
                 v = None if via is None else via[b_idx]
-                ok = self.clear(colliders, frames[b_idx], self.angles(base[b_idx], cand, v), margin, resolution,
+                ok = self.clear(colliders, frames[b_idx], self.angles(base[b_idx], cand, v, frames[b_idx]), margin, resolution,
                                 known=known, rows=rows[b_idx])
                 u[b_idx[ok]] = cand[ok]
                 rest = b_idx[~ok]
@@ -299,7 +302,7 @@ class ChainPoser:
                 break
             mid = 0.5 * (lo[live] + hi[live])
             ok = self.clear(colliders, frames[idx[live]], self.angles(base[idx[live]], mid,
-                                                                      None if v is None else v[live]),
+                                                                      None if v is None else v[live], frames[idx[live]]),
                             margin, resolution, known=known, rows=rows[idx[live]])
             hi[live] = np.where(ok, mid, hi[live])
             lo[live] = np.where(ok, lo[live], mid)
@@ -315,10 +318,90 @@ class ChainPoser:
         hi = np.array(blocked_u, dtype=np.float64)
         for _ in range(iterations):
             mid = 0.5 * (lo + hi)
-            ok = self.clear(colliders, frames, self.angles(base, mid, via), margin, resolution, known=known)
+            ok = self.clear(colliders, frames, self.angles(base, mid, via, frames), margin, resolution, known=known)
             lo = np.where(ok, mid, lo)
             hi = np.where(ok, hi, mid)
         return lo
+
+
+class ChainGroup:
+    """Several finger chains with the same number of joints as one :class:`ChainPoser` over virtual frames:
+    chain ``c`` at clip frame ``f`` is frame ``c * stride + f``, so one bisection, one clearance test
+    and one query a step serve them all (:meth:`ChainPoser.least_opening`, :meth:`ChainPoser.clear_below`
+    run on it as on one chain). Each row is posed by its own chain and searched alone, so every answer
+    is the one its chain gives alone, bit for bit.
+
+    Parameters
+    ----------
+    posers : list of ChainPoser
+        Chains of ``n`` joints each, in the same Euler order.
+    stride : int
+        At least the clip's frame count plus ``every - 1`` and a multiple of ``every`` (the bisection's
+        anchors are frames whose number is a multiple of ``every``, its neighbours within ``every - 1``:
+        :func:`group_stride`).
+    """
+
+    least_opening = ChainPoser.least_opening
+    _bisect = ChainPoser._bisect
+    clear_below = ChainPoser.clear_below
+
+    def __init__(self, posers: list, stride: int):
+        self.posers = list(posers)
+        self.stride = int(stride)
+
+    def frames_of(self, c: int, frames: np.ndarray) -> np.ndarray:
+        """The virtual frames of chain ``c`` at clip ``frames``."""
+        return c * self.stride + np.asarray(frames, dtype=np.int64)
+
+    def _split(self, frames: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """``(chain, rows, clip frames)`` of each chain among the virtual ``frames``."""
+        frames = np.asarray(frames, dtype=np.int64)
+        chain = frames // self.stride
+        out = []
+        for c in np.unique(chain):
+            rows = np.nonzero(chain == c)[0]
+            out.append((int(c), rows, frames[rows] - c * self.stride))
+        return out
+
+    def angles(self, base: np.ndarray, u: np.ndarray, via: np.ndarray | None = None,
+               frames: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`ChainPoser.angles`, each row by its chain (``frames``: the rows' virtual frames)."""
+        base = np.asarray(base, dtype=np.float64)
+        u = np.asarray(u, dtype=np.float64)
+        out = np.empty(base.shape)
+        for c, rows, _ in self._split(frames):
+            out[rows] = self.posers[c].angles(base[rows], u[rows], None if via is None else via[rows])
+        return out
+
+    def clear(self, colliders, frames: np.ndarray, angles: np.ndarray, margin: float, resolution: float,
+              first: int = 0, known: ChainDistances | None = None, rows: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`ChainPoser.clear` of each row by its chain, all in one test (``frames``: virtual; ``known``:
+        one memo row per virtual frame)."""
+        frames = np.asarray(frames, dtype=np.int64)
+        K = len(frames)
+        if K == 0:
+            return np.zeros(0, dtype=bool)
+        n = len(self.posers[0].chain.joints)
+        a, b = np.empty((K, n, 3)), np.empty((K, n, 3))
+        need = np.empty((K, n))
+        real = np.empty(K, dtype=np.int64)
+        for c, idx, f in self._split(frames):
+            poser = self.posers[c]
+            a[idx], b[idx] = poser.capsules(f, angles[idx])
+            need[idx] = poser.chain.radii + margin
+            real[idx] = f
+        a, b, need = a[:, first:], b[:, first:], need[:, first:]
+        if known is None:
+            return _capsules_clear(colliders, [(real, a, b, need)], resolution)[0]
+        lower, upper = known.axis_bounds(colliders, frames if rows is None else rows, real, a, b, need,
+                                         resolution, first)
+        return ((lower >= need - 0.5 * resolution) & (upper >= need)).all(axis=1)
+
+
+def group_stride(num_frames: int, every: int) -> int:
+    """A :class:`ChainGroup` stride for a clip of ``num_frames`` bisected on every ``every``-th frame."""
+    every = max(int(every), 1)
+    return -(-(num_frames + every) // every) * every
 
 
 def clear_together(posers: list, colliders, frames: list, angles: list, margin: float,

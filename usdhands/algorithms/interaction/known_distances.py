@@ -55,6 +55,14 @@ class ChainDistances:
         self.search = np.zeros((rows, joints - 1, 2))  # its lower and upper
         self.search_resolution = np.full((rows, joints - 1), np.nan)
 
+    def view(self, start: int, stop: int) -> "ChainDistances":
+        """Rows ``start`` to ``stop`` as a memo of their own (sharing this one's arrays: what either
+        measures, both know)."""
+        out = ChainDistances.__new__(ChainDistances)
+        for name in ("position", "value", "cutoff", "search_key", "search", "search_resolution"):
+            setattr(out, name, getattr(self, name)[start:stop])
+        return out
+
     def axis_bounds(self, colliders, rows: np.ndarray, frames: np.ndarray, a: np.ndarray, b: np.ndarray,
                     need: np.ndarray, resolution: float, first: int = 0,
                     find_depth: bool = False) -> tuple[np.ndarray, np.ndarray]:
