@@ -264,12 +264,16 @@ def test_rts_smoother_matches_a_per_curve_kalman_loop(T):
 
 
 def test_second_order_recursion_equals_lfilter_to_the_bit():
-    """The recursion behind the RTS smoother's steady stretch, compiled and in NumPy steps, is scipy's
-    lfilter, bit for bit (signed zeros, coefficients of the smoother and arbitrary ones, one column and many)."""
+    """The recursion behind the RTS smoother's steady stretch, compiled (numba's, and ahead of time where it
+    was built) and in NumPy steps, is scipy's lfilter, bit for bit (signed zeros, coefficients of the
+    smoother and arbitrary ones, one column and many)."""
     from scipy.signal import lfilter
 
     from usdhands.algorithms.interaction._recursion_kernel import second_order
     from usdhands.algorithms.interaction.smoothing import second_order_steps
+    from usdhands.compiled import kernel_module
+
+    built = kernel_module("algorithms.interaction._interaction_compiled")
 
     rng = np.random.default_rng(7)
     for n, C, a1, a2 in [(1801, 9, -1.8737, 0.8812), (5, 1, 0.3, -0.2), (400, 3, -1.999999, 0.9999991),
@@ -281,6 +285,8 @@ def test_second_order_recursion_equals_lfilter_to_the_bit():
         expected = lfilter([1.0], np.array([1.0, a1, a2]), x, axis=0, zi=zi)[0]
         assert second_order(x, a1, a2, zi).tobytes() == expected.tobytes()
         assert second_order_steps(x, a1, a2, zi).tobytes() == expected.tobytes()
+        if built is not None:
+            assert built.second_order(x, a1, a2, zi).tobytes() == expected.tobytes()
 
 
 def test_rts_smoother_on_many_curves_gives_each_its_own_answer_to_the_bit():

@@ -77,10 +77,15 @@ def test_sign_on_edges_and_on_shells_wound_inward_matches_trimesh(shape):
 
 @pytest.mark.parametrize("shape", ["cup", "mug"])
 def test_compiled_sign_and_morton_order_give_the_numpy_answers_bit_for_bit(shape):
-    """The compiled side test (_proximity_kernel) equals the NumPy one, and a batch queried in Morton
-    order equals its points queried one by one, on points near faces, on edges and on vertices, exactly
-    on them and off them, inside and out."""
+    """The compiled side tests (numba's _proximity_kernel, and the one compiled ahead of time where it was
+    built) equal the NumPy one, and a batch queried in Morton order equals its points queried one by one,
+    on points near faces, on edges and on vertices, exactly on them and off them, inside and out."""
     from usdhands.algorithms.interaction._proximity_kernel import closed_shell_signs
+    from usdhands.algorithms.interaction.proximity import _ahead_of_time_signs
+    from usdhands.compiled import kernel_module
+
+    built = kernel_module("algorithms.interaction._interaction_compiled")
+    twins = [closed_shell_signs] + ([_ahead_of_time_signs(built)] if built is not None else [])
 
     if shape == "mug" and not MUG.exists():
         pytest.skip("shared assets not present")
@@ -102,10 +107,12 @@ def test_compiled_sign_and_morton_order_give_the_numpy_answers_bit_for_bit(shape
         pts = np.ascontiguousarray(pts)
         d, face, closest = part.distance(pts)
         expected = part._closed_signed(pts, d, face, closest)
-        got, rest = closed_shell_signs(pts, closest, face, d, part.normals, V, F, part.neighbours, part.flat)
-        got[rest] = np.where(part._undecided_inside(pts[rest], face[rest], closest[rest], d[rest]), -d[rest], d[rest])
-        assert rest.any() and (expected < 0).any() and (expected > 0).any()
-        assert got.tobytes() == expected.tobytes()
+        for signs in twins:
+            got, rest = signs(pts, closest, face, d, part.normals, V, F, part.neighbours, part.flat)
+            got[rest] = np.where(part._undecided_inside(pts[rest], face[rest], closest[rest], d[rest]), -d[rest],
+                                 d[rest])
+            assert rest.any() and (expected < 0).any() and (expected > 0).any()
+            assert got.tobytes() == expected.tobytes()
         one_by_one = np.concatenate([part.distance(pts[i:i + 1])[0] for i in range(0, len(pts), 7)])
         assert one_by_one.tobytes() == d[::7].tobytes()  # batches of >= SORT_FROM points go in Morton order
 

@@ -1,13 +1,17 @@
 """The kernels compiled ahead of time: built from Cython when the package is installed (``setup.py``).
 
-Three modules, each the twin of a numba kernel module with the same functions, arguments
+Four modules, each the twin of a numba kernel module with the same functions, arguments
 and results to the bit:
 
 - ``algorithms.synthesis._search_compiled``: the synthesis search and one pair's warp
   (:mod:`usdhands.algorithms.synthesis._dtw_kernel`);
 - ``algorithms.synthesis._play_compiled``: playing, stitching and step-limiting the chosen
   fragments (:mod:`usdhands.algorithms.synthesis._play_kernel`);
-- ``formats._bvh_compiled``: reading BVH motion (:mod:`usdhands.formats._bvh_kernel`).
+- ``formats._bvh_compiled``: reading BVH motion (:mod:`usdhands.formats._bvh_kernel`);
+- ``algorithms.interaction._interaction_compiled``: the sign of a distance to a closed shell and the
+  RTS smoother's recursion (:mod:`usdhands.algorithms.interaction._proximity_kernel`,
+  :mod:`usdhands.algorithms.interaction._recursion_kernel`), which ``correct`` and ``synthesize --props``
+  run.
 
 A process that runs these never imports numba: nothing to start (numba's import, CPU target
 and cached kernels cost about 0.35 s of CPU a process, measured), one thread each where
@@ -30,7 +34,7 @@ __all__ = ["kernel_module", "ENABLED", "KERNEL_MODULES"]
 
 #: The compiled modules, by their names under ``usdhands``.
 KERNEL_MODULES = ("algorithms.synthesis._search_compiled", "algorithms.synthesis._play_compiled",
-                  "formats._bvh_compiled")
+                  "formats._bvh_compiled", "algorithms.interaction._interaction_compiled")
 #: ``False``: never use them (as an install without a C compiler does), for tests and comparisons;
 #: set from the environment variable ``USDHANDS_COMPILED_KERNELS=0`` (the processes a batch starts
 #: inherit it).

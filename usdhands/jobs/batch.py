@@ -578,7 +578,9 @@ def _warm_forkserver_process() -> None:
         _job_function("synthesize")
         cached_database(None)
         # where the kernels compiled ahead of time were built (imported here), the workers run them: no numba
-        if not all(kernel_module(name) is not None for name in KERNEL_MODULES):
+        # (the interaction's are not among those that decide it: without them its NumPy twins run)
+        if not all(kernel_module(name) is not None for name in KERNEL_MODULES
+                   if not name.startswith("algorithms.interaction.")):
             limit_steps_fast(np.zeros((2, 1)), np.zeros(1))
     freeze_at_exit()
 

@@ -7,7 +7,8 @@ the same formulas. Its dot products are summed x, y, z in order, where ``einsum`
 last bit otherwise; they only decide a sign against thresholds (``1e-12 * (1 + d)`` off the
 plane, ``1e-6`` in barycentric coordinates) and every answer is the distance igl measured, so the
 answers are the same (tests hold it to the NumPy code on points at faces, edges and vertices).
-Used where a kernel of the package already runs
+Its twin compiled ahead of time (``_interaction_compiled``, :mod:`usdhands.compiled`) runs where it
+was built; this one where it was not and a kernel of the package already runs
 (:func:`usdhands.jit.kernels_running`). Kept apart so importing the algorithms compiles nothing.
 """
 

@@ -4,8 +4,9 @@
 array, from a given state, with the very operations of ``scipy.signal.lfilter([1], [1, a1, a2],
 x, axis=0, zi=zi)`` (its transposed direct form II, the numerator padded with zeros), so the
 results are equal to the bit; tests hold it to ``lfilter``. It replaces ``lfilter`` so that a
-correction does not import ``scipy.signal`` (about 0.3 s of a fresh process). Used where a kernel
-of the package already runs (:func:`usdhands.jit.kernels_running`; loading numba and the kernel cost about as much as ``scipy.signal``); elsewhere
+correction does not import ``scipy.signal`` (about 0.3 s of a fresh process). Its twin compiled ahead
+of time (``_interaction_compiled``, :mod:`usdhands.compiled`) runs where it was built; this one where it
+was not and a kernel of the package already runs (:func:`usdhands.jit.kernels_running`; loading numba and the kernel cost about as much as ``scipy.signal``); elsewhere
 its NumPy twin :func:`usdhands.algorithms.interaction.smoothing.second_order_steps` runs.
 Kept apart so importing the algorithms compiles nothing.
 """

@@ -114,11 +114,10 @@ class _Part:
         d, face, closest = self.distance(p)
         if self.winding is not None:
             return np.where(self.winding.winding_number(p) > 0.5, -d, d)
-        if kernels_running():  # the same test compiled (_proximity_kernel), where the package's kernels run anyway
-            from usdhands.algorithms.interaction._proximity_kernel import closed_shell_signs
-
-            out, rest = closed_shell_signs(p, closest, face, d, self.normals, self.vertices, self.faces,
-                                           self.neighbours, self.flat)
+        signs = _compiled_side_test()
+        if signs is not None:  # the same test compiled
+            out, rest = signs(p, closest, face, d, self.normals, self.vertices, self.faces, self.neighbours,
+                              self.flat)
             if rest.any():
                 out[rest] = np.where(self._undecided_inside(p[rest], face[rest], closest[rest], d[rest]),
                                      -d[rest], d[rest])
@@ -239,6 +238,31 @@ class _Part:
             self._fwn = igl.FastWindingNumberBVH()
             self._fwn.init(self.vertices, self.faces, 2)
         return self._fwn.winding_number(np.ascontiguousarray(p)) > 0.5
+
+
+def _compiled_side_test():
+    """The compiled twin of the closed-shell side test this process runs, or None for the NumPy test: the one
+    compiled ahead of time where it was built (:mod:`usdhands.compiled`: nothing to start), else numba's
+    (:mod:`._proximity_kernel`) where a kernel of the package already runs (:func:`usdhands.jit.kernels_running`)."""
+    from usdhands.compiled import kernel_module
+
+    built = kernel_module("algorithms.interaction._interaction_compiled")
+    if built is not None:
+        return _ahead_of_time_signs(built)
+    if kernels_running():
+        from usdhands.algorithms.interaction._proximity_kernel import closed_shell_signs
+
+        return closed_shell_signs
+    return None
+
+
+def _ahead_of_time_signs(built):
+    """``closed_shell_signs`` of the module compiled ahead of time, taking ``flat`` as the numba kernel does
+    (bool; the compiled one reads its bytes)."""
+    def signs(p, closest, face, d, normals, vertices, faces, neighbours, flat):
+        return built.closed_shell_signs(p, closest, face, d, normals, vertices, faces, neighbours, flat.view(np.uint8))
+
+    return signs
 
 
 #: Vertices :meth:`MeshProximity.upper_distance` measures to (evenly through the used vertices

@@ -115,14 +115,20 @@ def rts_smooth(values: np.ndarray, fps: float, time_scale_s: float) -> np.ndarra
 
 def _recur(A: np.ndarray, u: tuple, x: tuple, start: int, stop: int) -> None:
     """Run ``x_t = A x_(t-1) + u_t`` for ``t`` in ``[start, stop)`` in place, as a second-order recursion on
-    each component with the arithmetic of ``scipy.signal.lfilter``: compiled where a kernel of the package
-    already runs (:func:`usdhands.jit.kernels_running`)
-    (:mod:`._recursion_kernel`), else :func:`second_order_steps` (the same bits).
+    each component with the arithmetic of ``scipy.signal.lfilter``: compiled ahead of time where it was built
+    (:mod:`usdhands.compiled`), else numba's where a kernel of the package already runs
+    (:func:`usdhands.jit.kernels_running`, :mod:`._recursion_kernel`), else :func:`second_order_steps`
+    (the same bits).
 
     ``A`` ``(2, 2)``; ``u`` and ``x``: the two components, ``(T, C)`` arrays (views allowed);
     ``x`` holds the states at ``start - 2`` and ``start - 1`` (``start >= 2``).
     """
-    if kernels_running():
+    from usdhands.compiled import kernel_module
+
+    built = kernel_module("algorithms.interaction._interaction_compiled")
+    if built is not None:
+        run = built.second_order
+    elif kernels_running():
         from usdhands.algorithms.interaction._recursion_kernel import second_order as run
     else:
         run = second_order_steps
