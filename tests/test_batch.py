@@ -274,6 +274,19 @@ def test_a_synthesize_worker_with_the_kernels_compiled_ahead_of_time_never_impor
     assert json.loads(done.stdout.splitlines()[-1]) == [False, False]
 
 
+def test_the_warm_forkserver_imports_what_a_clip_needs(sample_assets, tmp_path):
+    """After the warm forkserver's preload, a synthesize of a BVH clip imports no further module (each
+    worker's first clip then costs what the others do)."""
+    code = (
+        "import json, sys, usdhands\n"
+        "from usdhands.jobs import batch\n"
+        "batch._warm_forkserver_process()\n"
+        "before = set(sys.modules)\n"
+        f"usdhands.synthesize({str(sample_assets / 'conversation_bodyonly.bvh')!r}, {str(tmp_path / 'o.bvh')!r})\n"
+        "print(json.dumps(sorted(set(sys.modules) - before)))")
+    assert _run_fresh(code) == []
+
+
 def _run_fresh(code: str, **environ) -> object:
     """``code`` run by a fresh interpreter (its own forkserver) with the tests folder importable and
     ``environ`` added to its environment: the JSON of its last printed line."""

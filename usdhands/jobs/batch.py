@@ -200,12 +200,15 @@ def run_batch(inputs: Sequence[str | os.PathLike], options: BatchOptions,
 
         refuse_prop_options_without_props(job_options)
     extensions = ANIMATION_EXTENSIONS
+    # it loads while the inputs are listed and the outputs checked (where it loads no numba, whatever the
+    # batch's size), else while the outputs are checked and the pool or the cluster is made
+    warm = wants_warm_forkserver(options) and start_warm_forkserver(dask=options.scheduler is not None)
     pairs = []
     out = Path(options.out)
     for src, rel in collect_inputs(inputs, extensions):
         pairs.append((src, out / output_name(rel, options)))
-    # it loads while the outputs are checked and the pool or the cluster is made
-    warm = wants_warm_forkserver(options, len(pairs)) and start_warm_forkserver(dask=options.scheduler is not None)
+    if not warm and wants_warm_forkserver(options, len(pairs)):
+        warm = start_warm_forkserver(dask=options.scheduler is not None)
     if not pairs:
         named = [Path(p) for p in inputs]
         raise UsdHandsError(f"no input clips found ({', '.join(extensions)})",
@@ -523,14 +526,20 @@ def _warm_worker(job: str, job_options, clips_each: int) -> None:
 WARM_FORKSERVER_MODULE = "usdhands.jobs.batch_forkserver"
 
 
-def wants_warm_forkserver(options: BatchOptions, clips: int) -> bool:
-    """Whether a batch of ``clips`` clips forks its workers from the warm forkserver: it asked
+def wants_warm_forkserver(options: BatchOptions, clips: int | None = None) -> bool:
+    """Whether a batch forks its workers from the warm forkserver: it asked
     (:attr:`BatchOptions.warm_forkserver`), ``synthesize`` on the local pool or on a LocalCluster of
-    worker processes, and :data:`KERNEL_AT_START_CLIPS` clips or more a worker (a smaller batch would
+    worker processes, and either the kernels compiled ahead of time are built (the forkserver then
+    loads no numba: any batch gains; decided before its inputs are listed, ``clips`` None) or,
+    without them, ``clips`` reaches :data:`KERNEL_AT_START_CLIPS` a worker (a smaller batch would
     wait for numba's ~0.5 s start that its workers, searching in NumPy, never need)."""
-    return (options.warm_forkserver and options.job == "synthesize"
-            and (options.scheduler is None or (options.scheduler == "local" and options.dask_processes))
-            and options.workers >= 1 and clips >= KERNEL_AT_START_CLIPS * options.workers)
+    from usdhands.compiled import KERNEL_MODULES, kernel_module
+
+    if not (options.warm_forkserver and options.job == "synthesize" and options.workers >= 1
+            and (options.scheduler is None or (options.scheduler == "local" and options.dask_processes))):
+        return False
+    built = all(kernel_module(name) is not None for name in KERNEL_MODULES)
+    return built if clips is None else not built and clips >= KERNEL_AT_START_CLIPS * options.workers
 
 
 def start_warm_forkserver(dask: bool = False) -> bool:
@@ -574,9 +583,11 @@ def _warm_forkserver_process() -> None:
         from usdhands.algorithms.synthesis.output_warp import limit_steps_fast
         from usdhands.compiled import KERNEL_MODULES, kernel_module
         from usdhands.jobs.inputs import cached_database
+        from usdhands.jobs.synthesis import import_what_a_clip_needs
 
         _job_function("synthesize")
         cached_database(None)
+        import_what_a_clip_needs()
         # where the kernels compiled ahead of time were built (imported here), the workers run them: no numba
         # (the interaction's are not among those that decide it: without them its NumPy twins run)
         if not all(kernel_module(name) is not None for name in KERNEL_MODULES

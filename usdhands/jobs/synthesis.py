@@ -250,6 +250,35 @@ def synthesize(source: str | os.PathLike, output: str | os.PathLike, options: Sy
                             tuple(added), tuple(warnings))
 
 
+def import_what_a_clip_needs(extensions=(".bvh",)) -> None:
+    """Import now what one :func:`synthesize` of a clip otherwise imports on its way (each function
+    imports where it needs, so that one command loads no more than it uses): the synthesis and format
+    modules, the format handlers of ``extensions``, NumPy's lazily loaded parts it touches.
+
+    For a process that forks many workers (``usdhands batch``'s warm forkserver), so that each worker's
+    first clip costs what the others do. ``tests/test_compiled_kernels.py`` checks that a synthesize
+    of a BVH clip imports nothing more after it.
+    """
+    import numpy as np
+
+    import usdhands.algorithms.synthesis.synthesize  # noqa: F401
+    import usdhands.formats.hands  # noqa: F401
+    import usdhands.jobs.plots.synthesis  # noqa: F401
+    import usdhands.jobs.props  # noqa: F401
+    import usdhands.model.hand_detection  # noqa: F401
+    import usdhands.model.provenance  # noqa: F401
+    import usdhands.model.units  # noqa: F401
+    from usdhands.algorithms.synthesis import _dtw_numpy, feature_sets, segment_cost, stitching  # noqa: F401
+    from usdhands.compiled import KERNEL_MODULES, kernel_module
+    from usdhands.formats.registry import handler_for
+
+    for name in KERNEL_MODULES:
+        kernel_module(name)
+    for ext in extensions:
+        handler_for(Path("clip" + ext))
+    np.ma  # noqa: B018  (np.unique loads it on first use)
+
+
 def _no_progress(done: int, total: int, what: str = "") -> None:
     pass
 
