@@ -18,6 +18,8 @@ from usdhands.algorithms.synthesis import _dtw_kernel, _dtw_numpy, _play_kernel,
 from usdhands.compiled import KERNEL_MODULES, kernel_module
 from usdhands.formats import _bvh_kernel
 
+from test_dtw_numpy_twin import _segments  # noqa: E402  (consecutive random segments)
+
 BUILT = {name: kernel_module(name) for name in KERNEL_MODULES}
 search_compiled = BUILT["algorithms.synthesis._search_compiled"]
 play_compiled = BUILT["algorithms.synthesis._play_compiled"]
@@ -38,16 +40,6 @@ def test_kernel_module_names_only_the_compiled_modules(monkeypatch):
         kernel_module("formats.bvh")
     monkeypatch.setattr(usdhands.compiled, "ENABLED", False)
     assert kernel_module("formats._bvh_compiled") is None
-
-
-def _segments(rng, total, lo, hi):
-    out, s = [], 0
-    while True:
-        n = int(rng.integers(lo, hi))
-        if s + n > total:
-            return np.array(out, dtype=np.int64).reshape(-1, 2)
-        out.append((s, s + n))
-        s += n
 
 
 def _search(search, qf, qb, qg, df, ds, dg, k, lf, band, bound):
