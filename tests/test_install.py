@@ -82,7 +82,7 @@ def test_install_then_editable_install_keeps_a_working_command(tmp_path):
     where = _run([python, "-c", "import usdhands; print(usdhands.__file__)"], env=env, cwd=work).stdout.strip()
     assert Path(where).resolve() == (installed / "__init__.py").resolve()
     if compiler:  # the install built the kernels compiled ahead of time, into the installed package
-        assert _run([python, "-c", BUILT], env=env, cwd=work).stdout.split() == [str(installed)] * 3
+        assert _run([python, "-c", BUILT], env=env, cwd=work).stdout.split() == [str(installed)] * KERNELS
 
     sample = ROOT / "sample_assets" / "conversation_bodyonly.bvh"
     out = _run([bindir / "usdhands", "synthesize", sample, "-o", work / "out.bvh"], env=env, cwd=work)
@@ -104,9 +104,11 @@ def test_install_then_editable_install_keeps_a_working_command(tmp_path):
     where = _run([python, "-c", "import usdhands; print(usdhands.__file__)"], env=env, cwd=work).stdout.strip()
     assert Path(where).resolve() == (src / "usdhands" / "__init__.py").resolve()
     if compiler:  # built again, in place
-        assert _run([python, "-c", BUILT], env=env, cwd=work).stdout.split() == [str(src / "usdhands")] * 3
+        assert _run([python, "-c", BUILT], env=env, cwd=work).stdout.split() == [str(src / "usdhands")] * KERNELS
 
 
+#: How many kernel modules are compiled ahead of time (usdhands.compiled.KERNEL_MODULES)
+KERNELS = len(__import__("usdhands.compiled", fromlist=["KERNEL_MODULES"]).KERNEL_MODULES)
 #: Prints, for each kernel module compiled ahead of time, the package folder it was loaded from
 BUILT = ("from pathlib import Path\n"
          "from usdhands.compiled import KERNEL_MODULES, kernel_module\n"
