@@ -533,13 +533,20 @@ def wants_warm_forkserver(options: BatchOptions, clips: int | None = None) -> bo
     loads no numba: any batch gains; decided before its inputs are listed, ``clips`` None) or,
     without them, ``clips`` reaches :data:`KERNEL_AT_START_CLIPS` a worker (a smaller batch would
     wait for numba's ~0.5 s start that its workers, searching in NumPy, never need)."""
-    from usdhands.compiled import KERNEL_MODULES, kernel_module
-
     if not (options.warm_forkserver and options.job == "synthesize" and options.workers >= 1
             and (options.scheduler is None or (options.scheduler == "local" and options.dask_processes))):
         return False
-    built = all(kernel_module(name) is not None for name in KERNEL_MODULES)
+    built = _synthesis_kernels_built()
     return built if clips is None else not built and clips >= KERNEL_AT_START_CLIPS * options.workers
+
+
+def _synthesis_kernels_built() -> bool:
+    """Whether the kernels compiled ahead of time that a synthesize worker runs were built (the
+    interaction's are not among them: without those, its NumPy twins run, never numba)."""
+    from usdhands.compiled import KERNEL_MODULES, kernel_module
+
+    return all(kernel_module(name) is not None for name in KERNEL_MODULES
+               if not name.startswith("algorithms.interaction."))
 
 
 def start_warm_forkserver(dask: bool = False) -> bool:
@@ -581,17 +588,13 @@ def _warm_forkserver_process() -> None:
         import numpy as np
 
         from usdhands.algorithms.synthesis.output_warp import limit_steps_fast
-        from usdhands.compiled import KERNEL_MODULES, kernel_module
         from usdhands.jobs.inputs import cached_database
         from usdhands.jobs.synthesis import import_what_a_clip_needs
 
         _job_function("synthesize")
         cached_database(None)
-        import_what_a_clip_needs()
-        # where the kernels compiled ahead of time were built (imported here), the workers run them: no numba
-        # (the interaction's are not among those that decide it: without them its NumPy twins run)
-        if not all(kernel_module(name) is not None for name in KERNEL_MODULES
-                   if not name.startswith("algorithms.interaction.")):
+        import_what_a_clip_needs()  # the kernels compiled ahead of time among them
+        if not _synthesis_kernels_built():  # else the workers run those: no numba
             limit_steps_fast(np.zeros((2, 1)), np.zeros(1))
     freeze_at_exit()
 

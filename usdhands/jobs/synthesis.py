@@ -256,7 +256,7 @@ def import_what_a_clip_needs(extensions=(".bvh",)) -> None:
     modules, the format handlers of ``extensions``, NumPy's lazily loaded parts it touches.
 
     For a process that forks many workers (``usdhands batch``'s warm forkserver), so that each worker's
-    first clip costs what the others do. ``tests/test_compiled_kernels.py`` checks that a synthesize
+    first clip costs what the others do. ``tests/test_batch.py`` checks that a synthesize
     of a BVH clip imports nothing more after it.
     """
     import numpy as np
