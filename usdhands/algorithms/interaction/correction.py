@@ -196,12 +196,13 @@ def _reachable(clip: Clip, poser: ChainPoser, colliders, reach: float) -> np.nda
 
 
 def _near_posed(poser: ChainPoser, posed: FingersPosed, colliders, reach: float,
-                candidates: np.ndarray) -> np.ndarray:
-    """:func:`_near_frames` of the chain as ``posed`` gives it, posed only at ``candidates`` (the frames
-    :func:`_reachable` with the same ``reach`` finds; no other frame can be near)."""
+                candidates: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
+    """:func:`_near_frames` of the chain as ``posed`` gives it, posed only at ``candidates`` (frames that
+    include every frame :func:`_reachable` with the same or a smaller ``reach`` finds; no other frame can
+    be near); ``points``: the chain's :func:`_given_points` at ``candidates`` when the caller has them."""
     if len(candidates) == 0:
         return candidates
-    pts = _given_points(poser.chain, posed, candidates)
+    pts = _given_points(poser.chain, posed, candidates) if points is None else points
     r = float(poser.chain.radii.max()) + reach
     return candidates[colliders.bbox_gap(candidates, pts.min(axis=1) - r, pts.max(axis=1) + r) <= 0]
 
@@ -487,12 +488,15 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
     # that their bisections and smoothing run in step (ChainGroup)
     near_of = {}
     reachable = {}  # per chain near a collider, the frames where some pose of it could touch (with the margin)
+    given = {}  # per chain near a collider, its joints in the pose given at those frames (the report's too)
     for poser in posers:
         candidates = _reachable(clip, poser, colliders, margin)
-        near = _near_posed(poser, posed, colliders, margin, candidates)
+        points = _given_points(poser.chain, posed, candidates) if len(candidates) else None
+        near = _near_posed(poser, posed, colliders, margin, candidates, points)
         if len(near):
             near_of[poser.chain.name] = near
             reachable[poser.chain.name] = candidates
+            given[poser.chain.name] = points
     stride = group_stride(T, BISECT_EVERY)
     by_size: dict[int, list[ChainPoser]] = {}
     for poser in posers:
@@ -598,8 +602,8 @@ def correct_clip(clip: Clip, handmap: HandMap, colliders, *, margin_mm: float = 
         for n, ps in by_size.items():  # each size's chains measured together, before and then after
             before, after, after_posers = {}, {}, list(ps)
             for c, p in enumerate(ps):
-                candidates = _reachable(clip, p, colliders, 0.0)
-                frames = _near_posed(p, posed, colliders, 0.0, candidates)
+                candidates = reachable[p.chain.name]  # with the margin: all that can be near at 0
+                frames = _near_posed(p, posed, colliders, 0.0, candidates, given[p.chain.name])
                 before[c] = (frames, input_angles[p.chain.name][frames])
                 if p.chain.name in corrected:
                     after_posers[c] = _poser(out, p.chain, posed_out, given=False)
