@@ -11,8 +11,9 @@ Measured in the same run:
 
 And ``synthesize --props`` against plain synthesis of the same 60 s clip (the bundled
 database; library calls: synthesis with the proximity cuts and the collision term, then the
-correction of the result; and the synthesize job end to end, in both engine states: the
-search in NumPy as one command runs it, and with the kernels loaded), target within 2x.
+correction of the result; and the synthesize job end to end, in both engine states: without
+numba, as one command and a batch worker run it (the kernels compiled ahead of time where the
+install built them, else NumPy), and with numba's kernels loaded), target within 2x.
 
 Run: ``python benchmarks/bench_interaction.py [--seconds S] [--naive-frames N] [--no-synthesis]``.
 """
@@ -72,8 +73,8 @@ def main() -> None:
 
     from usdhands.algorithms.synthesis import segment_cost
 
-    # every synthesis here searches in NumPy, as one command does, until the kernel's row loads it
-    # (otherwise the process loads it after 20 M cells, in the middle of some comparison)
+    # no synthesis here loads numba, as one command does not, until the last row loads it (without the
+    # kernels compiled ahead of time the process would load it after 20 M NumPy cells, mid-comparison)
     segment_cost.NUMPY_SEARCH_PROCESS_CELLS = float("inf")
 
     clip = grasping_clip(args.seconds)
@@ -155,10 +156,10 @@ def _timed(fn, repeat: int = 1) -> tuple[dict, object]:
 
 def synthesize_job_times(clip, mug, repeat: int = 5) -> dict:
     """Seconds (wall and CPU, medians of ``repeat`` runs alternating the two) of the synthesize job on the
-    clip written as .glb, without and with the mug as an OBJ prop, ``{state: (plain, props)}``: first with
-    the search in NumPy (as one ``usdhands synthesize`` of a clip runs it: numba is not loaded, so neither
-    are the interaction's compiled side test and recursion), then with the search kernel loaded (a batch
-    worker, a library user synthesizing many clips: the interaction's kernels run too).
+    clip written as .glb, without and with the mug as an OBJ prop, ``{state: (plain, props)}``: first
+    without numba, as one ``usdhands synthesize`` of a clip and a batch worker run it (the search and the
+    interaction's kernels compiled ahead of time where the install built them, else the NumPy twins),
+    then with numba's search kernel loaded (a process that searched beyond the compiled search's size).
 
     Both jobs of a pair run in the same state: a process loads the kernel once it has searched
     ``NUMPY_SEARCH_PROCESS_CELLS`` in NumPy, so timing all plain runs and then all ``--props`` runs
@@ -181,8 +182,8 @@ def synthesize_job_times(clip, mug, repeat: int = 5) -> dict:
         trimesh.Trimesh(np.asarray(mug.vertices) * metres, np.asarray(mug.faces), process=False).export(prop)
         jobs = {"plain": lambda: synthesize(src, Path(tmp) / "plain.glb"),
                 "props": lambda: synthesize(src, Path(tmp) / "props.glb", SynthesizeOptions(props=(prop,)))}
-        for state in ("search in NumPy (one command)", "kernels loaded (batch worker)"):
-            if state.startswith("kernels"):
+        for state in ("no numba (one command, batch worker)", "numba's kernels loaded"):
+            if state.startswith("numba"):
                 segment_cost.load_search_kernel()
             for job in jobs.values():
                 job()  # the database, the first query's set-up, outside the timing
