@@ -150,6 +150,7 @@ class InteractionTerms:
         N, k = candidates.shape
         out = np.zeros((N, k))
         rows, frames, fragments = [], [], []
+        curves, picks = {}, {}  # each candidate segment's curves, each (length, span)'s sampled rows: once
         for i in range(N):
             q0, q1 = int(bounds[i]), int(bounds[i + 1])
             if not self.near[q0:q1].any():
@@ -158,24 +159,29 @@ class InteractionTerms:
             at = np.unique(np.round(np.linspace(0, n - 1, min(n, max(self.samples, -(-n // self.stride))))))
             at = at.astype(np.int64)
             for j in range(k):
-                if candidates[i, j] < 0:
+                c = int(candidates[i, j])
+                if c < 0:
                     continue
-                seg = self.fingers(int(candidates[i, j]))
-                stretch = np.round(np.linspace(0, len(seg) - 1, q1 - q0)).astype(np.int64)
+                seg = curves.get(c)
+                if seg is None:
+                    seg = curves[c] = self.fingers(c)
+                pick = picks.get((len(seg), n))
+                if pick is None:
+                    pick = picks[len(seg), n] = np.round(np.linspace(0, len(seg) - 1, n)).astype(np.int64)[at]
                 rows.append((i, j))
                 frames.append(q0 + at)
-                fragments.append(seg[stretch[at]])
+                fragments.append(seg[pick])
         if not rows:
             return out
         frames_all = np.concatenate(frames)
         D = np.concatenate(fragments)
         D_star = self.corrected(frames_all, D)
         m = max(int(np.count_nonzero(np.any(D != 0, axis=0))), 1)
+        diff = (D - D_star + 180.0) % 360.0 - 180.0
         pos = 0
         for (i, j), f in zip(rows, frames):
             n = len(f)
-            diff = (D[pos:pos + n] - D_star[pos:pos + n] + 180.0) % 360.0 - 180.0
-            out[i, j] = self.weight * float((diff ** 2).sum()) / (n * m)
+            out[i, j] = self.weight * float((diff[pos:pos + n] ** 2).sum()) / (n * m)
             pos += n
         return out
 
