@@ -1,7 +1,8 @@
 """Build of usdhands' kernels compiled ahead of time (Cython); everything else is in pyproject.toml.
 
 The kernels a batch worker or a one-clip command runs (the synthesis search, playing and
-stitching the chosen fragments, reading BVH motion) are compiled here, at install, so
+stitching the chosen fragments, reading BVH motion, the interaction's side test and smoother
+recursion; :mod:`usdhands.compiled`) are compiled here, at install, so
 that a process using them never starts numba (about 0.35 s of CPU a process). They are
 optional: where no C compiler is found, the install goes on and the package runs the
 numba and NumPy twins of the same kernels (the same results).

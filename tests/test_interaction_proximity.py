@@ -81,11 +81,10 @@ def test_compiled_sign_and_morton_order_give_the_numpy_answers_bit_for_bit(shape
     built) equal the NumPy one, and a batch queried in Morton order equals its points queried one by one,
     on points near faces, on edges and on vertices, exactly on them and off them, inside and out."""
     from usdhands.algorithms.interaction._proximity_kernel import closed_shell_signs
-    from usdhands.algorithms.interaction.proximity import _ahead_of_time_signs
     from usdhands.compiled import kernel_module
 
     built = kernel_module("algorithms.interaction._interaction_compiled")
-    twins = [closed_shell_signs] + ([_ahead_of_time_signs(built)] if built is not None else [])
+    twins = [closed_shell_signs] + ([built.closed_shell_signs] if built is not None else [])
 
     if shape == "mug" and not MUG.exists():
         pytest.skip("shared assets not present")

@@ -99,9 +99,10 @@ class BatchOptions:
     dask_processes : bool
         ``scheduler="local"``: worker processes (True) or threads of this process (False, for tests).
     warm_forkserver : bool
-        ``synthesize`` on the local pool or on a LocalCluster of worker processes, 20 clips or more a
-        worker: start this process's multiprocessing forkserver at once with synthesis, the bundled
-        database and numba loaded (and Dask, for the LocalCluster: :func:`start_warm_forkserver`), so
+        ``synthesize`` on the local pool or on a LocalCluster of worker processes
+        (:func:`wants_warm_forkserver`): start this process's multiprocessing forkserver at once with
+        synthesis, the bundled database and the kernels compiled ahead of time loaded (numba where
+        those were not built; and Dask, for the LocalCluster: :func:`start_warm_forkserver`), so
         that the workers fork from it warm. It changes the
         process's forkserver for the rest of its life: for a process that runs batch and nothing
         else (the command line sets it); library callers keep False.
@@ -511,13 +512,13 @@ def _warm_worker(job: str, job_options, clips_each: int) -> None:
     with contextlib.suppress(ImportError, AttributeError):  # a failing import is each clip's error
         _job_function(job)
     if job == "synthesize":
-        from usdhands.algorithms.synthesis.segment_cost import compiled_search_built, load_search_kernel
+        from usdhands.algorithms.synthesis.segment_cost import load_search_kernel
         from usdhands.jobs.inputs import cached_database
 
         with contextlib.suppress(UsdHandsError):
             cached_database(getattr(job_options, "db", None))
         # never in the caller's process; never where the kernels compiled ahead of time search
-        if _own_worker_process and clips_each >= KERNEL_AT_START_CLIPS and not compiled_search_built():
+        if _own_worker_process and clips_each >= KERNEL_AT_START_CLIPS and not _synthesis_kernels_built():
             _one_kernel_thread()  # Dask warms its workers on another thread than their tasks'
             load_search_kernel()
 
@@ -554,9 +555,9 @@ def start_warm_forkserver(dask: bool = False) -> bool:
     (:func:`_warm_forkserver_process`) and, with ``dask``, Dask's ``distributed`` for the worker
     processes of a LocalCluster (:func:`_run_dask`); False where there is no forkserver (the pool spawns).
 
-    The pool's workers then fork from a process that has imported synthesis and loaded numba,
-    its CPU target and a kernel, instead of each importing and loading them after it starts;
-    the forkserver loads while the batch process checks its outputs. A forkserver already
+    The pool's workers then fork from a process that has imported synthesis and loaded its kernels
+    (:func:`_warm_forkserver_process`), instead of each importing and loading them after it starts;
+    the forkserver loads while the batch process lists its inputs and checks its outputs. A forkserver already
     running in this process keeps what it has (the workers then warm themselves, as without).
     The preload stays set for this process's forkserver: see :attr:`BatchOptions.warm_forkserver`.
     """

@@ -15,10 +15,12 @@ import numpy as np
 
 def closed_shell_signs(const double[:, ::1] p, const double[:, ::1] closest, const int64_t[::1] face,
                        const double[::1] d, const double[:, ::1] normals, const double[:, ::1] vertices,
-                       const int64_t[:, ::1] faces, const int64_t[:, ::1] neighbours, const unsigned char[::1] flat):
+                       const int64_t[:, ::1] faces, const int64_t[:, ::1] neighbours, flat):
     """:func:`usdhands.algorithms.interaction._proximity_kernel.closed_shell_signs`: signed distances ``(N,)``
-    and whether each is left undecided ``(N,)`` bool."""
+    and whether each is left undecided ``(N,)`` bool (``flat``: the faces without a usable normal, bool,
+    as the numba kernel takes it)."""
     cdef Py_ssize_t n = p.shape[0], i
+    cdef const unsigned char[::1] is_flat = np.asarray(flat, dtype=np.bool_).view(np.uint8)
     out_arr = np.empty(n)
     undecided_arr = np.zeros(n, dtype=np.bool_)
     cdef double[::1] out = out_arr
@@ -65,14 +67,14 @@ def closed_shell_signs(const double[:, ::1] p, const double[:, ::1] closest, con
             on2 = w <= 1e-6
             count = <int>on0 + <int>on1 + <int>on2
             di = d[i]
-            decided = count == 0 and fabs(side) > 1e-12 * (1.0 + di) and not flat[f]
+            decided = count == 0 and fabs(side) > 1e-12 * (1.0 + di) and not is_flat[f]
             inside = side < 0
             if count == 1 and di > 0:
                 k = 0 if on0 else (1 if on1 else 2)
                 g = neighbours[f, k]
                 s = r0 * (normals[f, 0] + normals[g, 0]) + r1 * (normals[f, 1] + normals[g, 1]) + \
                     r2 * (normals[f, 2] + normals[g, 2])
-                if fabs(s) > 1e-12 * (1.0 + di) and not flat[f] and not flat[g]:
+                if fabs(s) > 1e-12 * (1.0 + di) and not is_flat[f] and not is_flat[g]:
                     decided = True
                     inside = s < 0
             if not decided and di > 0:

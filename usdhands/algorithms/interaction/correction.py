@@ -260,33 +260,17 @@ def penetration_depth_mm(clip: Clip, posers: list[ChainPoser], colliders, resolu
     return depth
 
 
-def _chain_depth_mm(clip: Clip, poser: ChainPoser, colliders, resolution_mm: float = 0.05,
-                    known: ChainDistances | None = None, angles: np.ndarray | None = None,
-                    frames: np.ndarray | None = None) -> np.ndarray:
-    """Deepest penetration of one chain's capsules per frame, ``(T,)`` mm (:func:`penetration_depth_mm`);
-    ``known``: what was measured on the chain, one row per frame (the same depths, fewer queries);
-    ``angles``: the chain's :func:`finger_angles` when the caller has them; ``frames``: the chain's
-    :func:`_near_frames` at reach 0 when the caller has them."""
+def _chain_depth_mm(clip: Clip, poser: ChainPoser, colliders, resolution_mm: float = 0.05) -> np.ndarray:
+    """Deepest penetration of one chain's capsules per frame, ``(T,)`` mm (:func:`penetration_depth_mm`):
+    :func:`_group_depth_mm` of the chain alone at its :func:`_near_frames`."""
+    frames = _near_frames(poser, colliders, 0.0)
+    angles = _chain_angles(clip, poser.chain)[frames] if len(frames) else None
     mm = 0.001 / clip.skeleton.meters_per_unit
-    depth = np.zeros(clip.num_frames)
-    frames = _near_frames(poser, colliders, 0.0) if frames is None else frames
-    if len(frames) == 0:
-        return depth
-    angles = _chain_angles(clip, poser.chain) if angles is None else angles
-    a, b = poser.capsules(frames, angles[frames])
-    K, n = a.shape[:2]
-    need = np.tile(poser.chain.radii, (K, 1))
-    if known is not None:
-        lower, _ = known.axis_bounds(colliders, frames, frames, a, b, need, resolution_mm * mm, find_depth=True)
-    else:
-        lower, _ = axis_clearance(colliders, np.repeat(frames, n), a.reshape(-1, 3), b.reshape(-1, 3),
-                                  need.reshape(-1), resolution_mm * mm, find_depth=True)
-        lower = lower.reshape(K, n)
-    depth[frames] = np.maximum(need - lower, 0.0).max(axis=1) / mm
-    return depth
+    group = ChainGroup([poser], group_stride(clip.num_frames, 1))
+    return _group_depth_mm(group, colliders, {0: (frames, angles)}, None, mm, clip.num_frames, resolution_mm)[0]
 
 
-def _group_depth_mm(group: ChainGroup, colliders, items: dict, known: ChainDistances, mm: float, T: int,
+def _group_depth_mm(group: ChainGroup, colliders, items: dict, known: ChainDistances | None, mm: float, T: int,
                     resolution_mm: float = 0.05) -> dict:
     """:func:`_chain_depth_mm` of the chains of ``group`` in one search: ``items`` maps a chain's index to
     its near frames ``(K,)`` and angles there ``(K, n, 3)``; ``known``: the group's memo (rows

@@ -248,21 +248,12 @@ def _compiled_side_test():
 
     built = kernel_module("algorithms.interaction._interaction_compiled")
     if built is not None:
-        return _ahead_of_time_signs(built)
+        return built.closed_shell_signs
     if kernels_running():
         from usdhands.algorithms.interaction._proximity_kernel import closed_shell_signs
 
         return closed_shell_signs
     return None
-
-
-def _ahead_of_time_signs(built):
-    """``closed_shell_signs`` of the module compiled ahead of time, taking ``flat`` as the numba kernel does
-    (bool; the compiled one reads its bytes)."""
-    def signs(p, closest, face, d, normals, vertices, faces, neighbours, flat):
-        return built.closed_shell_signs(p, closest, face, d, normals, vertices, faces, neighbours, flat.view(np.uint8))
-
-    return signs
 
 
 #: Vertices :meth:`MeshProximity.upper_distance` measures to (evenly through the used vertices

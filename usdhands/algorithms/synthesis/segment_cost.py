@@ -54,7 +54,7 @@ from usdhands.compiled import kernel_module
 
 __all__ = [
     "weight_features", "band_window", "dtw_align", "dtw_align_fast", "dtw_align_many", "lb_keogh", "knn_segments",
-    "SearchResult", "load_search_kernel", "compiled_search_built",
+    "SearchResult", "load_search_kernel",
 ]
 
 
@@ -358,24 +358,19 @@ def load_search_kernel() -> None:
     with it (:func:`~usdhands.algorithms.synthesis.output_warp.play_kernels`).
 
     For a process that will synthesize many clips (a batch worker, at its start) where the
-    kernels compiled ahead of time were not built (:func:`compiled_search_built`): otherwise
+    kernels compiled ahead of time were not built (:mod:`usdhands.compiled`): otherwise
     its first :data:`NUMPY_SEARCH_PROCESS_CELLS` cells are searched in NumPy (about 45 of the
     batch benchmark's clips at 2.5 times the kernel's CPU, paid again by every worker). The
     results are the same either way. Costs about 0.3 s (importing numba, loading the kernel).
     """
     one = np.zeros((2, 1))
-    # "keogh" always runs in a compiled kernel; the bound is an int argument, so this is the
-    # signature of every search (float64 and int64 arrays made here, as knn_segments makes them)
+    # the signature of every search: the bound is an int argument, the arrays float64 and int64 as
+    # knn_segments makes them
     from usdhands.algorithms.synthesis import _dtw_kernel
 
     qb = np.array([[0, 2]], dtype=np.int64)
     _dtw_kernel.search(one, qb, np.array([-1], dtype=np.int64), one, qb, np.array([-2], dtype=np.int64), 1, 1.5, 1.0, BOUNDS["keogh"],
                        np.full((1, 1), -1, dtype=np.int64), np.full((1, 1), np.inf), np.zeros((1, 4), dtype=np.int64))
-
-
-def compiled_search_built() -> bool:
-    """Whether the search kernel compiled ahead of time is there (:mod:`usdhands.compiled`)."""
-    return kernel_module("algorithms.synthesis._search_compiled") is not None
 
 
 def _search_kernel(query_bounds: np.ndarray, db_segments: np.ndarray, length_factor: float, band: float,
