@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from usdhands.formats.props import _clean, _read_plain_obj
+from usdhands.formats.props import _clean
 
 ROOT = Path(__file__).resolve().parent.parent
 ASSETS = ROOT.parent / "shared" / "assets"
