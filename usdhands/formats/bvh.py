@@ -79,7 +79,7 @@ from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats._bvh_numpy_motion import parse_rows as parse_motion_rows
 from usdhands.formats.fixed_point_text import format_rows_6f
 from usdhands.model.asset import Asset
-from usdhands.model.clip import Clip
+from usdhands.model.clip import Clip, clip_size_problem
 from usdhands.model.rotations import quat_identity, quat_to_euler_deg, unwrap_deg
 from usdhands.model.skeleton import Skeleton
 
@@ -798,6 +798,11 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
                   up_axis="Y", name=path.stem)
     values = np.ascontiguousarray(bvh.values, dtype=np.float64)
     T = values.shape[0]
+    rate = _fps(bvh.frame_time)
+    n = T if fps is None or T < 2 else int(np.floor((T - 1) / rate * fps + 1e-6)) + 1  # after resampling
+    too_big = clip_size_problem(max(T, n), J, T * sum(1 for j in bvh.joints if j.channels))
+    if too_big:  # before the clip's arrays are allocated (a line of text per frame, but joints without channels)
+        raise AssetReadError(too_big, path=path)
     rot = np.empty((T, J, 4))  # arrays that own their memory: the clip keeps them (see below)
     trans = np.empty((T, J, 3))
     layout = _ChannelLayout(bvh.joints)
@@ -812,7 +817,7 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     scales = np.ones((T, J, 3))  # the rest scales (BVH has none): cheaper made here than broadcast and copied
     for a in (rot, trans, scales):
         a.setflags(write=False)  # made here and handed over: the clip keeps them without a copy
-    clip = Clip(sk, _fps(bvh.frame_time), rot, trans, scales, name=path.stem)
+    clip = Clip(sk, rate, rot, trans, scales, name=path.stem)
     if fps is not None and T:
         clip = clip.resample(fps)
     return Asset(str(path), (sk,), (clip,), ())

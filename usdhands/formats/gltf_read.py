@@ -33,7 +33,7 @@ from usdhands.errors import AssetReadError
 from usdhands.formats.gltf_container import GltfFile, load_gltf
 from usdhands.formats.gltf_materials import read_materials
 from usdhands.model.asset import Asset, BlendShape, BlendShapeWeights, SkinnedMesh
-from usdhands.model.clip import Clip
+from usdhands.model.clip import Clip, clip_size_problem
 from usdhands.model.provenance import provenance_record
 from usdhands.model.rotations import quat_slerp, trs_to_xform, xform_to_trs
 from usdhands.model.skeleton import Skeleton
@@ -649,9 +649,15 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
         raise doc.error(f"key times span {t1 - t0:g} s: over {MAX_FRAMES:g} frames at {rate:g} fps",
                         f"animations[{anim_index}]")
     n = int(np.floor((t1 - t0) * rate + 1e-3)) + 1
-    at = t0 + np.arange(n) / rate
     sk = binding.skeleton
     J = sk.num_joints
+    held: dict[int, int] = {}  # joint -> key times of its channel with the most
+    for c, j, _ in chans:
+        held[j] = max(held.get(j, 0), len(keys[c][0]))
+    too_big = clip_size_problem(n, J, sum(held.values()))
+    if too_big:  # before any array is allocated
+        raise doc.error(too_big, f"animations[{anim_index}]")
+    at = t0 + np.arange(n) / rate
     # time-major arrays, as the clip keeps them (handed over read-only: the clip does not copy
     # them). Where every joint has a channel of a kind, the channels fill a joint-major block
     # (each a contiguous stretch) that is then copied into time order once; otherwise the

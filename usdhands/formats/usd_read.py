@@ -44,7 +44,7 @@ from usdhands.formats.usd_common import (
 from usdhands.formats.usd_schema_data import read_finger_motion
 from usdhands.formats.usd_materials import MaterialReader
 from usdhands.model.asset import Asset, BlendShape, BlendShapeWeights, RootNode, SkinnedMesh
-from usdhands.model.clip import Clip
+from usdhands.model.clip import Clip, clip_size_problem
 from usdhands.model.rotations import xform_to_trs
 from usdhands.model.skeleton import Skeleton
 
@@ -609,6 +609,9 @@ def _read_clip(anim_query, sk: Skeleton, tokens: list[str], tcps: float, fps: fl
         start = float(times[0]) / tcps
     T = len(codes)
     J = sk.num_joints
+    too_big = clip_size_problem(T, J, max(len(samples), 1) * K)  # each sample holds the K joints' values
+    if too_big:  # before any array is allocated
+        raise InvalidAnimationError(too_big, path=path, location=where)
     # gather in the animation's joint order, then scatter into the skeleton's
     r_k = np.empty((T, K, 4))
     t_k = np.empty((T, K, 3))

@@ -10,12 +10,42 @@ from usdhands.errors import InvalidAnimationError
 from usdhands.model.rotations import check_quat, quat_slerp, trs_to_xform
 from usdhands.model.skeleton import Skeleton, forward_kinematics, readonly
 
-__all__ = ["Clip"]
+__all__ = ["Clip", "MAX_JOINT_FRAMES", "MAX_FILLED_JOINT_FRAMES", "FILL_RATIO", "clip_size_problem"]
 
 
 #: Largest translation or scale component a clip may hold: far beyond any scene, and far
 #: enough below 32-bit floats' 3.4e38 (glTF, USD) that unit conversions cannot overflow them.
 MAX_MAGNITUDE = 1e30
+
+#: Most frames x joints a reader allocates for one clip (80 bytes each as the clip's float64
+#: rotations, translations and scales): an hour of capture at 120 fps on a 200-joint skeleton is
+#: 86.4 million (6.9 GB), and reads.
+MAX_JOINT_FRAMES = 100_000_000
+#: Most frames x joints a reader fills in itself, where the file holds values for fewer than one in
+#: :data:`FILL_RATIO` of them (keys far apart interpolated, joints without channels held at rest):
+#: 800 MB of arrays, 43 minutes at 60 fps of 65 joints. A few bytes could otherwise ask for
+#: gigabytes: a .usdz of 4 time samples, the last at time code 209,722, read 209,723 frames x 65
+#: joints (2.2 GB); a 200 KB BVH of 6,001 joints, one with a channel, read 20,000 frames (15 GB).
+MAX_FILLED_JOINT_FRAMES = 10_000_000
+#: Joint-frames a clip may hold per joint-frame the file holds values for before
+#: :data:`MAX_FILLED_JOINT_FRAMES` applies (a capture: 1; keys every 5th frame: 5; a BVH's End Sites: ~1.3).
+FILL_RATIO = 16
+
+
+def clip_size_problem(frames: int, joints: int, held: int) -> str | None:
+    """Why a reader refuses a clip of ``frames`` x ``joints``, or None; called before any array is allocated.
+
+    ``held``: the joint-frames the file holds values for (per animated joint, the key times of
+    its channel with the most; a capture file of a key per joint and frame: ``frames * joints``).
+    The reader raises its own error with the message.
+    """
+    size = int(frames) * int(joints)
+    if size > MAX_JOINT_FRAMES:
+        return f"{frames:,} frames x {joints:,} joints: more than {MAX_JOINT_FRAMES:,} joint-frames are refused"
+    if size > MAX_FILLED_JOINT_FRAMES and size > FILL_RATIO * held:
+        return (f"{frames:,} frames x {joints:,} joints from values for {held:,} joint-frames: more than "
+                f"{MAX_FILLED_JOINT_FRAMES:,} joint-frames, over {FILL_RATIO} per value the file holds, are refused")
+    return None
 
 
 def _owned_readonly(a: np.ndarray, given) -> np.ndarray:
