@@ -18,6 +18,7 @@ KERNELS = {
     "usdhands.algorithms.synthesis._search_compiled": "usdhands/algorithms/synthesis/_search_compiled.pyx",
     "usdhands.algorithms.synthesis._play_compiled": "usdhands/algorithms/synthesis/_play_compiled.pyx",
     "usdhands.formats._bvh_compiled": "usdhands/formats/_bvh_compiled.pyx",
+    "usdhands.formats._crate_compiled": "usdhands/formats/_crate_compiled.pyx",
     "usdhands.algorithms.interaction._interaction_compiled": "usdhands/algorithms/interaction/_interaction_compiled.pyx",
 }
 

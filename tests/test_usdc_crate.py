@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from hostile import crate_lies, crate_seed, run_batch  # noqa: E402  (tests/ is on sys.path)
+from usdhands.compiled import kernel_module
 from usdhands.errors import AssetReadError
 from usdhands.formats.usdc_crate import check_crate, check_crate_bytes, lz4_block_decompress
 
@@ -403,3 +404,125 @@ def test_time_samples_claiming_more_times_than_values_are_refused(sample_assets,
     struct.pack_into("<Q", data, times_rep & ((1 << 48) - 1), n)  # as many: read
     path.write_bytes(bytes(data))
     assert read_asset(path).clips
+
+
+_CRATE_COMPILED = kernel_module("formats._crate_compiled")
+needs_crate_kernel = pytest.mark.skipif(_CRATE_COMPILED is None, reason="formats._crate_compiled was not built")
+
+
+def _outcome(fn, *args):
+    try:
+        return ("ok", fn(*args))
+    except ValueError as e:
+        return ("ValueError", str(e))
+
+
+def _lz4_block(rng) -> bytes:
+    """An LZ4 block of random sequences: literals (some past 15 bytes: length bytes), matches near and far,
+    overlapping ones, lengths of 255 and more; now and then a byte changed or the block cut short."""
+    out, produced = bytearray(), 0
+    for _ in range(int(rng.integers(0, 12))):
+        lit = int(rng.choice([0, 1, 3, 15, 16, 40, 300]))
+        match = int(rng.choice([0, 4, 11, 19, 20, 270, 600]))
+        token_lit, token_match = min(lit, 15), min(max(match - 4, 0), 15)
+        out.append((token_lit << 4) | token_match)
+        if lit >= 15:
+            rest = lit - 15
+            while rest >= 255:
+                out.append(255)
+                rest -= 255
+            out.append(rest)
+        out += bytes(rng.integers(0, 256, lit, dtype=np.uint8))
+        produced += lit
+        offset = int(rng.integers(1, max(produced, 1) + 2))  # sometimes one past the output
+        out += offset.to_bytes(2, "little")
+        if token_match == 15:
+            rest = match - 4 - 15
+            while rest >= 255:
+                out.append(255)
+                rest -= 255
+            out.append(rest)
+        produced += max(match, 4)
+    out += bytes([0x30]) + b"end"
+    data = bytes(out)
+    if rng.random() < 0.3 and data:
+        k = int(rng.integers(0, len(data)))
+        data = data[:k] + bytes([int(rng.integers(0, 256))]) + data[k + 1:]
+    if rng.random() < 0.2:
+        data = data[:int(rng.integers(0, len(data) + 1))]
+    return data
+
+
+@needs_crate_kernel
+def test_compiled_lz4_equals_the_python_twin():
+    """The same bytes or the same ValueError for valid blocks, blocks with a byte changed, cut short, random
+    bytes, and limits below, at and above what a block decodes to."""
+    from usdhands.formats.usdc_crate import lz4_block_decompress as python_lz4
+
+    rng = np.random.default_rng(7)
+    kinds = {"ok": 0, "ValueError": 0}
+    for trial in range(3000):
+        data = _lz4_block(rng) if trial % 4 else bytes(rng.integers(0, 256, int(rng.integers(0, 60)), dtype=np.uint8))
+        full = _outcome(python_lz4, data, 1 << 20)
+        limits = [1 << 20, 0, 1]
+        if full[0] == "ok":
+            limits += [len(full[1]), len(full[1]) - 1, len(full[1]) + 1]
+        for limit in limits:
+            want = _outcome(python_lz4, data, limit)
+            assert _outcome(_CRATE_COMPILED.lz4_block_decompress, data, limit) == want, (data, limit)
+            assert _outcome(_CRATE_COMPILED.lz4_block_decompress, memoryview(data), limit) == want
+            kinds[want[0]] += 1
+    assert kinds["ok"] > 1000 and kinds["ValueError"] > 1000, kinds
+
+
+@needs_crate_kernel
+@pytest.mark.parametrize("width", [4, 8])
+def test_compiled_decode_ints_equals_the_python_twin(width):
+    """Both of the Python function's paths (one by one up to 96 32-bit integers, NumPy past that), on
+    coded integers whole, cut short and random; sums that wrap as int64 (8-byte deltas)."""
+    from usdhands.formats.usdc_crate import decode_ints
+
+    rng = np.random.default_rng(width + 10)
+    kinds = {"ok": 0, "ValueError": 0}
+    for trial in range(1500):
+        n = int(rng.choice([0, 1, 5, 40, 96, 97, 300]))
+        codes = rng.integers(0, 4, n)
+        sizes = [0, 1, 2, 4] if width == 4 else [0, 2, 4, 8]
+        body = b"".join(int(rng.integers(-(1 << (8 * sizes[c] - 1)), 1 << (8 * sizes[c] - 1), dtype=np.int64)).to_bytes(
+            sizes[c], "little", signed=True) for c in codes if sizes[c])
+        packed = bytearray((2 * n + 7) // 8)
+        for i, c in enumerate(codes):
+            packed[i // 4] |= int(c) << (2 * (i % 4))
+        common = int(rng.integers(-(1 << 31), 1 << 31)).to_bytes(width, "little", signed=True)
+        encoded = common + bytes(packed) + body
+        cases = [encoded, encoded[:int(rng.integers(0, len(encoded) + 1))],
+                 bytes(rng.integers(0, 256, int(rng.integers(0, 80)), dtype=np.uint8))]
+        for data in cases:
+            want = _outcome(decode_ints, data, n, width)
+            got = _outcome(_CRATE_COMPILED.decode_ints, data, n, width)
+            if want[0] == "ok":
+                assert got[0] == "ok" and got[1].dtype == np.int64 and got[1].tolist() == want[1].tolist()
+            else:
+                assert got == want
+            kinds[want[0]] += 1
+    assert kinds["ok"] > 1000 and kinds["ValueError"] > 500, kinds
+
+
+def test_the_check_refuses_the_same_lies_with_and_without_the_compiled_loops(sample_assets, tmp_path, monkeypatch):
+    """Every crafted crate of the hostile corpus gives the same line with the Python loops as with the compiled ones."""
+    import usdhands.formats.usdc_crate as crate
+
+    lies = crate_lies(crate_seed(sample_assets, tmp_path))
+    lines = {}
+    for python in (False, True):
+        if python:
+            monkeypatch.setattr(crate, "_lz4_block", crate.lz4_block_decompress)
+            monkeypatch.setattr(crate, "_decode_ints", crate.decode_ints)
+        for name, (data, _) in lies.items():
+            try:
+                check_crate_bytes(data, "x.usdc")
+                lines.setdefault(name, []).append(None)
+            except AssetReadError as e:
+                lines.setdefault(name, []).append(str(e))
+    assert all(a == b for a, b in lines.values()), lines
+    assert sum(a is not None for a, _ in lines.values()) >= len(lies) - 1

@@ -1,6 +1,6 @@
 """The kernels compiled ahead of time: built from Cython when the package is installed (``setup.py``).
 
-Four modules, each the twin of a numba kernel module with the same functions, arguments
+Five modules, each the twin of a numba (or Python) kernel module with the same functions, arguments
 and results to the bit:
 
 - ``algorithms.synthesis._search_compiled``: the synthesis search and one pair's warp
@@ -8,6 +8,8 @@ and results to the bit:
 - ``algorithms.synthesis._play_compiled``: playing, stitching and step-limiting the chosen
   fragments (:mod:`usdhands.algorithms.synthesis._play_kernel`);
 - ``formats._bvh_compiled``: reading BVH motion (:mod:`usdhands.formats._bvh_kernel`);
+- ``formats._crate_compiled``: the LZ4 blocks and coded integers the check of a USD crate file
+  reads (:mod:`usdhands.formats.usdc_crate`, whose Python functions are its twins);
 - ``algorithms.interaction._interaction_compiled``: the sign of a distance to a closed shell and the
   RTS smoother's recursion (:mod:`usdhands.algorithms.interaction._proximity_kernel`,
   :mod:`usdhands.algorithms.interaction._recursion_kernel`), which ``correct`` and ``synthesize --props``
@@ -34,7 +36,7 @@ __all__ = ["kernel_module", "ENABLED", "KERNEL_MODULES"]
 
 #: The compiled modules, by their names under ``usdhands``.
 KERNEL_MODULES = ("algorithms.synthesis._search_compiled", "algorithms.synthesis._play_compiled",
-                  "formats._bvh_compiled", "algorithms.interaction._interaction_compiled")
+                  "formats._bvh_compiled", "algorithms.interaction._interaction_compiled", "formats._crate_compiled")
 #: ``False``: never use them (as an install without a C compiler does), for tests and comparisons;
 #: set from the environment variable ``USDHANDS_COMPILED_KERNELS=0`` (the processes a batch starts
 #: inherit it).
