@@ -209,75 +209,27 @@ def _current_umask() -> int:
 
 
 @contextlib.contextmanager
-def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+def _renamed_on_success(path: Path, make_temporary) -> Iterator[tuple[str, int | None]]:
+    """The skeleton :func:`atomic_output` and :func:`atomic_write_bytes` share: yield ``(name, fd)`` of a
+    temporary file beside ``path`` made by ``make_temporary(path)`` (``fd`` open, or None), rename it
+    onto ``path`` when the block ends, remove it on any exception (``path`` left as it was).
 
-    On any exception the temporary file is removed and ``path`` is left as it was.
+    SIGTERM/SIGINT are deferred until the temporary file's name is known to the cleanup: a signal
+    right after mkstemp left .out.XXXX files behind. ``make_temporary`` raises OutputPathError.
     """
-    path = Path(path)
     if path.is_dir():
         raise OutputPathError("is a folder; give the output a file name", path=path)
-    # SIGTERM/SIGINT deferred until the temporary file's name is known to the cleanup below:
-    # a signal right after mkstemp left .out.XXXX files behind
     deferred = DeferredSignals()
-    tmp_path = None
-    try:
-        try:
-            fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-        except OSError as e:  # read-only or missing folder
-            raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
-        os.close(fd)
-        tmp_path = Path(tmp)
-        deferred.replay()  # a signal that came meanwhile raises here, inside the cleanup
-        yield tmp_path
-        # mkstemp creates the file 0600; give the output the mode a plain open() would
-        with contextlib.suppress(OSError):
-            os.chmod(tmp_path, 0o666 & ~_current_umask())
-        try:
-            os.replace(tmp_path, path)
-        except OSError as e:
-            raise OutputPathError(f"cannot replace the output: {e.strerror}", path=path) from None
-    except BaseException:
-        if tmp_path is not None:
-            with contextlib.suppress(FileNotFoundError):
-                tmp_path.unlink()
-        raise
-    finally:
-        deferred.restore()
-
-
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` as :func:`atomic_output` does (a temporary file beside it renamed onto
-    it; on any exception the temporary file is removed and ``path`` is left as it was), in one open.
-
-    The temporary file is made with ``O_EXCL`` and mode ``0o666`` less the umask (what a plain
-    ``open()`` gives, the mode :func:`atomic_output` sets after ``mkstemp``'s ``0o600``), written
-    through the descriptor that made it and renamed: no second open, no ``chmod``, no reading of the
-    umask (a USD output's texture: 0.28 -> 0.21 ms of CPU for CesiumMan's 210 KB image).
-    """
-    path = Path(path)
-    if path.is_dir():
-        raise OutputPathError("is a folder; give the output a file name", path=path)
-    deferred = DeferredSignals()  # as in atomic_output: the name is known before a signal can unwind
     tmp = None
     try:
-        for _ in range(tempfile.TMP_MAX):
-            candidate = os.path.join(path.parent, f".{path.stem}.{os.urandom(6).hex()}{path.suffix}")
-            try:
-                fd = os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
-            except FileExistsError:
-                continue
-            except OSError as e:  # read-only or missing folder
-                raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}",
-                                      path=path) from None
-            tmp = candidate
-            break
-        else:
-            raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: no free temporary name",
-                                  path=path)
-        with open(fd, "wb") as f:
+        tmp, fd = make_temporary(path)
+        try:
             deferred.replay()  # a signal that came meanwhile raises here, inside the cleanup
-            f.write(data)
+        except BaseException:
+            if fd is not None:
+                os.close(fd)
+            raise
+        yield tmp, fd
         try:
             os.replace(tmp, path)
         except OSError as e:
@@ -289,6 +241,60 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
         raise
     finally:
         deferred.restore()
+
+
+def _mkstemp_temporary(path: Path) -> tuple[str, None]:
+    """A temporary file beside ``path`` by ``tempfile.mkstemp`` (mode 0600), closed."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    except OSError as e:  # read-only or missing folder
+        raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}", path=path) from None
+    os.close(fd)
+    return tmp, None
+
+
+def _exclusive_temporary(path: Path) -> tuple[str, int]:
+    """A temporary file beside ``path`` made with ``O_EXCL`` and mode ``0o666`` less the umask, and its
+    open descriptor."""
+    for _ in range(tempfile.TMP_MAX):
+        candidate = os.path.join(path.parent, f".{path.stem}.{os.urandom(6).hex()}{path.suffix}")
+        try:
+            fd = os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o666)
+        except FileExistsError:
+            continue
+        except OSError as e:  # read-only or missing folder
+            raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: {e.strerror}",
+                                  path=path) from None
+        return candidate, fd
+    raise OutputPathError(f"cannot write into folder {str(path.parent)!r}: no free temporary name", path=path)
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+
+    On any exception the temporary file is removed and ``path`` is left as it was.
+    """
+    with _renamed_on_success(Path(path), _mkstemp_temporary) as (tmp, _):
+        tmp_path = Path(tmp)
+        yield tmp_path
+        # mkstemp creates the file 0600; give the output the mode a plain open() would
+        with contextlib.suppress(OSError):
+            os.chmod(tmp_path, 0o666 & ~_current_umask())
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` as :func:`atomic_output` does (a temporary file beside it renamed onto
+    it; on any exception the temporary file is removed and ``path`` is left as it was), in one open.
+
+    The temporary file is made with ``O_EXCL`` and mode ``0o666`` less the umask (what a plain
+    ``open()`` gives, the mode :func:`atomic_output` sets after ``mkstemp``'s ``0o600``), written
+    through the descriptor that made it and renamed: no second open, no ``chmod``, no reading of the
+    umask (a USD output's texture: 0.28 -> 0.21 ms of CPU for CesiumMan's 210 KB image).
+    """
+    with _renamed_on_success(Path(path), _exclusive_temporary) as (_, fd):
+        with open(fd, "wb") as f:
+            f.write(data)
 
 
 @contextlib.contextmanager
