@@ -77,6 +77,9 @@ def test_the_limits_let_an_hour_of_capture_read_and_refuse_what_the_fuzzer_found
     assert clip_size_problem(209_723, 65, 4 * 65) is not None  # the .usdz the fuzzer found
     assert clip_size_problem(153_846, 65, 4 * 65) is None  # 9,999,990 joint-frames: under the fill limit
     assert clip_size_problem(1_000_001, 100, 100_000_100) is not None  # a key per frame, over 100 million
+    # a reader's count of the values held is asked for only past the fill limit
+    assert clip_size_problem(153_846, 65, lambda: 1 // 0) is None
+    assert clip_size_problem(209_723, 65, lambda: 260) == clip_size_problem(209_723, 65, 260)
 
 
 def test_usd_keys_far_apart_refused_in_one_line(tmp_path):

@@ -800,7 +800,7 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     T = values.shape[0]
     rate = _fps(bvh.frame_time)
     n = T if fps is None or T < 2 else int(np.floor((T - 1) / rate * fps + 1e-6)) + 1  # after resampling
-    too_big = clip_size_problem(max(T, n), J, T * sum(1 for j in bvh.joints if j.channels))
+    too_big = clip_size_problem(max(T, n), J, lambda: T * sum(1 for j in bvh.joints if j.channels))
     if too_big:  # before the clip's arrays are allocated (a line of text per frame, but joints without channels)
         raise AssetReadError(too_big, path=path)
     rot = np.empty((T, J, 4))  # arrays that own their memory: the clip keeps them (see below)

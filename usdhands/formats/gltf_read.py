@@ -651,10 +651,14 @@ def sample_animation(doc: GltfFile, anim_index: int, binding: SkeletonBinding, f
     n = int(np.floor((t1 - t0) * rate + 1e-3)) + 1
     sk = binding.skeleton
     J = sk.num_joints
-    held: dict[int, int] = {}  # joint -> key times of its channel with the most
-    for c, j, _ in chans:
-        held[j] = max(held.get(j, 0), len(keys[c][0]))
-    too_big = clip_size_problem(n, J, sum(held.values()))
+
+    def held() -> int:  # per animated joint, the key times of its channel with the most
+        most: dict[int, int] = {}
+        for c, j, _ in chans:
+            most[j] = max(most.get(j, 0), len(keys[c][0]))
+        return sum(most.values())
+
+    too_big = clip_size_problem(n, J, held)
     if too_big:  # before any array is allocated
         raise doc.error(too_big, f"animations[{anim_index}]")
     at = t0 + np.arange(n) / rate

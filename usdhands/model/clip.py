@@ -32,17 +32,19 @@ MAX_FILLED_JOINT_FRAMES = 10_000_000
 FILL_RATIO = 16
 
 
-def clip_size_problem(frames: int, joints: int, held: int) -> str | None:
+def clip_size_problem(frames: int, joints: int, held) -> str | None:
     """Why a reader refuses a clip of ``frames`` x ``joints``, or None; called before any array is allocated.
 
     ``held``: the joint-frames the file holds values for (per animated joint, the key times of
-    its channel with the most; a capture file of a key per joint and frame: ``frames * joints``).
+    its channel with the most; a capture file of a key per joint and frame: ``frames * joints``),
+    an int or a function of no arguments giving it (called only for a clip past
+    :data:`MAX_FILLED_JOINT_FRAMES`: a reader's count over its channels costs nothing on small clips).
     The reader raises its own error with the message.
     """
     size = int(frames) * int(joints)
     if size > MAX_JOINT_FRAMES:
         return f"{frames:,} frames x {joints:,} joints: more than {MAX_JOINT_FRAMES:,} joint-frames are refused"
-    if size > MAX_FILLED_JOINT_FRAMES and size > FILL_RATIO * held:
+    if size > MAX_FILLED_JOINT_FRAMES and size > FILL_RATIO * (held := held() if callable(held) else held):
         return (f"{frames:,} frames x {joints:,} joints from values for {held:,} joint-frames: more than "
                 f"{MAX_FILLED_JOINT_FRAMES:,} joint-frames, over {FILL_RATIO} per value the file holds, are refused")
     return None
