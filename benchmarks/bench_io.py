@@ -15,10 +15,13 @@ the ratio of wall-time medians (these machines are shared: wall time is noisier)
 The bare baselines, per format (``bare_read_*``, ``bare_write_*``):
 
 - USD (pxr): ``Usd.Stage.Open``, ``Get`` of rotations and translations at every time
-  sample of every SkelAnimation (scales once) into ``(T, J, 4/3)`` float32 arrays, and
-  of what else the reader reads: every Skeleton's joints, bind and rest transforms,
-  every Mesh's points, faces, normals, UVs, joint influences and bound material, every
-  shader's inputs and the bytes of the texture files they name (usdhands: float64
+  sample of every SkelAnimation into ``(T, J, 4/3)`` float32 arrays (scales at every time
+  sample where they have time samples, else once), and of what else the reader reads:
+  every Skeleton's joints, bind and rest transforms and local-to-world transform, every
+  Mesh's points, faces, normals, UVs, joint influences and bound material, which skeleton
+  each mesh is bound to (``UsdSkel.Cache``, ``ComputeSkelBindings``), every shader's inputs
+  and the bytes of the texture files they name (before session 11 the bare read took scales
+  once even where they vary, and neither bindings nor world transforms; usdhands: float64
   arrays, the hierarchy checked, the crate's structure checked before USD opens it, the
   influences checked, skinning resolved; a generated file has no mesh); writing: one
   SkelAnimation per clip, ``Set`` of ``FromNumpy`` arrays per frame, and every Skeleton's
@@ -202,20 +205,28 @@ def bare_write_usd(asset, path: Path) -> None:
 
 
 def bare_read_usd(path: Path) -> list:
-    """Rotations and translations ``(T, J, 4/3)`` float32 of every SkelAnimation (scales once);
-    every Skeleton's joints, bind and rest transforms; every Mesh's points, faces, normals,
-    UVs and joint influences as numpy arrays, and its bound material; every shader's inputs,
-    and the bytes of every texture file they name."""
+    """Rotations and translations ``(T, J, 4/3)`` float32 of every SkelAnimation, and its scales at
+    every time sample where they have time samples (once where they do not); every Skeleton's
+    joints, bind and rest transforms and its local-to-world transform; every Mesh's points,
+    faces, normals, UVs and joint influences as numpy arrays, and its bound material; which
+    skeleton each mesh is bound to (``UsdSkel.Cache`` populated from each SkelRoot,
+    ``ComputeSkelBindings``); every shader's inputs, and the bytes of every texture file they name."""
     from pxr import Ar, Sdf, Usd, UsdGeom, UsdShade, UsdSkel
 
     out = []
     stage = Usd.Stage.Open(str(path))
+    cache = UsdSkel.Cache()
+    roots = []
     for prim in stage.Traverse():
-        if prim.IsA(UsdSkel.Skeleton):
+        if prim.IsA(UsdSkel.Root):
+            roots.append(UsdSkel.Root(prim))
+            cache.Populate(roots[-1], Usd.PrimDefaultPredicate)
+        elif prim.IsA(UsdSkel.Skeleton):
             skel = UsdSkel.Skeleton(prim)
             out.append((list(skel.GetJointsAttr().Get() or []),
                         [np.asarray(a.Get()) for a in (skel.GetBindTransformsAttr(), skel.GetRestTransformsAttr())
-                         if a.HasValue()]))
+                         if a.HasValue()],
+                        np.asarray(skel.ComputeLocalToWorldTransform(Usd.TimeCode.EarliestTime()))))
         elif prim.IsA(UsdGeom.Mesh):
             mesh, api = UsdGeom.Mesh(prim), UsdGeom.PrimvarsAPI(prim)
             binding = UsdSkel.BindingAPI(prim)
@@ -236,7 +247,7 @@ def bare_read_usd(path: Path) -> list:
         if not prim.IsA(UsdSkel.Animation):
             continue
         anim = UsdSkel.Animation(prim)
-        r, t = anim.GetRotationsAttr(), anim.GetTranslationsAttr()
+        r, t, s = anim.GetRotationsAttr(), anim.GetTranslationsAttr(), anim.GetScalesAttr()
         samples = r.GetTimeSamples()
         J = len(anim.GetJointsAttr().Get() or [])
         out_r = np.empty((len(samples), J, 4), np.float32)
@@ -244,8 +255,17 @@ def bare_read_usd(path: Path) -> list:
         for f, code in enumerate(samples):
             out_r[f] = np.asarray(r.Get(code))
             out_t[f] = np.asarray(t.Get(code))
-        anim.GetScalesAttr().Get()
-        out.append((out_r, out_t))
+        if s.GetNumTimeSamples():  # scales that vary (CesiumMan's: 48 samples), as usdhands must read them
+            out_s = np.empty((len(samples), J, 3), np.float16)
+            for f, code in enumerate(samples):
+                out_s[f] = np.asarray(s.Get(code))
+        else:
+            out_s = s.Get()
+        out.append((out_r, out_t, out_s))
+    for root in roots:  # which skeleton each skinned mesh is bound to
+        for binding in cache.ComputeSkelBindings(root, Usd.PrimDefaultPredicate):
+            out.append((binding.GetSkeleton().GetPrim().GetPath(),
+                        [target.GetPrim().GetPath() for target in binding.GetSkinningTargets()]))
     return out
 
 
