@@ -28,6 +28,7 @@ import numpy as np
 import pygltflib
 
 from usdhands.errors import AssetReadError
+from usdhands.formats.gltf_decode import NotPlain, decode_gltf
 from usdhands.input_files import check_json_depth, refuse_json_constant
 
 __all__ = [
@@ -133,15 +134,18 @@ def _parse_json(path: Path, text: bytes | str) -> pygltflib.GLTF2:
         if last is not None and last[0] == key:
             return _copy(last[1])
     try:
-        with warnings.catch_warnings():
-            # dataclasses_json's note on a missing property pygltflib types as required (a channel
-            # without target, an image without uri): the readers check what they use
-            warnings.filterwarnings("ignore", "(Missing value|'NoneType' object value) of non-optional type",
-                                    RuntimeWarning)
-            decoded = pygltflib.GLTF2.from_dict(data, infer_missing=True)  # gltf_from_json without parsing again
-    except Exception as e:  # dataclasses_json raises a variety of types on wrong shapes
-        raise AssetReadError(f"invalid glTF JSON structure: {type(e).__name__}: {e}".splitlines()[0],
-                             path=path) from None
+        decoded = decode_gltf(data)  # pygltflib's objects without dataclasses_json's per-field inspection
+    except NotPlain:  # a value of another shape than its field's: dataclasses_json converts or refuses it
+        try:
+            with warnings.catch_warnings():
+                # dataclasses_json's note on a missing property pygltflib types as required (a channel
+                # without target, an image without uri): the readers check what they use
+                warnings.filterwarnings("ignore", "(Missing value|'NoneType' object value) of non-optional type",
+                                        RuntimeWarning)
+                decoded = pygltflib.GLTF2.from_dict(data, infer_missing=True)  # gltf_from_json without parsing again
+        except Exception as e:  # dataclasses_json raises a variety of types on wrong shapes
+            raise AssetReadError(f"invalid glTF JSON structure: {type(e).__name__}: {e}".splitlines()[0],
+                                 path=path) from None
     if key is None:
         return decoded
     _last_decoded = (key, decoded)
@@ -156,7 +160,8 @@ def _copy(decoded: pygltflib.GLTF2) -> pygltflib.GLTF2:
 
 #: pygltflib's decoding of the JSON into objects (dataclasses_json) takes about 1 ms per
 #: object: 57 ms for the sample conversation, which a synthesis reads twice (the input,
-#: then again as the source its output keeps). The last document decoded is kept with
+#: then again as the source its output keeps); :mod:`usdhands.formats.gltf_decode` makes the
+#: same objects in a thirtieth of that. The last document decoded is kept with
 #: its JSON text, when that is at most 8 MB (a .glb's JSON, without the binary chunk;
 #: a .gltf with its buffers in data URIs is larger and is not kept), and a load of the
 #: same text gets a deep copy of it (a pickle round trip, about 1 ms): the same text always gives the same
