@@ -33,13 +33,26 @@ cdef Py_ssize_t _length(const unsigned char[::1] src, Py_ssize_t *i, Py_ssize_t 
             return length
 
 
+cdef unsigned char *_grown(unsigned char *out, Py_ssize_t *cap, Py_ssize_t need) except NULL:
+    """``out`` reallocated to the first doubling of ``cap[0]`` that holds ``need`` bytes (``cap`` updated);
+    MemoryError where there is no such memory (``out`` is then still the caller's to free)."""
+    cdef Py_ssize_t new_cap = cap[0]
+    cdef unsigned char *grown
+    while need > new_cap:
+        new_cap *= 2
+    grown = <unsigned char *>realloc(out, new_cap)
+    if grown == NULL:
+        raise MemoryError()
+    cap[0] = new_cap
+    return grown
+
+
 def lz4_block_decompress(const unsigned char[::1] src, Py_ssize_t limit):
     """Decode one LZ4 block; at most ``limit`` bytes out (``usdc_crate.lz4_block_decompress``'s twin)."""
     cdef Py_ssize_t i = 0, n = src.shape[0], literal, length, offset, start, k, size = 0
     cdef Py_ssize_t cap = 256
     cdef unsigned char token
     cdef unsigned char *out = <unsigned char *>malloc(cap)
-    cdef unsigned char *grown
     if out == NULL:
         raise MemoryError()
     try:
@@ -52,12 +65,7 @@ def lz4_block_decompress(const unsigned char[::1] src, Py_ssize_t limit):
             if i + literal > n:
                 raise ValueError("LZ4 literals run past the block")
             if size + literal > cap:
-                while size + literal > cap:
-                    cap *= 2
-                grown = <unsigned char *>realloc(out, cap)
-                if grown == NULL:
-                    raise MemoryError()
-                out = grown
+                out = _grown(out, &cap, size + literal)
             if literal:
                 memcpy(out + size, &src[i], literal)
             size += literal
@@ -77,12 +85,7 @@ def lz4_block_decompress(const unsigned char[::1] src, Py_ssize_t limit):
             if size + length > limit:
                 raise ValueError(f"LZ4 block decodes to more than {limit} bytes")
             if size + length > cap:
-                while size + length > cap:
-                    cap *= 2
-                grown = <unsigned char *>realloc(out, cap)
-                if grown == NULL:
-                    raise MemoryError()
-                out = grown
+                out = _grown(out, &cap, size + length)
             start = size - offset
             for k in range(length):  # forward, byte by byte: an overlapping match repeats the last `offset` bytes
                 out[size + k] = out[start + k]
