@@ -120,8 +120,13 @@ def test_dask_local_cluster_runs_without_profiler_and_monitors_and_the_callers_c
             assert worker["pid"] == os.getpid() and worker["settings"] == before
         assert "profile" not in worker["callbacks"] and "profile-cycle" not in worker["callbacks"]
         assert {"heartbeat", "tick", "monitor"} <= set(worker["callbacks"])  # the rest of the worker as usual
+        # batch's plugin, given to the workers when they are made: a process of its own set up as one
+        assert "usdhands-own-process-worker" in worker["plugins"] and worker["own_process"] is processes
     assert {key: dask.config.get(key) for key in SETTINGS} == before
     assert dict(os.environ) == environ
+    from distributed.nanny import WorkerProcess
+
+    assert WorkerProcess._init_msg_interval == 0.05  # Dask's own again (batch's only while the cluster is made)
 
 
 def test_inputs_from_a_list_file_and_check_outputs(clips, tmp_path, capsys):
@@ -361,13 +366,18 @@ def test_a_warm_local_cluster_forks_its_worker_processes_from_the_warm_forkserve
     process's Dask config is as it was."""
     dask = pytest.importorskip("dask")
     distributed = pytest.importorskip("distributed")
-    calls, made = [], []
+    calls, made, looks, warms = [], [], [], []
 
     class Made(Exception):
         pass
 
     def cluster(**kwargs):
+        from distributed.nanny import WorkerProcess
+
         made.append((kwargs["processes"], dask.config.get("distributed.worker.multiprocessing-method")))
+        looks.append(WorkerProcess._init_msg_interval)
+        plugin, = kwargs["plugins"]
+        warms.append(plugin.warm[2])
         raise Made
 
     monkeypatch.setattr(batch, "start_warm_forkserver", lambda dask=False: calls.append(dask) or True)
@@ -382,6 +392,11 @@ def test_a_warm_local_cluster_forks_its_worker_processes_from_the_warm_forkserve
     assert calls == [True]
     assert made == [(True, "forkserver"), (False, before), (True, before)]
     assert dask.config.get("distributed.worker.multiprocessing-method") == before
+    # the nannies look for their new worker every 5 ms while the cluster is made (Dask: 50 ms), as before after
+    from distributed.nanny import WorkerProcess
+
+    assert looks == [batch.NANNY_LOOK_INTERVAL] * 3 and WorkerProcess._init_msg_interval == 0.05
+    assert warms == [1, 1, 1]  # each worker warms for its share of the clips (one clip, one worker)
 
 
 def test_a_local_cluster_whose_workers_fork_from_the_warm_forkserver_synthesizes_like_the_job_alone(clips, tmp_path):
@@ -552,6 +567,24 @@ def test_dask_tasks_hold_up_to_8_clips_shrinking_to_one_and_a_short_batch_one_cl
     assert [len(c) for c in batch.dask_chunks(todo[:20], 2)] == [2, 2, 2] + [1] * 14
     assert [len(c) for c in batch.dask_chunks(todo[:7], 2)] == [1] * 7
     assert [len(c) for c in batch.dask_chunks(todo[:10], 64)] == [1] * 10
+
+
+def test_the_dask_plugin_warms_each_worker_and_leaves_a_failed_warm_up_to_the_clips(monkeypatch):
+    """The worker plugin batch gives a LocalCluster's workers when they are made (and registers on a running
+    cluster) warms the worker before its first task; in the caller's process (a LocalCluster of threads) it
+    changes nothing else; a warm-up that raises does not stop the worker from starting (each clip then
+    records its own error)."""
+    pytest.importorskip("distributed")
+    from usdhands.jobs.dask_worker import OwnProcessWorker
+
+    warmed = []
+    options = usdhands.SynthesizeOptions(k=3)
+    monkeypatch.setattr(batch, "_warm_worker", lambda *args: warmed.append(args))
+    OwnProcessWorker(warm=("synthesize", options, 7)).setup(None)
+    OwnProcessWorker().setup(None)  # no warm-up asked
+    assert warmed == [("synthesize", options, 7)] and batch._own_worker_process is False
+    monkeypatch.setattr(batch, "_warm_worker", lambda *args: 1 / 0)
+    OwnProcessWorker(warm=("synthesize", options, 7)).setup(None)
 
 
 def test_remote_scheduler_runs_the_batch_and_a_killer_clip_fails_alone(clips, tmp_path, dask_cluster):

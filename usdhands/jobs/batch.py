@@ -685,6 +685,8 @@ def _run_dask(todo, task, options: BatchOptions, report, warm: bool = False) -> 
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
         raise UsdHandsError("--scheduler needs Dask: pip install 'usdhands[dask]'") from None
+    from usdhands.jobs.dask_worker import OwnProcessWorker
+
     job, job_options, model = task
     with contextlib.ExitStack() as stack:
         if options.scheduler == "local":
@@ -699,23 +701,27 @@ def _run_dask(todo, task, options: BatchOptions, report, warm: bool = False) -> 
             # PYTHONHASHSEED): the caller's environment is given back when the cluster has closed
             stack.enter_context(_environ_kept())
             forked = {"distributed.worker.multiprocessing-method": "forkserver"} if warm else {}
+            slots = options.workers  # one thread each
+            # each worker sets itself up and warms (the plugin) before it registers, so the first task
+            # waits for no round trip to the workers; a worker the nanny restarts does the same
+            plugin = OwnProcessWorker(freeze_at_exit=True, warm=(job, job_options, -(-len(todo) // slots)))
+            _warm_scheduler_versions()
             with dask.config.set({"distributed.scheduler.allowed-failures": 1,
                                   "distributed.scheduler.worker-saturation": 1.0, **QUIET_LOCAL_CLUSTER,
-                                  "distributed.nanny.pre-spawn-environ": worker_environ(), **forked}):
+                                  "distributed.nanny.pre-spawn-environ": worker_environ(), **forked}), \
+                    _nannies_look_often():
                 cluster = stack.enter_context(LocalCluster(
                     n_workers=options.workers, threads_per_worker=1, processes=options.dask_processes,
-                    dashboard_address=None))
+                    dashboard_address=None, plugins=(plugin,)))
             client = stack.enter_context(Client(cluster))
         else:
             try:
                 client = stack.enter_context(Client(options.scheduler, timeout="10s"))
             except (OSError, TimeoutError) as e:
                 raise UsdHandsError(f"cannot reach the Dask scheduler {options.scheduler}: {e}") from None
-        from usdhands.jobs.dask_worker import OwnProcessWorker
-
-        client.register_plugin(OwnProcessWorker(freeze_at_exit=options.scheduler == "local"))
-        slots = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()) or 1
-        client.run(_warm_worker, job, job_options, -(-len(todo) // slots))
+            slots = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()) or 1
+            # every worker (and any that joins later) sets itself up and warms before the first task
+            client.register_plugin(OwnProcessWorker(warm=(job, job_options, -(-len(todo) // slots))))
         futures = {client.submit(run_clips, job, job_options, model, chunk, pure=False): chunk
                    for chunk in dask_chunks(todo, slots)}
         alone = []
@@ -783,6 +789,42 @@ def _environ_kept():
         for key, value in saved.items():
             if os.environ.get(key) != value:
                 os.environ[key] = value
+
+
+#: How often (seconds) a LocalCluster's nanny looks whether the worker process it started is up, while batch
+#: makes the cluster (Dask's ``WorkerProcess._init_msg_interval``, 0.05 s: ~25 ms of each start waited for
+#: nothing, up to 50 ms); a worker the nanny restarts later is looked for at Dask's pace
+NANNY_LOOK_INTERVAL = 0.005
+
+
+@contextlib.contextmanager
+def _nannies_look_often():
+    """:data:`NANNY_LOOK_INTERVAL` for the nannies started inside (Dask's own interval again on exit)."""
+    try:
+        from distributed.nanny import WorkerProcess
+    except ImportError:  # pragma: no cover - a Dask without it
+        yield
+        return
+    own = "_init_msg_interval" in WorkerProcess.__dict__
+    before = WorkerProcess.__dict__.get("_init_msg_interval")
+    WorkerProcess._init_msg_interval = NANNY_LOOK_INTERVAL
+    try:
+        yield
+    finally:
+        if own:
+            WorkerProcess._init_msg_interval = before
+        else:
+            del WorkerProcess._init_msg_interval
+
+
+def _warm_scheduler_versions() -> None:
+    """Ask the platform for what Dask's scheduler reports of this machine when the first worker registers
+    (``platform.uname().processor`` runs ``uname -p`` once a process): done while the worker processes
+    start, not while the first one waits for the scheduler's answer."""
+    import platform
+
+    with contextlib.suppress(Exception):
+        platform.uname().processor
 
 
 #: The most clips one Dask task runs: each task costs the caller's scheduler and client and the
