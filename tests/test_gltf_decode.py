@@ -135,3 +135,28 @@ def test_a_document_of_another_shape_is_declined():
                  {"accessors": [{"min": 3}]}, {"extras": []}, {"accessors": [{"count": "x"}]}):
         with pytest.raises(NotPlain):
             decode_gltf(data)
+
+
+def test_a_pygltflib_class_with_a_field_type_unknown_here_goes_to_pygltflib(monkeypatch):
+    """A newer pygltflib with a field of a type the plans do not know: its documents are decoded by
+    pygltflib's own from_dict, not refused."""
+    from usdhands.formats import gltf_decode
+    from usdhands.formats.gltf_container import clear_decoded_cache, load_gltf
+
+    @dataclasses.dataclass
+    class Odd:
+        value: "complex" = 0j
+
+    monkeypatch.setattr(gltf_decode, "_plans", {})
+    with pytest.raises(NotPlain):
+        gltf_decode._plan(Odd)
+    assert gltf_decode._plans[Odd] is None
+    path = ROOT / "sample_assets" / "interaction" / "cup_grasp.glb"
+    clear_decoded_cache()
+    want = load_gltf(path).gltf
+    monkeypatch.setattr(gltf_decode, "_plans", {pygltflib.Node: None})  # as if Node had such a field
+    clear_decoded_cache()
+    with pytest.raises(NotPlain):
+        decode_gltf(_json(path))
+    got = load_gltf(path).gltf  # read all the same, through dataclasses_json
+    assert difference(want, got) is None

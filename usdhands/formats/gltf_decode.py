@@ -34,7 +34,7 @@ class NotPlain(Exception):
 # what to do with one field's value (None is None for every kind: dataclasses_json passes it through)
 _PRIMITIVE, _DATACLASS, _DATACLASSES, _LIST, _DICT, _AS_IS = range(6)
 
-_plans: dict[type, tuple] = {}
+_plans: dict[type, tuple | None] = {}  # None: a class left to dataclasses_json
 
 
 def _field_kind(hint) -> tuple[int, object]:
@@ -63,13 +63,20 @@ def _field_kind(hint) -> tuple[int, object]:
 
 
 def _plan(cls: type) -> tuple:
-    """``((name, kind, argument, default, factory), ...)`` of ``cls``'s init fields, made once per class."""
-    plan = _plans.get(cls)
-    if plan is None:
-        hints = typing.get_type_hints(cls)
-        plan = tuple((f.name, *_field_kind(hints[f.name]), f.default, f.default_factory)
-                     for f in dataclasses.fields(cls) if f.init)
+    """``((name, kind, argument, default, factory), ...)`` of ``cls``'s init fields, made once per class;
+    :class:`NotPlain` for a class with a field type this module does not know (a pygltflib release
+    newer than it: its documents then all go to dataclasses_json)."""
+    plan = _plans.get(cls, ())
+    if plan == ():
+        try:
+            hints = typing.get_type_hints(cls)
+            plan = tuple((f.name, *_field_kind(hints[f.name]), f.default, f.default_factory)
+                         for f in dataclasses.fields(cls) if f.init)
+        except (ValueError, TypeError, NameError):
+            plan = None
         _plans[cls] = plan
+    if plan is None:
+        raise NotPlain
     return plan
 
 
