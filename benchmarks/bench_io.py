@@ -256,7 +256,7 @@ def bare_read_usd(path: Path) -> list:
             out_r[f] = np.asarray(r.Get(code))
             out_t[f] = np.asarray(t.Get(code))
         if s.GetNumTimeSamples():  # scales that vary (CesiumMan's: 48 samples), as usdhands must read them
-            out_s = np.empty((len(samples), J, 3), np.float16)
+            out_s = np.empty((len(samples), J, 3), np.float32)
             for f, code in enumerate(samples):
                 out_s[f] = np.asarray(s.Get(code))
         else:

@@ -1,6 +1,6 @@
 """A ``usdhands`` process runs OpenBLAS on one thread unless its caller chose a thread count
-(cli.one_blas_thread_by_default): the extra threads spun on usdhands' small products, a third
-of a fresh command's CPU, for the same output."""
+(cli.one_blas_thread_by_default): the extra threads spun on usdhands' small products, a quarter to
+a third of a fresh command's CPU, for the same output."""
 
 from __future__ import annotations
 

@@ -223,7 +223,7 @@ def one_blas_thread_by_default() -> bool:
 
     usdhands' linear algebra is many small products (4 x 4 transforms, a prop's vertices, a
     clip's curves), on which OpenBLAS's extra threads find no work but spin after each call: a
-    fresh ``usdhands synthesize`` of the sample conversation took 0.39-0.46 s of CPU for 0.29-0.30 s
+    fresh ``usdhands synthesize`` of the sample conversation took 0.36-0.40 s of CPU for 0.29-0.30 s
     of wall time with OpenBLAS's default (a thread per core), and 0.27-0.32 s with one thread, in the
     same wall time and with the same output bytes. On a farm that runs a command per core, that
     is a quarter of the CPU back. The variable is inherited by what the process starts (``batch``'s
