@@ -31,13 +31,17 @@ def _shells(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
     and faces sharing a vertex share it), each face labelled by its first vertex's: the same shells
     as the components of faces joined by shared vertices, without that graph's ``F x F`` product
     (5.9 -> 0.9 ms on the mug)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    built = _compiled_geometry()
+    if built is not None:  # union-find, compiled ahead of time: no SciPy to import
+        vertex_labels = built.vertex_components(np.ascontiguousarray(faces, dtype=np.int64), n_vertices)
+    else:
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
 
-    a = faces.reshape(-1)
-    b = faces[:, [1, 2, 0]].reshape(-1)
-    graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n_vertices, n_vertices)).tocsr()
-    _, vertex_labels = connected_components(graph, directed=False)
+        a = faces.reshape(-1)
+        b = faces[:, [1, 2, 0]].reshape(-1)
+        graph = coo_matrix((np.ones(len(a), dtype=np.int8), (a, b)), shape=(n_vertices, n_vertices)).tocsr()
+        _, vertex_labels = connected_components(graph, directed=False)
     labels = vertex_labels[faces[:, 0]]
     found, first = np.unique(labels, return_index=True)
     rank = np.empty(int(found.max(initial=-1)) + 1, dtype=np.int64)
@@ -63,8 +67,6 @@ class _Part:
     """One closed shell (sign from the nearest face's side) or all open shells together (winding number)."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, closed: bool):
-        import igl
-
         used = np.unique(faces)
         remap = np.full(len(vertices), -1, dtype=np.int64)
         remap[used] = np.arange(len(used))
@@ -74,13 +76,22 @@ class _Part:
             self.faces = np.ascontiguousarray(self.faces[:, ::-1])  # wound inward: the side test needs outward
         self.closed = closed
         self.bounds = np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
-        self.tree = igl.AABB()
-        self.tree.init(self.vertices, self.faces)
+        built = _compiled_geometry()
+        if built is not None:  # compiled ahead of time: libigl (and SciPy, which it imports) stay unloaded
+            self._squared_distance = built.TriangleTree(self.vertices, self.faces).squared_distance
+        else:
+            import igl
+
+            tree = igl.AABB()
+            tree.init(self.vertices, self.faces)
+            self._squared_distance = lambda p: tree.squared_distance(self.vertices, self.faces, p)
         self.winding = None
         self._fwn = None
         self._edges = None  # per face: first corner, edges, their dot products (the side test's, on first use)
         self._around = None  # per vertex, its faces' normals (the corner side test's, on first use)
         if not closed:
+            import igl
+
             self.winding = igl.FastWindingNumberBVH()
             self.winding.init(self.vertices, self.faces, 2)
         tri = self.vertices[self.faces]
@@ -97,10 +108,10 @@ class _Part:
 
     def distance(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if len(p) < SORT_FROM:
-            d2, face, closest = self.tree.squared_distance(self.vertices, self.faces, p)
+            d2, face, closest = self._squared_distance(p)
         else:  # in Morton order (each point's answer is its own: the same values, fewer cache misses)
             order = morton_order(p, self.bounds)
-            d2s, fs, cs = self.tree.squared_distance(self.vertices, self.faces, np.ascontiguousarray(p[order]))
+            d2s, fs, cs = self._squared_distance(np.ascontiguousarray(p[order]))
             d2, face, closest = np.empty_like(d2s), np.empty_like(fs), np.empty_like(cs)
             d2[order], face[order], closest[order] = d2s, fs, cs
         return np.sqrt(np.maximum(d2, 0.0)), np.asarray(face, dtype=np.int64), closest
@@ -238,6 +249,15 @@ class _Part:
             self._fwn = igl.FastWindingNumberBVH()
             self._fwn.init(self.vertices, self.faces, 2)
         return self._fwn.winding_number(np.ascontiguousarray(p)) > 0.5
+
+
+def _compiled_geometry():
+    """The interaction's module compiled ahead of time (its :class:`TriangleTree` for the nearest points and its
+    union-find for the shells), or None where it was not built: then libigl's ``AABB`` and SciPy's
+    ``connected_components`` (the same distances to rounding, the same shells)."""
+    from usdhands.compiled import kernel_module
+
+    return kernel_module("algorithms.interaction._interaction_compiled")
 
 
 def _compiled_side_test():

@@ -15,8 +15,6 @@ cannot put a contact back.
 from __future__ import annotations
 
 import numpy as np
-from scipy import sparse
-from scipy.linalg import solveh_banded
 
 from usdhands.jit import kernels_running
 
@@ -172,10 +170,44 @@ def smoothness_weight(fps: float, time_scale_s: float) -> float:
     return float((max(time_scale_s, 0.0) * fps) ** 4)
 
 
-def _second_difference_gram(T: int) -> sparse.csr_matrix:
-    """``D.T @ D`` for the ``(T-2, T)`` second-difference operator ``D`` (pentadiagonal)."""
-    D = sparse.diags([np.ones(T - 2), -2 * np.ones(T - 2), np.ones(T - 2)], [0, 1, 2], shape=(T - 2, T))
-    return (D.T @ D).tocsr()
+def _second_difference_bands(T: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The diagonals of ``D.T @ D`` for the ``(T-2, T)`` second-difference operator ``D``, ``T >= 3``
+    (pentadiagonal, symmetric): the main one ``(T,)`` ``1, 5, 6, ..., 6, 5, 1``, the first above it
+    ``(T-1,)`` ``-2, -4, ..., -4, -2`` and the second ``(T-2,)`` of ones (integers: exact)."""
+    d0 = np.zeros(T)
+    d0[:T - 2] += 1.0
+    d0[1:T - 1] += 4.0
+    d0[2:] += 1.0
+    d1 = np.zeros(T - 1)
+    d1[:T - 2] -= 2.0
+    d1[1:] -= 2.0
+    return d0, d1, np.ones(T - 2)
+
+
+def _banded_product(diagonals: tuple, y: np.ndarray) -> np.ndarray:
+    """``H @ y`` ``(T,)`` for the symmetric pentadiagonal ``H`` given by its ``diagonals`` (0, 1 and 2 above
+    the main one, as :func:`_second_difference_bands` gives them) and ``y`` ``(T,)``."""
+    d0, d1, d2 = diagonals
+    out = d0 * y
+    out[:-1] += d1 * y[1:]
+    out[1:] += d1 * y[:-1]
+    out[:-2] += d2 * y[2:]
+    out[2:] += d2 * y[:-2]
+    return out
+
+
+def _solve_banded(ab: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``scipy.linalg.solveh_banded(ab, rhs)`` for the upper bands ``ab`` ``(3, n)`` of a positive definite
+    pentadiagonal matrix: the banded Cholesky compiled ahead of time where it was built (no SciPy to
+    import: its linear algebra and sparse modules cost a fresh ``correct`` about 0.1 s), else SciPy's."""
+    from usdhands.compiled import kernel_module
+
+    built = kernel_module("algorithms.interaction._interaction_compiled")
+    if built is not None:
+        return built.solve_pentadiagonal_spd(np.ascontiguousarray(ab), np.ascontiguousarray(rhs))
+    from scipy.linalg import solveh_banded
+
+    return solveh_banded(ab, rhs)
 
 
 def _principal_bands(diagonals: tuple, idx: np.ndarray) -> np.ndarray:
@@ -227,14 +259,13 @@ def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iter
     T = len(lower)
     if T < 3 or weight <= 0 or np.all(lower == lower[0]):
         return lower.copy()
-    G = _second_difference_gram(T)
+    G = _second_difference_bands(T)
     a = np.ones(T) if fit is None else np.asarray(fit, dtype=np.float64)
-    H = (sparse.diags(a, format="csr") + weight * G).tocsr()
-    c = weight * (G @ lower)  # x = lower + y, minimise y.H.y/2 + c.y with 0 <= y <= room
+    bands = (a + weight * G[0], weight * G[1], weight * G[2])  # H = diag(a) + weight * G
+    c = weight * _banded_product(G, lower)  # x = lower + y, minimise y.H.y/2 + c.y with 0 <= y <= room
     if target is not None:
         c = c + a * (lower - np.asarray(target, dtype=np.float64))
     room = upper - lower
-    bands = (H.diagonal(0), H.diagonal(1), H.diagonal(2))
     at_lo = np.zeros(T, dtype=bool)
     at_hi = np.zeros(T, dtype=bool)
     y = np.zeros(T)
@@ -243,9 +274,9 @@ def bounded_smooth(lower: np.ndarray, upper: np.ndarray, weight: float, max_iter
         y = np.where(at_hi, room, 0.0)
         if free.any():
             idx = np.nonzero(free)[0]
-            rhs = -c[idx] - (H @ y)[idx]
-            y[idx] = solveh_banded(_principal_bands(bands, idx), rhs)
-        grad = H @ y + c
+            rhs = -c[idx] - _banded_product(bands, y)[idx]
+            y[idx] = _solve_banded(_principal_bands(bands, idx), rhs)
+        grad = _banded_product(bands, y) + c
         to_lo = free & (y < -1e-12)
         to_hi = free & (y > room + 1e-12)
         off_lo = at_lo & (grad < -1e-12)
