@@ -77,14 +77,14 @@ class _Part:
         self.closed = closed
         self.bounds = np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
         built = _compiled_geometry()
+        self._tree = None
         if built is not None:  # compiled ahead of time: libigl (and SciPy, which it imports) stay unloaded
-            self._squared_distance = built.TriangleTree(self.vertices, self.faces).squared_distance
+            self._tree = built.TriangleTree(self.vertices, self.faces)
         else:
             import igl
 
-            tree = igl.AABB()
-            tree.init(self.vertices, self.faces)
-            self._squared_distance = lambda p: tree.squared_distance(self.vertices, self.faces, p)
+            self._igl = igl.AABB()
+            self._igl.init(self.vertices, self.faces)
         self.winding = None
         self._fwn = None
         self._edges = None  # per face: first corner, edges, their dot products (the side test's, on first use)
@@ -107,11 +107,13 @@ class _Part:
         return np.linalg.norm(gap, axis=-1)
 
     def distance(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if len(p) < SORT_FROM:
-            d2, face, closest = self._squared_distance(p)
+        if self._tree is not None:  # the compiled tree orders a batch itself
+            d2, face, closest = self._tree.squared_distance(p, SORT_FROM)
+        elif len(p) < SORT_FROM:
+            d2, face, closest = self._igl.squared_distance(self.vertices, self.faces, p)
         else:  # in Morton order (each point's answer is its own: the same values, fewer cache misses)
             order = morton_order(p, self.bounds)
-            d2s, fs, cs = self._squared_distance(np.ascontiguousarray(p[order]))
+            d2s, fs, cs = self._igl.squared_distance(self.vertices, self.faces, np.ascontiguousarray(p[order]))
             d2, face, closest = np.empty_like(d2s), np.empty_like(fs), np.empty_like(cs)
             d2[order], face[order], closest[order] = d2s, fs, cs
         return np.sqrt(np.maximum(d2, 0.0)), np.asarray(face, dtype=np.int64), closest
@@ -170,6 +172,13 @@ class _Part:
         point whose nearest point is a corner by the faces around that vertex where they agree
         (:meth:`_corner_sides`), every other by the winding number (:meth:`_parity`); ``bary``: the
         nearest points' barycentric coordinates ``(u, v, w)`` when the caller has them."""
+        built = _compiled_geometry()
+        if built is not None and bary is None:  # the same tests compiled, in one pass
+            normals, pad, unusable = self._corners_around()
+            inside, todo = built.undecided_sides(p, closest, face, d, self.vertices, self.faces, normals, pad, unusable)
+            if todo.any():
+                inside[todo] = self._parity(p[todo])
+            return inside
         u, v, w = self._barycentric(closest, face) if bary is None else bary
         corner = ((u <= 1e-6).astype(np.int8) + (v <= 1e-6) + (w <= 1e-6)) >= 2
         inside = np.zeros(len(p), dtype=bool)
@@ -200,9 +209,21 @@ class _Part:
         (so the signs are those from the nearest point); faces without a usable normal, or faces that
         disagree, leave the point to the winding number.
         """
+        normals, pad, unusable = self._corners_around()
+        x = p - self.vertices[vertex]
+        dots = np.einsum("nkj,nj->nk", normals[vertex], x)
+        slack = (np.linalg.norm(closest - self.vertices[vertex], axis=1) + 1e-12 * (1.0 + d))[:, None]
+        padded = pad[vertex]
+        front = np.all((dots > slack) | padded, axis=1)
+        behind = np.all((dots < -slack) | padded, axis=1)
+        return (front | behind) & ~unusable[vertex], behind
+
+    def _corners_around(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each vertex's faces' normals ``(V, W, 3)`` padded with zeros to the largest count ``W``, the padding
+        ``(V, W)`` bool, and the vertices the corner test cannot use ``(V,)`` bool (a face around them
+        without a usable normal, or no face); built on first use."""
         if self._around is None:
-            # each vertex's faces' normals, padded with zeros to the largest count (a zero normal's
-            # product, 0, is on no side: the padding is masked)
+            # a zero normal's product, 0, is on no side: the padding is masked
             corners = self.faces.reshape(-1)
             order = np.argsort(corners, kind="stable")
             count = np.bincount(corners, minlength=len(self.vertices))
@@ -214,14 +235,7 @@ class _Part:
             pad[corners[order], rank] = False
             flat = np.bincount(corners, weights=np.repeat(self.flat, 3), minlength=len(self.vertices)) > 0
             self._around = (normals, pad, flat | (count == 0))
-        normals, pad, unusable = self._around
-        x = p - self.vertices[vertex]
-        dots = np.einsum("nkj,nj->nk", normals[vertex], x)
-        slack = (np.linalg.norm(closest - self.vertices[vertex], axis=1) + 1e-12 * (1.0 + d))[:, None]
-        padded = pad[vertex]
-        front = np.all((dots > slack) | padded, axis=1)
-        behind = np.all((dots < -slack) | padded, axis=1)
-        return (front | behind) & ~unusable[vertex], behind
+        return self._around
 
     def _barycentric(self, x: np.ndarray, face: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The columns of :func:`_barycentric` of points ``x`` ``(N, 3)`` in faces ``face`` ``(N,)``, from the
