@@ -2,10 +2,12 @@
 
 The kernels a batch worker or a one-clip command runs (the synthesis search, playing and
 stitching the chosen fragments, reading BVH motion, the interaction's side test and smoother
-recursion; :mod:`usdhands.compiled`) are compiled here, at install, so
-that a process using them never starts numba (about 0.35 s of CPU a process). They are
-optional: where no C compiler is found, the install goes on and the package runs the
-numba and NumPy twins of the same kernels (the same results).
+recursion, the props' nearest-point tree and banded solves; :mod:`usdhands.compiled`) are
+compiled here, at install, so that a process using them never starts numba (about 0.35 s of
+CPU a process) and a correction against closed props imports neither libigl nor SciPy. They
+are optional: where no C compiler is found, the install goes on and the package runs the
+numba and NumPy twins of the same kernels (the same results), and libigl's tree and SciPy's
+banded solve for the props (the same distances and solutions to rounding).
 
 Floating point: no fused multiply-add contraction (``-ffp-contract=off``), so that each
 kernel gives its numba twin's numbers to the bit on every CPU.

@@ -11,11 +11,12 @@ Measured in the same run:
 
 And ``synthesize --props`` against plain synthesis of the same 60 s clip (the bundled
 database; library calls: synthesis with the proximity cuts and the collision term, then the
-correction of the result; and the synthesize job end to end, in both engine states: without
+correction of the result; the synthesize job end to end, in both engine states: without
 numba, as one command and a batch worker run it (the kernels compiled ahead of time where the
-install built them, else NumPy), and with numba's kernels loaded), target within 2x.
+install built them, else NumPy), and with numba's kernels loaded; and the ``usdhands synthesize``
+command in fresh processes, as a user runs it), target within 2x.
 
-Run: ``python benchmarks/bench_interaction.py [--seconds S] [--naive-frames N] [--no-synthesis]``.
+Run: ``python benchmarks/bench_interaction.py [--seconds S] [--naive-frames N] [--no-synthesis] [--fresh N]``.
 """
 
 from __future__ import annotations
@@ -68,6 +69,8 @@ def main() -> None:
     ap.add_argument("--naive-frames", type=int, default=30, help="frames the naive baseline is timed on")
     ap.add_argument("--no-synthesis", action="store_true", help="skip the synthesize --props comparison")
     ap.add_argument("--repeat", type=int, default=5, help="alternating runs of each synthesize job timed (medians)")
+    ap.add_argument("--fresh", type=int, default=7,
+                    help="fresh usdhands processes of each kind timed, alternating (medians; 0: none)")
     args = ap.parse_args()
     import trimesh
 
@@ -136,6 +139,50 @@ def main() -> None:
                   f"{props_job['cpu']:.2f}, ratio {props_job['wall'] / plain_job['wall']:.2f}x wall, "
                   f"{props_job['cpu'] / plain_job['cpu']:.2f}x CPU (medians of {args.repeat} alternating runs, "
                   f"load {os.getloadavg()[0]:.1f})")
+        if args.fresh:
+            plain_cmd, props_cmd = fresh_command_times(clip, mug, args.fresh)
+            print(f"usdhands synthesize in a fresh process (read .glb, synthesize, write .glb), as a user runs it: "
+                  f"plain {plain_cmd['wall']:.3f} s wall / {plain_cmd['cpu']:.3f} s CPU, --props mug.obj "
+                  f"{props_cmd['wall']:.3f} / {props_cmd['cpu']:.3f}, ratio {props_cmd['wall'] / plain_cmd['wall']:.2f}x "
+                  f"wall, {props_cmd['cpu'] / plain_cmd['cpu']:.2f}x CPU (medians of {args.fresh} alternating "
+                  f"processes, load {os.getloadavg()[0]:.1f})  (target <= 2x)")
+
+
+def fresh_command_times(clip, mug, repeat: int) -> tuple[dict, dict]:
+    """Wall and CPU seconds (medians of ``repeat`` processes alternating the two) of ``python -m usdhands
+    synthesize`` of the clip written as .glb, without and with the mug as an OBJ prop: what a user waits
+    for, imports and all (each command run once first, untimed: bytecode and kernel caches warm)."""
+    import resource
+    import subprocess
+    import tempfile
+
+    import trimesh
+
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    with tempfile.TemporaryDirectory() as tmp:
+        src, prop = Path(tmp) / "grasping.glb", Path(tmp) / "mug.obj"
+        write_asset(Asset("grasping", (clip.skeleton,), (clip,)), src)
+        trimesh.Trimesh(np.asarray(mug.vertices) * clip.skeleton.meters_per_unit, np.asarray(mug.faces),
+                        process=False).export(prop)
+        base = [sys.executable, "-m", "usdhands", "synthesize", str(src), "-q"]
+        cmds = {"plain": base + ["-o", str(Path(tmp) / "plain.glb")],
+                "props": base + ["--props", str(prop), "-o", str(Path(tmp) / "props.glb")]}
+        runs = {k: [] for k in cmds}
+        for i in range(repeat + 1):
+            for k, cmd in cmds.items():
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                t0 = time.perf_counter()
+                subprocess.run(cmd, env=env, check=True, stdout=subprocess.DEVNULL)
+                wall = time.perf_counter() - t0
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                if i:  # the first of each is not timed
+                    runs[k].append({"wall": wall, "cpu": after.ru_utime - before.ru_utime + after.ru_stime
+                                    - before.ru_stime})
+    return tuple({m: float(np.median([r[m] for r in runs[k]])) for m in ("wall", "cpu")} for k in cmds)
 
 
 def exact_queries(colliders) -> int:

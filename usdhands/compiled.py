@@ -13,7 +13,11 @@ and results to the bit:
 - ``algorithms.interaction._interaction_compiled``: the sign of a distance to a closed shell and the
   RTS smoother's recursion (:mod:`usdhands.algorithms.interaction._proximity_kernel`,
   :mod:`usdhands.algorithms.interaction._recursion_kernel`), which ``correct`` and ``synthesize --props``
-  run.
+  run; and the props' geometry that lets those commands import neither libigl nor SciPy against
+  closed props: a triangle tree for exact nearest points (libigl's ``AABB``: the same distances to
+  rounding), the corner side test, the shells' union-find (SciPy's components) and the bounded
+  smoother's banded Cholesky (``scipy.linalg.solveh_banded``: the same solutions to rounding). An
+  install without it runs libigl and SciPy there.
 
 A process that runs these never imports numba: nothing to start (numba's import, CPU target
 and cached kernels cost about 0.35 s of CPU a process, measured), one thread each where
