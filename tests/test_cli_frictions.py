@@ -95,3 +95,21 @@ def test_building_the_parser_imports_no_heavy_library():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "[]"
+
+
+def test_building_the_parser_imports_no_job_for_a_default():
+    """``reduce --steps``' default is written out in the command (no job or reduction module imported
+    for it), and is the steps' own default."""
+    code = ("import sys; from usdhands.cli import build_parser; p = build_parser(); "
+            "print(sorted(m for m in sys.modules if m.startswith(('usdhands.jobs', 'usdhands.algorithms.reduction')))); "
+            "r = p._subparsers._group_actions[0].choices['reduce']; "
+            "print(next(a.default for a in r._actions if a.dest == 'steps'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    imported, default = out.stdout.strip().splitlines()
+    assert imported == "[]"
+    from usdhands.algorithms.reduction.reduce import DEFAULT_STEPS, parse_steps
+    from usdhands.jobs.reduction import ReduceOptions
+
+    assert default == DEFAULT_STEPS == ReduceOptions().steps
+    assert len(parse_steps(default)) == 4  # the paper's four steps

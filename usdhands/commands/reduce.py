@@ -13,10 +13,13 @@ from pathlib import Path
 
 from usdhands.commands._common import Progress, add_layer_argument, print_json, print_table
 
+#: reduce.DEFAULT_STEPS (the paper's four steps, ReduceOptions' default), written out so that building
+#: the parser (every command, --help) does not import the job and the reduction steps; a test checks
+#: they agree
+DEFAULT_STEPS = "range<1,rmsd<0.3,range<5,rmsd<0.5"
+
 
 def register(sub) -> None:
-    from usdhands.jobs.reduction import DEFAULT_STEPS
-
     p = sub.add_parser(
         "reduce", help="find irrelevant and redundant finger DOFs; rebuild a hand from a few curves",
         description="Finger DOF reduction by range and RMS deviation (Jorg and O'Sullivan 2009): curves with "
