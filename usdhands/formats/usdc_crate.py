@@ -56,6 +56,7 @@ _COMPRESSIBLE = np.zeros(256, dtype=bool)
 _COMPRESSIBLE[list(_COMPRESSED_INTS | _COMPRESSED_FLOATS)] = True
 # ValueRep bits (crateFile.h)
 _ARRAY, _INLINED, _COMPRESSED, _PAYLOAD = 1 << 63, 1 << 62, 1 << 61, (1 << 48) - 1
+_ARRAY_OR_INLINED, _ARRAY_BIT = np.uint64(_ARRAY | _INLINED), np.uint64(_ARRAY)
 _DICTIONARY, _VALUE, _UNREGISTERED_VALUE, _TIME_SAMPLES = 31, 52, 53, 46
 _STRING_KINDS, _TOKEN_KINDS, _PATH_EXPRESSION = {10}, {11, 12}, 57  # string, token/asset path: an index
 _NAMED_KINDS = _STRING_KINDS | _TOKEN_KINDS
@@ -483,6 +484,11 @@ class _Crate:
 
     def many(self, reps: np.ndarray, depth: int, seen: set[int]) -> None:
         """Check a run of value reps: arrays are collected for :meth:`arrays`, the rest walked here."""
+        if ((reps & _ARRAY_OR_INLINED) == _ARRAY_BIT).all():
+            # arrays stored out of line, every one (an array attribute's time samples): nothing inlined to
+            # look up, nothing else to walk; what the steps below do for them, in 2 NumPy calls instead of ~15
+            self.array_reps.append(reps)
+            return
         inlined = (reps & np.uint64(_INLINED)) != 0
         kind = ((reps >> np.uint64(48)) & np.uint64(0xFF)).astype(np.intp)
         for kinds, table in ((_IS_STRING, "string"), (_IS_TOKEN, "token")):  # payload: an index
