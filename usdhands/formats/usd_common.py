@@ -25,9 +25,9 @@ from usdhands.model.rotations import quat_canonical, quat_multiply, trs_to_xform
 __all__ = [
     "SOURCE_JOINT_NAMES_KEY", "SOURCE_SKELETON_KEY", "SOURCE_NAME_KEY", "SOURCE_MESH_KEY", "SOURCE_NODE_KEY",
     "DEFAULT_WEIGHT_KEY", "INTERPOLATION_KEY", "NODE_KEY", "NODE_SCALE_KEY", "KEY_TIMES_KEY", "quiet_diagnostics", "open_stage",
-    "tf_error_reason", "matrices_to_numpy", "numpy_to_matrices", "valid_identifier",
+    "open_stage_quietly", "tf_error_reason", "matrices_to_numpy", "numpy_to_matrices", "valid_identifier",
     "unique_name", "joint_tokens_for", "skeleton_tokens_and_names", "bound_animation_path",
-    "skeleton_world_xforms", "fold_into_roots", "all_close",
+    "skeleton_world_xforms", "fold_into_roots", "fold_similarity_into_roots", "world_might_vary", "all_close",
 ]
 
 #: customData key on a Skeleton prim: the original joint names when the tokens had to be sanitised
@@ -217,7 +217,8 @@ def checked_layers(path: Path) -> list[Sdf.Layer]:
     naming a crafted .usdc would hand it to USD's crate reader unchecked (a segfault with
     a token index past the table). Each layer is checked (:func:`check_crate`) before
     ``Sdf.Layer.FindOrOpen`` reads its structure, then its composition dependencies are
-    followed. Returns the opened layers (keep them alive until the stage is open).
+    followed. Returns the opened layers (keep them alive until the stage is open): the first is
+    ``path``'s own (none when it did not open: nothing else is followed then).
 
     Raises
     ------
@@ -263,17 +264,26 @@ def open_stage(path: str | os.PathLike) -> Usd.Stage:
     AssetReadError
         Missing, truncated or corrupt files, one line with the path.
     """
+    with quiet_diagnostics():
+        return open_stage_quietly(path)
+
+
+def open_stage_quietly(path: str | os.PathLike) -> Usd.Stage:
+    """:func:`open_stage` inside the caller's :func:`quiet_diagnostics` block (a reader that reads the
+    stage in the same block enters it once: 15-30 us a block)."""
     path = Path(path)
     if not path.exists():
         raise AssetReadError("no such file", path=path)
     if path.is_dir():
         raise AssetReadError("is a folder, not a file", path=path)
-    with quiet_diagnostics():
-        try:
-            layers = checked_layers(path)  # held open: Stage.Open finds them in USD's layer registry
-            stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
-        except Tf.ErrorException as e:
-            raise AssetReadError(f"cannot read as USD: {tf_error_reason(e, path)}", path=path) from None
+    try:
+        layers = checked_layers(path)  # held open: Stage.Open finds them in USD's layer registry
+        # the checked root layer itself when it opened (first held): USD does not look the path up and
+        # resolve it again (0.08 -> 0.04 ms on CesiumMan.usdz); the same stage and resolver context
+        root = layers[0] if layers else str(path)
+        stage = Usd.Stage.Open(root, Usd.Stage.LoadAll)
+    except Tf.ErrorException as e:
+        raise AssetReadError(f"cannot read as USD: {tf_error_reason(e, path)}", path=path) from None
     del layers
     if stage is None:
         raise AssetReadError("cannot read as USD", path=path)
@@ -399,7 +409,7 @@ def all_close(a, b, rtol: float = 1e-5, atol: float = 1e-8) -> bool:
     return bool(np.allclose(a, b, rtol=rtol, atol=atol))
 
 
-def _world_might_vary(prim: Usd.Prim) -> bool:
+def world_might_vary(prim: Usd.Prim) -> bool:
     """Whether the local-to-world transform of ``prim`` may change over time."""
     p = prim
     while p and not p.IsPseudoRoot():
@@ -433,7 +443,7 @@ def skeleton_world_xforms(prim: Usd.Prim, time_codes: Sequence[float] | None = N
         ``time_codes``); None when the transform is the identity at every time.
         A transform that does not vary over time is computed once and repeated.
     """
-    if time_codes is None or not _world_might_vary(prim):
+    if time_codes is None or not world_might_vary(prim):
         n = 1 if time_codes is None else len(time_codes)
         if earliest is not None:
             return np.repeat(np.asarray(earliest, dtype=np.float64)[None], n, axis=0)
@@ -498,3 +508,77 @@ def fold_into_roots(parents: np.ndarray, world: np.ndarray, translations: np.nda
     nq = np.where((np.sum(nq * ref, axis=-1) < 0)[..., None], -nq, nq)
     t[:, roots], q[:, roots], s[:, roots] = nt, nq, ns
     return t, q, s
+
+
+#: How far from a rotation times one scale (relative to the scale squared) a world transform's
+#: columns may be for :func:`fold_similarity_into_roots` (``matrix_to_quat`` takes matrices this
+#: close to orthogonal as they are).
+SIMILARITY_TOL = 1e-12
+
+
+def fold_similarity_into_roots(parents: np.ndarray, world: np.ndarray, translations: np.ndarray,
+                               rotations: np.ndarray, scales: np.ndarray
+                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """:func:`fold_into_roots` of one world transform at every frame that is a rotation times a
+    uniform scale ``c > 0`` plus a translation (a Z-up stage's, a unit scale), with positive finite
+    root scales and finite non-zero root rotations: the products taken apart as quaternions and
+    vectors (``q_world * q / |q|``, ``c R t + w``, ``c s``) instead of as matrices at every frame.
+    The same numbers within ~1e-15 relative (both are exact for such transforms; they round
+    differently), the same hemisphere; None where this does not apply (the caller folds with
+    :func:`fold_into_roots`, which also raises what it raises there).
+
+    Parameters
+    ----------
+    world : (4, 4) float
+        Column-vector transform, the same at every frame.
+    translations, rotations, scales
+        As :func:`fold_into_roots` (``(T, J, 3)``, ``(T, J, 4)`` xyzw, ``(T, J, 3)``).
+    """
+    world = np.asarray(world, dtype=np.float64)
+    if world.shape != (4, 4) or not (np.isfinite(world).all() and (world[3] == (0.0, 0.0, 0.0, 1.0)).all()):
+        return None
+    a = world[:3, :3]
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = a.tolist()
+    gram = a.T @ a
+    c2 = float(gram.trace()) / 3.0
+    det = a00 * (a11 * a22 - a12 * a21) - a01 * (a10 * a22 - a12 * a20) + a02 * (a10 * a21 - a11 * a20)
+    if not (1e-150 < c2 < 1e150 and det > 0 and float(np.abs(gram - c2 * _EYE4[:3, :3]).max()) <= SIMILARITY_TOL * c2):
+        return None
+    roots = np.flatnonzero(np.asarray(parents) < 0)
+    t = np.array(translations, dtype=np.float64)
+    q = np.array(rotations, dtype=np.float64)
+    s = np.array(scales, dtype=np.float64)
+    if not len(roots) or not len(t):
+        return t, q, s
+    qr, sr = q[:, roots], s[:, roots]
+    with np.errstate(all="ignore"):
+        norm = np.sqrt(np.einsum("...i,...i->...", qr, qr))[..., None]
+        if not (np.isfinite(qr).all() and (norm > 0).all() and (sr > 0).all() and np.isfinite(sr).all()):
+            return None
+    c = c2 ** 0.5
+    x, y, z, w = _rotation_quat([[a00 / c, a01 / c, a02 / c], [a10 / c, a11 / c, a12 / c], [a20 / c, a21 / c, a22 / c]])
+    # q_world * u for every u at once: the Hamilton product as a matrix on the right quaternion (xyzw)
+    left = np.array([[w, -z, y, x], [z, w, -x, y], [-y, x, w, z], [-x, -y, -z, w]])
+    t[:, roots] = t[:, roots] @ a.T + world[:3, 3]
+    q[:, roots] = (qr / norm) @ left.T
+    s[:, roots] = c * sr
+    return t, q, s
+
+
+def _rotation_quat(r: list[list[float]]) -> tuple[float, float, float, float]:
+    """The xyzw unit quaternion (w >= 0) of one rotation matrix (column vectors) in Python floats, by
+    Markley's method as :func:`~usdhands.model.rotations.matrix_to_quat` (the same candidate)."""
+    d0, d1, d2 = r[0][0], r[1][1], r[2][2]
+    trace = d0 + d1 + d2
+    k = max(range(4), key=(d0, d1, d2, trace).__getitem__)
+    if k == 0:
+        q = [1 + 2 * d0 - trace, r[1][0] + r[0][1], r[2][0] + r[0][2], r[2][1] - r[1][2]]
+    elif k == 1:
+        q = [r[1][0] + r[0][1], 1 + 2 * d1 - trace, r[2][1] + r[1][2], r[0][2] - r[2][0]]
+    elif k == 2:
+        q = [r[2][0] + r[0][2], r[2][1] + r[1][2], 1 + 2 * d2 - trace, r[1][0] - r[0][1]]
+    else:
+        q = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1], 1 + trace]
+    n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) ** 0.5
+    sign = -1.0 if q[3] < 0 else 1.0
+    return q[0] * sign / n, q[1] * sign / n, q[2] * sign / n, q[3] * sign / n
