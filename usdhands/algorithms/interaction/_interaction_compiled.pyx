@@ -13,6 +13,32 @@ from libc.stdint cimport int64_t
 import numpy as np
 
 
+cdef inline void _barycentric_of(const double* V, const int64_t* F, int64_t f, double x, double y, double z,
+                                 double* out) noexcept nogil:
+    """The barycentric coordinates ``(u, v, w)`` into ``out`` of point ``(x, y, z)`` in face ``f`` of the
+    vertices ``V`` ``(V, 3)`` and faces ``F`` ``(F, 3)`` (row-major), ``(2, -1, -1)`` for a face without area:
+    the arithmetic of ``proximity._barycentric``, its sums x, y, z in order."""
+    cdef int64_t a = 3 * F[3 * f], b = 3 * F[3 * f + 1], c = 3 * F[3 * f + 2]
+    cdef double e00 = V[b] - V[a], e01 = V[b + 1] - V[a + 1], e02 = V[b + 2] - V[a + 2]
+    cdef double e10 = V[c] - V[a], e11 = V[c + 1] - V[a + 1], e12 = V[c + 2] - V[a + 2]
+    cdef double q0 = x - V[a], q1 = y - V[a + 1], q2 = z - V[a + 2]
+    cdef double d00 = e00 * e00 + e01 * e01 + e02 * e02
+    cdef double d01 = e00 * e10 + e01 * e11 + e02 * e12
+    cdef double d11 = e10 * e10 + e11 * e11 + e12 * e12
+    cdef double d20 = q0 * e00 + q1 * e01 + q2 * e02
+    cdef double d21 = q0 * e10 + q1 * e11 + q2 * e12
+    cdef double den = d00 * d11 - d01 * d01, v, w
+    if den > 0:
+        v = (d11 * d20 - d01 * d21) / den
+        w = (d00 * d21 - d01 * d20) / den
+    else:
+        v = -1.0
+        w = -1.0
+    out[0] = 1.0 - v - w
+    out[1] = v
+    out[2] = w
+
+
 def closed_shell_signs(const double[:, ::1] p, const double[:, ::1] closest, const int64_t[::1] face,
                        const double[::1] d, const double[:, ::1] normals, const double[:, ::1] vertices,
                        const int64_t[:, ::1] faces, const int64_t[:, ::1] neighbours, flat):
@@ -25,9 +51,9 @@ def closed_shell_signs(const double[:, ::1] p, const double[:, ::1] closest, con
     undecided_arr = np.zeros(n, dtype=np.bool_)
     cdef double[::1] out = out_arr
     cdef unsigned char[::1] undecided = undecided_arr.view(np.uint8)
-    cdef int64_t f, a, b, c, g, k
-    cdef double r0, r1, r2, side, e00, e01, e02, e10, e11, e12, q0, q1, q2, d00, d01, d11, d20, d21, den
-    cdef double v, w, u, di, s
+    cdef int64_t f, g, k
+    cdef double r0, r1, r2, side, v, w, u, di, s
+    cdef double bary[3]
     cdef bint on0, on1, on2, decided, inside
     cdef int count
     with nogil:
@@ -37,31 +63,10 @@ def closed_shell_signs(const double[:, ::1] p, const double[:, ::1] closest, con
             r1 = p[i, 1] - closest[i, 1]
             r2 = p[i, 2] - closest[i, 2]
             side = r0 * normals[f, 0] + r1 * normals[f, 1] + r2 * normals[f, 2]
-            a = faces[f, 0]
-            b = faces[f, 1]
-            c = faces[f, 2]
-            e00 = vertices[b, 0] - vertices[a, 0]
-            e01 = vertices[b, 1] - vertices[a, 1]
-            e02 = vertices[b, 2] - vertices[a, 2]
-            e10 = vertices[c, 0] - vertices[a, 0]
-            e11 = vertices[c, 1] - vertices[a, 1]
-            e12 = vertices[c, 2] - vertices[a, 2]
-            q0 = closest[i, 0] - vertices[a, 0]
-            q1 = closest[i, 1] - vertices[a, 1]
-            q2 = closest[i, 2] - vertices[a, 2]
-            d00 = e00 * e00 + e01 * e01 + e02 * e02
-            d01 = e00 * e10 + e01 * e11 + e02 * e12
-            d11 = e10 * e10 + e11 * e11 + e12 * e12
-            d20 = q0 * e00 + q1 * e01 + q2 * e02
-            d21 = q0 * e10 + q1 * e11 + q2 * e12
-            den = d00 * d11 - d01 * d01
-            if den > 0:
-                v = (d11 * d20 - d01 * d21) / den
-                w = (d00 * d21 - d01 * d20) / den
-            else:
-                v = -1.0
-                w = -1.0
-            u = 1.0 - v - w
+            _barycentric_of(&vertices[0, 0], &faces[0, 0], f, closest[i, 0], closest[i, 1], closest[i, 2], bary)
+            u = bary[0]
+            v = bary[1]
+            w = bary[2]
             on0 = u <= 1e-6
             on1 = v <= 1e-6
             on2 = w <= 1e-6
@@ -102,39 +107,19 @@ def undecided_sides(const double[:, ::1] p, const double[:, ::1] closest, const 
     todo_arr = np.zeros(n, dtype=np.bool_)
     cdef unsigned char[::1] inside = inside_arr.view(np.uint8)
     cdef unsigned char[::1] todo = todo_arr.view(np.uint8)
-    cdef int64_t f, a, b, c, vx
-    cdef double e00, e01, e02, e10, e11, e12, q0, q1, q2, d00, d01, d11, d20, d21, den, u, v, w
+    cdef int64_t f, vx
+    cdef double u, v, w
+    cdef double bary[3]
     cdef double x0, x1, x2, g0, g1, g2, slack, dot
     cdef bint front, behind
     cdef int slot
     with nogil:
         for i in range(n):
             f = face[i]
-            a = faces[f, 0]
-            b = faces[f, 1]
-            c = faces[f, 2]
-            e00 = vertices[b, 0] - vertices[a, 0]
-            e01 = vertices[b, 1] - vertices[a, 1]
-            e02 = vertices[b, 2] - vertices[a, 2]
-            e10 = vertices[c, 0] - vertices[a, 0]
-            e11 = vertices[c, 1] - vertices[a, 1]
-            e12 = vertices[c, 2] - vertices[a, 2]
-            q0 = closest[i, 0] - vertices[a, 0]
-            q1 = closest[i, 1] - vertices[a, 1]
-            q2 = closest[i, 2] - vertices[a, 2]
-            d00 = e00 * e00 + e01 * e01 + e02 * e02
-            d01 = e00 * e10 + e01 * e11 + e02 * e12
-            d11 = e10 * e10 + e11 * e11 + e12 * e12
-            d20 = q0 * e00 + q1 * e01 + q2 * e02
-            d21 = q0 * e10 + q1 * e11 + q2 * e12
-            den = d00 * d11 - d01 * d01
-            if den > 0:
-                v = (d11 * d20 - d01 * d21) / den
-                w = (d00 * d21 - d01 * d20) / den
-            else:
-                v = -1.0
-                w = -1.0
-            u = 1.0 - v - w
+            _barycentric_of(&vertices[0, 0], &faces[0, 0], f, closest[i, 0], closest[i, 1], closest[i, 2], bary)
+            u = bary[0]
+            v = bary[1]
+            w = bary[2]
             if <int>(u <= 1e-6) + <int>(v <= 1e-6) + <int>(w <= 1e-6) < 2:
                 todo[i] = 1  # not at a corner: the winding number
                 continue
@@ -314,6 +299,18 @@ cdef inline void _segment_closest(double px, double py, double pz, double ax, do
     out[3] = dx * dx + dy * dy + dz * dz
 
 
+cdef inline void _triangle_edges(double px, double py, double pz, double ax, double ay, double az, double bx,
+                                 double by, double bz, double cx, double cy, double cz, double* out) noexcept nogil:
+    cdef double tmp[4]
+    _segment_closest(px, py, pz, ax, ay, az, bx, by, bz, out)
+    _segment_closest(px, py, pz, bx, by, bz, cx, cy, cz, tmp)
+    if tmp[3] < out[3]:
+        out[0] = tmp[0]; out[1] = tmp[1]; out[2] = tmp[2]; out[3] = tmp[3]
+    _segment_closest(px, py, pz, cx, cy, cz, ax, ay, az, tmp)
+    if tmp[3] < out[3]:
+        out[0] = tmp[0]; out[1] = tmp[1]; out[2] = tmp[2]; out[3] = tmp[3]
+
+
 cdef inline void _triangle_closest(double px, double py, double pz, const double* T, double* out) noexcept nogil:
     """The point of triangle ``T`` (its corners' 9 coordinates) nearest ``p`` into ``out[0:3]`` and its
     squared distance into ``out[3]``: the Voronoi regions of the corners, edges and face in turn
@@ -326,16 +323,9 @@ cdef inline void _triangle_closest(double px, double py, double pz, const double
     cdef double apx = px - ax, apy = py - ay, apz = pz - az
     cdef double d1 = abx * apx + aby * apy + abz * apz, d2 = acx * apx + acy * apy + acz * apz
     cdef double bpx, bpy, bpz, cpx, cpy, cpz, d3, d4, d5, d6, va, vb, vc, v, w, denom, dx, dy, dz
-    cdef double tmp[4]
     cdef double nx = aby * acz - abz * acy, ny = abz * acx - abx * acz, nz = abx * acy - aby * acx
     if nx * nx + ny * ny + nz * nz <= 0.0:  # no area: the nearest of its edges
-        _segment_closest(px, py, pz, ax, ay, az, bx, by, bz, out)
-        _segment_closest(px, py, pz, bx, by, bz, cx, cy, cz, tmp)
-        if tmp[3] < out[3]:
-            out[0] = tmp[0]; out[1] = tmp[1]; out[2] = tmp[2]; out[3] = tmp[3]
-        _segment_closest(px, py, pz, cx, cy, cz, ax, ay, az, tmp)
-        if tmp[3] < out[3]:
-            out[0] = tmp[0]; out[1] = tmp[1]; out[2] = tmp[2]; out[3] = tmp[3]
+        _triangle_edges(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz, out)
         return
     if d1 <= 0.0 and d2 <= 0.0:
         out[0] = ax; out[1] = ay; out[2] = az
@@ -380,18 +370,6 @@ cdef inline void _triangle_closest(double px, double py, double pz, const double
     dy = py - out[1]
     dz = pz - out[2]
     out[3] = dx * dx + dy * dy + dz * dz
-
-
-cdef inline void _triangle_edges(double px, double py, double pz, double ax, double ay, double az, double bx,
-                                 double by, double bz, double cx, double cy, double cz, double* out) noexcept nogil:
-    cdef double tmp[4]
-    _segment_closest(px, py, pz, ax, ay, az, bx, by, bz, out)
-    _segment_closest(px, py, pz, bx, by, bz, cx, cy, cz, tmp)
-    if tmp[3] < out[3]:
-        out[0] = tmp[0]; out[1] = tmp[1]; out[2] = tmp[2]; out[3] = tmp[3]
-    _segment_closest(px, py, pz, cx, cy, cz, ax, ay, az, tmp)
-    if tmp[3] < out[3]:
-        out[0] = tmp[0]; out[1] = tmp[1]; out[2] = tmp[2]; out[3] = tmp[3]
 
 
 cdef void _select(int64_t[::1] idx, const double[:, ::1] key, int axis, Py_ssize_t lo, Py_ssize_t hi,
