@@ -78,6 +78,22 @@ def test_tree_gives_the_brute_force_nearest_point_on_triangle_soups(seed):
     np.testing.assert_allclose(np.einsum("ij,ij->i", P - near, P - near), d2, rtol=1e-12, atol=1e-14)
     for i in range(0, len(P), 7):  # coordinates of about 1: on the face to rounding
         assert brute_force_nearest(V, F[face[i]][None], near[i][None])[0] <= 1e-24
+    # visited in Z order (sort_from 0): the same answers to the bit
+    sorted_answers = BUILT.TriangleTree(V, F).squared_distance(P, 0)
+    assert all(x.tobytes() == y.tobytes() for x, y in zip(sorted_answers, (d2, face, near)))
+
+
+@needs_built
+@pytest.mark.parametrize("n_faces", [1, 2, 4, 5, 9, 17])
+def test_tree_of_a_few_triangles_is_exact(n_faces):
+    """Trees of one leaf, of a leaf and a split, of a few levels: the brute force's distances."""
+    rng = np.random.default_rng(n_faces)
+    V = rng.normal(size=(3 * n_faces, 3))
+    F = np.arange(3 * n_faces, dtype=np.int64).reshape(n_faces, 3)
+    P = rng.normal(size=(300, 3)) * 2
+    for sort_from in (-1, 0):
+        d2, _, _ = BUILT.TriangleTree(V, F).squared_distance(P, sort_from)
+        np.testing.assert_allclose(d2, brute_force_nearest(V, F, P), rtol=1e-10, atol=1e-14)
 
 
 @needs_built
