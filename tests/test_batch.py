@@ -446,14 +446,44 @@ def test_a_refused_batch_starts_no_forkserver(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("how", ["freeze_at_exit", "forkserver_preload", "dask_plugin", "dask_plugin_farm", "cli"])
+def test_the_command_line_starts_the_warm_forkserver_before_numpy_loads(tmp_path):
+    """``usdhands batch --job synthesize`` starts the workers' forkserver as soon as it has parsed its
+    arguments (where the kernels compiled ahead of time were built): before NumPy loads."""
+    from usdhands.compiled import KERNEL_MODULES, kernel_file_built
+
+    if not all(kernel_file_built(name) for name in KERNEL_MODULES if not name.startswith("algorithms.interaction.")):
+        pytest.skip("the kernels compiled ahead of time were not built: the forkserver starts once the batch is listed")
+    code = ("import json, sys\n"
+            "from usdhands.jobs import batch\n"
+            "seen = []\n"
+            "batch.start_warm_forkserver = lambda dask=False: seen.append(['numpy' in sys.modules, dask])\n"
+            "from usdhands.cli import main\n"
+            f"code = main(['batch', {str(tmp_path / 'none')!r}, '--job', 'synthesize', '--out', "
+            f"{str(tmp_path / 'out')!r}, '--scheduler', 'local'])\n"
+            "print(json.dumps([code, seen[0]]))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert json.loads(done.stdout.splitlines()[-1]) == [2, [False, True]], done.stderr[-2000:]
+    assert "no such file or folder" in done.stderr
+
+
+def test_the_warm_forkserver_ends_at_once_at_exit_its_streams_flushed():
+    """The warm forkserver's preload makes its exit end at once: what it wrote is flushed, the exit
+    handlers registered before (and Python's teardown of the modules) are skipped."""
+    code = ("import atexit, sys\n"
+            "atexit.register(lambda: print('an earlier exit handler ran', flush=True))\n"
+            "import usdhands.jobs.batch_forkserver\n"
+            "sys.stdout.write('written, not flushed')\nsys.stderr.write('to stderr')\nsys.exit(3)\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert (done.returncode, done.stdout, done.stderr) == (0, "written, not flushed", "to stderr")
+
+
+@pytest.mark.parametrize("how", ["freeze_at_exit", "dask_plugin", "dask_plugin_farm", "cli"])
 def test_processes_batch_starts_exit_without_the_last_collections_and_keep_their_status(how):
-    """The warm forkserver, the LocalCluster's workers (not a farm's) and the command line's process
-    freeze the garbage collector at exit (its last collections over numba's objects took ~0.3 s):
-    an exit handler registered before still runs, after the freeze, and the exit status is kept."""
+    """The LocalCluster's workers (not a farm's) and the command line's process freeze the garbage
+    collector at exit (its last collections over numba's objects took ~0.3 s): an exit handler
+    registered before still runs, after the freeze, and the exit status is kept."""
     setup = {
         "freeze_at_exit": "from usdhands.jobs.batch import freeze_at_exit\nfreeze_at_exit()\nsys.exit(3)\n",
-        "forkserver_preload": "import usdhands.jobs.batch_forkserver\nsys.exit(3)\n",
         "dask_plugin": "import pickle\npickle.loads(bytes.fromhex(sys.argv[1])).setup(None)\nsys.exit(3)\n",
         "dask_plugin_farm": "import pickle\npickle.loads(bytes.fromhex(sys.argv[1])).setup(None)\nsys.exit(3)\n",
         "cli": "sys.argv = ['usdhands', 'no-such-command']\nfrom usdhands.cli import entry_point\nentry_point()\n",
@@ -552,21 +582,26 @@ def dask_cluster(tmp_path):
         log.close()
 
 
-def test_dask_tasks_hold_up_to_8_clips_shrinking_to_one_and_a_short_batch_one_clip_each():
-    todo = [(f"in{i}", f"out{i}") for i in range(200)]
-    for slots in (1, 2, 3, 8):
-        sizes = [len(c) for c in batch.dask_chunks(todo, slots)]
-        assert [p for c in batch.dask_chunks(todo, slots) for p in c] == todo  # every clip once, in order
-        assert sizes[0] == max(sizes) == min(8, 200 // (4 * slots)) and sizes[-1] == 1  # 8, 8, 8, 6
-        assert sizes == sorted(sizes, reverse=True)
-        left = len(todo)
-        for size in sizes:  # a quarter of a thread's share of what is left, from 8 down to 1
-            assert size == max(1, min(8, left // (4 * slots)))
-            left -= size
-    assert [len(c) for c in batch.dask_chunks(todo, 2)] == [8] * 18 + [7, 6, 5, 4, 4, 3, 3, 3, 2, 2, 2] + [1] * 15
-    assert [len(c) for c in batch.dask_chunks(todo[:20], 2)] == [2, 2, 2] + [1] * 14
-    assert [len(c) for c in batch.dask_chunks(todo[:7], 2)] == [1] * 7
-    assert [len(c) for c in batch.dask_chunks(todo[:10], 64)] == [1] * 10
+def test_dask_tasks_are_sized_by_the_clips_measured_seconds_and_shrink_to_one_clip_at_the_end():
+    """A task aims at DASK_TASK_SECONDS of clips (2 clips before any was measured), at most half a
+    thread's share of the clips left, at least one."""
+    assert batch.DASK_TASK_SECONDS == 0.25 and batch.DASK_FIRST_TASK_CLIPS == 2
+    assert batch.dask_task_size(200, 2, None) == 2  # nothing measured yet
+    assert batch.dask_task_size(200, 2, 0.011) == 22  # 0.25 s of 11 ms clips
+    assert batch.dask_task_size(200, 2, 0.5) == 1 and batch.dask_task_size(200, 2, 3.0) == 1  # long clips: one each
+    assert batch.dask_task_size(60, 2, 0.011) == 15  # half of a thread's share of 60 clips
+    assert batch.dask_task_size(3, 2, 0.011) == 1 and batch.dask_task_size(3, 1, 0.011) == 1
+    assert batch.dask_task_size(10, 64, 0.001) == 1
+    for slots in (1, 2, 3, 8):  # a batch of 200 clips of 11 ms: every clip once, tasks shrinking to one at the end
+        left, sizes = 200, []
+        while left:
+            sizes.append(batch.dask_task_size(left, slots, 0.011 if len(sizes) >= 2 * slots else None))
+            left -= sizes[-1]
+        assert sizes[:2 * slots] == [2] * 2 * slots and sizes[-1] == 1
+        assert sizes[2 * slots] == min(22, (200 - 4 * slots) // (2 * slots))
+        assert sizes[2 * slots:] == sorted(sizes[2 * slots:], reverse=True)
+        if slots == 2:  # bench_batch's: 25 tasks (tasks of up to 8 clips, each a quarter of a share: 47)
+            assert sizes == [2] * 4 + [22] * 5 + [20, 15, 11, 9, 6, 5, 4, 3, 2] + [1] * 7
 
 
 def test_the_dask_plugin_warms_each_worker_and_leaves_a_failed_warm_up_to_the_clips(monkeypatch):
@@ -613,7 +648,7 @@ def test_remote_scheduler_runs_the_batch_and_a_killer_clip_fails_alone(clips, tm
         shutil.copy(clips / "ok_00.glb", many / f"ok_{i:02d}.glb")
     shutil.copy(clips / "ok_00.glb", many / "die_07.glb")
     todo = sorted(many.iterdir())
-    assert [len(c) for c in batch.dask_chunks(todo, 2)][0] == 2 and todo[0].name == "die_07.glb"  # in a 2-clip task
+    assert batch.dask_task_size(len(todo), 2, None) == 2 and todo[0].name == "die_07.glb"  # in a 2-clip task
     report = run_batch([many], BatchOptions(job="batch_dying_job:convert_or_die", out=tmp_path / "many_out",
                                             workers=2, scheduler=dask_cluster, job_options=usdhands.ConvertOptions()))
     statuses = {os.path.basename(c.file): c.status for c in report.clips}

@@ -113,3 +113,27 @@ def test_building_the_parser_imports_no_job_for_a_default():
 
     assert default == DEFAULT_STEPS == ReduceOptions().steps
     assert len(parse_steps(default)) == 4  # the paper's four steps
+
+
+def test_a_command_line_builds_the_parser_of_the_command_it_names_only():
+    """``usdhands batch ...`` registers the batch parser only (the other commands' modules, some of which
+    load NumPy, are not imported); no command, a misspelled one or --version: the full parser."""
+    from usdhands.cli import named_command
+
+    assert named_command(["batch", "in", "--job", "synthesize"]) == "batch"
+    assert named_command(["-v", "usd-plugin"]) == "usd-plugin"
+    assert named_command(["-q", "--verbose", "db", "build"]) == "db"
+    assert named_command(["usd_plugin"]) is None and named_command(["synthesise", "x"]) is None
+    assert named_command([]) is None and named_command(["--version"]) is None and named_command(["-h"]) is None
+    full = build_parser()._subparsers._group_actions[0].choices
+    assert {"batch", "synthesize", "usd-plugin", "db", "inspect"} <= set(full)
+    for name in full:
+        assert list(build_parser(name)._subparsers._group_actions[0].choices) == [name]
+    code = ("import json, sys; from usdhands.cli import main; code = main(['usd-plugin']); "
+            "print(json.dumps([code, sorted(m for m in sys.modules if m.startswith('usdhands.commands.'))]))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert json.loads(out.stdout.splitlines()[-1]) == [0, ["usdhands.commands._common", "usdhands.commands.usd_plugin"]]
+    # a misspelled command is refused by the full parser, which lists every command
+    code = "from usdhands.cli import main; raise SystemExit(main(['synthesise', 'x']))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 2 and "invalid choice: 'synthesise'" in out.stderr and "usd-plugin" in out.stderr

@@ -42,6 +42,27 @@ def test_kernel_module_names_only_the_compiled_modules(monkeypatch):
     assert kernel_module("formats._bvh_compiled") is None
 
 
+def test_kernel_file_built_tells_a_built_module_by_its_file_without_importing_it(monkeypatch, tmp_path):
+    from usdhands.compiled import kernel_file_built
+
+    assert {name: kernel_file_built(name) for name in KERNEL_MODULES} == {
+        name: module is not None for name, module in BUILT.items()}
+    code = ("import json, sys\nfrom usdhands.compiled import KERNEL_MODULES, kernel_file_built\n"
+            "[kernel_file_built(name) for name in KERNEL_MODULES]\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.startswith(('numpy', 'usdhands.algorithms', "
+            "'usdhands.formats')))))\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert json.loads(done.stdout) == [], done.stderr[-2000:]
+    with pytest.raises(ValueError, match="unknown compiled kernel module 'formats.bvh'"):
+        kernel_file_built("formats.bvh")
+    monkeypatch.setattr(usdhands.compiled, "ENABLED", False)
+    assert not kernel_file_built("formats._bvh_compiled")
+    # a package without the extension files: not built
+    monkeypatch.setattr(usdhands.compiled, "ENABLED", True)
+    monkeypatch.setattr(usdhands.compiled, "__file__", str(tmp_path / "compiled.py"))
+    assert not any(kernel_file_built(name) for name in KERNEL_MODULES)
+
+
 def _search(search, qf, qb, qg, df, ds, dg, k, lf, band, bound):
     Q = len(qb)
     idx, cost, stats = np.full((Q, k), -1, np.int64), np.full((Q, k), np.inf), np.zeros((Q, 4), np.int64)

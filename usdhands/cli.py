@@ -79,8 +79,10 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(f"{self.prog}: {message}" if self.prog != "usdhands" else message)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser with every subcommand registered."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The full argument parser with every subcommand registered; with ``command`` (a subcommand's
+    name, as :func:`named_command` finds it), that subcommand's parser only: the other commands'
+    modules are not imported (``handmap`` and ``inspect`` import NumPy, ~45 ms of a command's start)."""
     import usdhands.commands as commands
 
     parser = _Parser(
@@ -91,18 +93,36 @@ def build_parser() -> argparse.ArgumentParser:
     parser.set_defaults(verbose=False, quiet=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if info.name.startswith("_"):
+        if info.name.startswith("_") or (command is not None and _command_name(info.name) != command):
             continue
         module = importlib.import_module(f"usdhands.commands.{info.name}")
         module.register(sub)
     return parser
 
 
+def _command_name(module: str) -> str:
+    """The subcommand a module of :mod:`usdhands.commands` registers (``usd_plugin``: ``usd-plugin``)."""
+    return module.replace("_", "-")
+
+
+def named_command(argv: list[str]) -> str | None:
+    """The subcommand a command line names: its first word not starting with ``-`` (the top level's
+    options take no value), when that is a subcommand; None else (no command, ``--help``, ``--version``,
+    a misspelled command: the full parser, whose usage and errors list every command)."""
+    import usdhands.commands as commands
+
+    word = next((w for w in argv if not w.startswith("-")), None)
+    names = {_command_name(info.name) for info in pkgutil.iter_modules(commands.__path__)
+             if not info.name.startswith("_")}
+    return word if word in names else None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     from usdhands.commands._common import set_quiet
 
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(named_command(argv))
     try:
         args = parser.parse_args(argv)
     except UsageError as e:

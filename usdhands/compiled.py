@@ -36,7 +36,7 @@ import importlib
 import os
 from types import ModuleType
 
-__all__ = ["kernel_module", "ENABLED", "KERNEL_MODULES"]
+__all__ = ["kernel_module", "kernel_file_built", "ENABLED", "KERNEL_MODULES"]
 
 #: The compiled modules, by their names under ``usdhands``.
 KERNEL_MODULES = ("algorithms.synthesis._search_compiled", "algorithms.synthesis._play_compiled",
@@ -61,3 +61,20 @@ def kernel_module(name: str) -> ModuleType | None:
         except ImportError:
             _loaded[name] = None
     return _loaded[name]
+
+
+def kernel_file_built(name: str) -> bool:
+    """Whether the compiled module ``usdhands.<name>`` (one of :data:`KERNEL_MODULES`) was built: its
+    extension file is in the package (False where :data:`ENABLED` is False). Imports nothing (neither
+    the module nor NumPy, nor the packages above it): for a guess made before they load, which
+    :func:`kernel_module` confirms (a file that fails to import gives None there)."""
+    if name not in KERNEL_MODULES:
+        raise ValueError(f"unknown compiled kernel module {name!r}; expected one of {KERNEL_MODULES}")
+    if not ENABLED:
+        return False
+    from importlib.machinery import EXTENSION_SUFFIXES
+    from pathlib import Path
+
+    *package, stem = name.split(".")
+    folder = Path(__file__).parent.joinpath(*package)
+    return any((folder / (stem + suffix)).is_file() for suffix in EXTENSION_SUFFIXES)

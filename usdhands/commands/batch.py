@@ -128,17 +128,20 @@ def _job_options_given(args) -> list[str]:
 
 def run(args) -> int:
     from usdhands.errors import UsdHandsError
-    from usdhands.jobs.batch import BatchOptions, check_side_files, run_batch
+    from usdhands.jobs.batch import BatchOptions, check_side_files, run_batch, start_warm_forkserver_early
 
     for flag in _job_options_given(args):
         if flag not in JOB_FLAGS[args.job]:
             raise UsdHandsError(f"{flag} is not an option of --job {args.job}")
+    workers = args.workers or os.cpu_count() or 1
+    # the workers' forkserver loads while the side files are checked and the options made (NumPy)
+    start_warm_forkserver_early(args.job, workers, args.scheduler)
     # every side file given (the job reads each: the others were refused above) is checked before any clip runs
     check_side_files({"--handmap": args.handmap, "--config": args.config, "--model": args.model,
                       "--interaction-config": args.interaction_config, "--props": args.props, "--db": args.db},
                      args.out)
     options = BatchOptions(job=args.job, out=args.out, job_options=job_options(args),
-                           workers=args.workers or os.cpu_count() or 1, scheduler=args.scheduler, to=args.to,
+                           workers=workers, scheduler=args.scheduler, to=args.to,
                            model=args.model, warm_forkserver=True)
     bar = _progress_bar(args.job)
     try:

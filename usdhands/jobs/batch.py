@@ -20,8 +20,9 @@
 - A failing clip is recorded (``out/report.json``: file, status, seconds, error line) and
   does not stop the others. A worker process that dies is replaced and its clips retried
   once, each alone, so a clip that kills its worker is the only one to fail. (Dask runs a
-  long batch in tasks of up to 8 clips; a task whose worker died twice is retried clip by
-  clip, and a clip that kills its worker twice alone fails with ``KilledWorker``.)
+  long batch in tasks of about a quarter of a second of clips, :func:`dask_task_size`; a task
+  whose worker died twice is retried clip by clip, and a clip that kills its worker twice
+  alone fails with ``KilledWorker``.)
 - Start-up is paid once per worker, and the database loaded once per worker
   (:func:`usdhands.jobs.inputs.cached_database`).
 - A worker in a process of its own (the local pool's, a Dask worker process) runs numba's
@@ -527,18 +528,34 @@ def _warm_worker(job: str, job_options, clips_each: int) -> None:
 WARM_FORKSERVER_MODULE = "usdhands.jobs.batch_forkserver"
 
 
-def wants_warm_forkserver(options: BatchOptions, clips: int | None = None) -> bool:
+def wants_warm_forkserver(options: BatchOptions, clips: int | None = None, built: bool | None = None) -> bool:
     """Whether a batch forks its workers from the warm forkserver: it asked
     (:attr:`BatchOptions.warm_forkserver`), ``synthesize`` on the local pool or on a LocalCluster of
     worker processes, and either the kernels compiled ahead of time are built (the forkserver then
     loads no numba: any batch gains; decided before its inputs are listed, ``clips`` None) or,
     without them, ``clips`` reaches :data:`KERNEL_AT_START_CLIPS` a worker (a smaller batch would
-    wait for numba's ~0.5 s start that its workers, searching in NumPy, never need)."""
+    wait for numba's ~0.5 s start that its workers, searching in NumPy, never need). ``built``: whether
+    those kernels were built, when known (else they are loaded to see)."""
     if not (options.warm_forkserver and options.job == "synthesize" and options.workers >= 1
             and (options.scheduler is None or (options.scheduler == "local" and options.dask_processes))):
         return False
-    built = _synthesis_kernels_built()
+    built = _synthesis_kernels_built() if built is None else built
     return built if clips is None else not built and clips >= KERNEL_AT_START_CLIPS * options.workers
+
+
+def start_warm_forkserver_early(job: str, workers: int, scheduler: str | None) -> bool:
+    """For a process that runs batch and nothing else (the command line, which then sets
+    :attr:`BatchOptions.warm_forkserver`): :func:`start_warm_forkserver` as soon as the job, the
+    workers and the scheduler are known, where :func:`run_batch` would start it before listing its
+    inputs (:func:`wants_warm_forkserver`), the kernels compiled ahead of time guessed built from their
+    files (:func:`usdhands.compiled.kernel_file_built`: nothing imported, NumPy neither). The warm
+    forkserver then loads while the caller checks its side files and makes the job's options, which
+    load NumPy (~45 ms); :func:`run_batch` finds it running. Whether it started."""
+    from usdhands.compiled import KERNEL_MODULES, kernel_file_built
+
+    built = all(kernel_file_built(name) for name in KERNEL_MODULES if not name.startswith("algorithms.interaction."))
+    options = BatchOptions(job=job, out=Path(), workers=workers, scheduler=scheduler, warm_forkserver=True)
+    return wants_warm_forkserver(options, built=built) and start_warm_forkserver(dask=scheduler is not None)
 
 
 def _synthesis_kernels_built() -> bool:
@@ -583,7 +600,7 @@ def _warm_forkserver_process() -> None:
     (:func:`_warm_worker`). Never raises (a forkserver whose preload failed would start no worker):
     what failed is loaded again by each worker.
 
-    At its exit the forkserver skips Python's last garbage collections (:func:`freeze_at_exit`).
+    At its exit the forkserver ends at once, its streams flushed (:func:`_end_at_once_at_exit`).
     """
     with contextlib.suppress(Exception):
         import numpy as np
@@ -597,7 +614,26 @@ def _warm_forkserver_process() -> None:
         import_what_a_clip_needs()  # the kernels compiled ahead of time among them
         if not _synthesis_kernels_built():  # else the workers run those: no numba
             limit_steps_fast(np.zeros((2, 1)), np.zeros(1))
-    freeze_at_exit()
+    _end_at_once_at_exit()
+
+
+def _end_at_once_at_exit() -> None:
+    """The warm forkserver's exit (when the batch process has exited): its standard streams flushed,
+    it ends at once (``os._exit(0)``), before its other exit handlers and Python's teardown of the
+    modules it loaded (``distributed``, NumPy, synthesis: ~14 ms, measured), during which it still
+    held the batch's stderr, which whoever reads that waits to be closed. A process that only forks
+    needs neither (no thread, no file of its own, no child it waits for; nobody reads its exit status).
+    """
+    import atexit
+    import sys
+
+    def end() -> None:
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(0)
+
+    atexit.register(end)  # exit handlers run last-registered first
 
 
 def freeze_at_exit() -> None:
@@ -710,10 +746,15 @@ def _run_dask(todo, task, options: BatchOptions, report, warm: bool = False) -> 
                                   "distributed.scheduler.worker-saturation": 1.0, **QUIET_LOCAL_CLUSTER,
                                   "distributed.nanny.pre-spawn-environ": worker_environ(), **forked}), \
                     _nannies_look_often():
+                # the scheduler first, then the client and the first tasks, then the workers: each worker's
+                # first task is sent when it registers, with no round trip left to the client
                 cluster = stack.enter_context(LocalCluster(
-                    n_workers=options.workers, threads_per_worker=1, processes=options.dask_processes,
-                    dashboard_address=None, plugins=(plugin,)))
-            client = stack.enter_context(Client(cluster))
+                    n_workers=0, threads_per_worker=1, processes=options.dask_processes, dashboard_address=None,
+                    plugins=(plugin,)))
+                client = stack.enter_context(Client(cluster))
+                feed = _TaskFeed(client, todo, task, slots)
+                cluster.scale(options.workers)
+                cluster.sync(cluster._correct_state)  # the workers started (raises as LocalCluster(n_workers) does)
         else:
             try:
                 client = stack.enter_context(Client(options.scheduler, timeout="10s"))
@@ -722,20 +763,23 @@ def _run_dask(todo, task, options: BatchOptions, report, warm: bool = False) -> 
             slots = sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()) or 1
             # every worker (and any that joins later) sets itself up and warms before the first task
             client.register_plugin(OwnProcessWorker(warm=(job, job_options, -(-len(todo) // slots))))
-        futures = {client.submit(run_clips, job, job_options, model, chunk, pure=False): chunk
-                   for chunk in dask_chunks(todo, slots)}
+            feed = _TaskFeed(client, todo, task, slots)
         alone = []
-        for future in as_completed(futures):
-            chunk = futures[future]
+        for future in feed:
+            chunk = feed.chunks[future]
             try:
-                for record in future.result():
-                    report(record)
+                records = future.result()
             except Exception as e:  # KilledWorker and the like: the task took its worker down twice
                 if len(chunk) > 1:  # which clip did it is not known: each is retried alone
                     alone.extend(chunk)
                 else:
                     src, dst = chunk[0]
                     report(ClipRecord(str(src), str(dst), "failed", 0.0, one_line(f"{type(e).__name__}: {e}")))
+                feed.done()
+                continue
+            feed.done(records)
+            for record in records:
+                report(record)
         if alone:
             futures = {client.submit(run_clips, job, job_options, model, [pair], pure=False): [pair] for pair in alone}
             for future in as_completed(futures):
@@ -827,25 +871,76 @@ def _warm_scheduler_versions() -> None:
         platform.uname().processor
 
 
-#: The most clips one Dask task runs: each task costs the caller's scheduler and client and the
-#: worker's event loop ~3 ms of CPU each (its messages, the result fetched), a sixth of a 40 ms clip
-DASK_CHUNK_MAX = 8
+#: How long a Dask task aims to run, in its clips' measured seconds. Each task costs ~6 ms of CPU
+#: besides its clips, half in the caller's process (the scheduler's and the client's messages, its
+#: result fetched), half in the worker's event loop, and the worker waits ~3 ms between two tasks; on
+#: two workers with two cores, that CPU is taken from the clips. bench_batch, between its 10% and 90%
+#: marks: tasks of 8 clips (~90 ms) 0.8 ms of that CPU a clip, 6% of the clips' own; tasks of a quarter
+#: of a second 0.3-0.4 ms, 3%. The progress still moves every few tenths of a second with two workers,
+#: whatever the clips' length
+DASK_TASK_SECONDS = 0.25
+#: The clips of each first task, before any clip of the batch was measured (the worker's first clip
+#: also pays its warm-up)
+DASK_FIRST_TASK_CLIPS = 2
 
 
-def dask_chunks(todo: list, slots: int) -> list[list]:
-    """``todo``'s (source, output) pairs cut into consecutive tasks for ``slots`` worker threads.
+def dask_task_size(left: int, slots: int, clip_seconds: float | None) -> int:
+    """How many of the ``left`` clips the next Dask task takes, for ``slots`` worker threads; ``clip_seconds``:
+    the mean seconds of the batch's clips measured so far (None: none yet).
 
-    Each task takes a quarter of a thread's share of the clips left, at most
-    :data:`DASK_CHUNK_MAX` and at least one: a long batch starts with tasks of 8 clips and ends
-    with tasks of 1, so the workers finish together (tasks of equal size left one worker alone
-    on the last up to 8 clips); a short batch is one clip per task.
+    About :data:`DASK_TASK_SECONDS` of clips (:data:`DASK_FIRST_TASK_CLIPS` before any was measured),
+    at most half a thread's share of the clips left (not yet submitted), at least one: a long batch of
+    short clips runs in tasks of a quarter of a second, then shorter ones down to one clip at its end,
+    so that the workers finish together; a clip of a quarter of a second or more is a task of its own;
+    a short batch is one or two clips per task.
     """
-    chunks, i = [], 0
-    while i < len(todo):
-        size = max(1, min(DASK_CHUNK_MAX, (len(todo) - i) // (4 * max(1, slots))))
-        chunks.append(todo[i:i + size])
-        i += size
-    return chunks
+    most = left // (2 * max(1, slots))
+    aimed = DASK_FIRST_TASK_CLIPS if clip_seconds is None else int(DASK_TASK_SECONDS / max(clip_seconds, 1e-4))
+    return max(1, min(most, aimed))
+
+
+class _TaskFeed:
+    """A batch's clips, in order, as Dask tasks of :func:`run_clips` sized by :func:`dask_task_size`,
+    with ``2 * slots`` of them submitted and unfinished at a time: one running on each worker thread
+    and one waiting for each in the scheduler, so that a worker that finishes a task starts the next
+    without a round trip to this process.
+
+    Iterate for the tasks' futures as they finish; :meth:`done` (with the finished task's records)
+    measures their clips and submits the next task. ``chunks``: future -> its (source, output) pairs.
+    """
+
+    def __init__(self, client, todo: list, task: tuple, slots: int) -> None:
+        from distributed import as_completed
+
+        self.client, self.todo, self.task, self.slots = client, todo, task, slots
+        self.chunks: dict = {}
+        self.next = 0  # the first clip not submitted
+        self.seconds, self.clips = 0.0, 0  # measured
+        self.finished = as_completed(loop=client.loop)
+        for _ in range(2 * slots):
+            self._submit()
+
+    def _submit(self) -> None:
+        left = len(self.todo) - self.next
+        if left <= 0:
+            return
+        size = dask_task_size(left, self.slots, self.seconds / self.clips if self.clips else None)
+        chunk = self.todo[self.next:self.next + size]
+        self.next += size
+        job, job_options, model = self.task
+        future = self.client.submit(run_clips, job, job_options, model, chunk, pure=False)
+        self.chunks[future] = chunk
+        self.finished.add(future)
+
+    def __iter__(self):
+        return iter(self.finished)
+
+    def done(self, records: Sequence[ClipRecord] = ()) -> None:
+        """A task finished: its ``records`` measured (none for a task that failed), the next task submitted."""
+        for record in records:
+            self.seconds += record.seconds
+            self.clips += 1
+        self._submit()
 
 
 def run_clips(job: str, job_options, model: Path | None, pairs) -> list[ClipRecord]:
