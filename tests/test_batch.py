@@ -89,6 +89,31 @@ def test_dask_local_cluster_synthesizes_like_the_job_alone(clips, tmp_path):
     assert report.scheduler == "local" and report.summary["clips_per_second"] > 0
 
 
+def test_dask_tasks_are_fed_two_per_worker_thread_and_sized_by_the_measured_clips(clips, tmp_path, monkeypatch):
+    """The first 2 * workers tasks are sized before any clip was measured, each later one when a task
+    has finished, from the mean seconds of the clips done; every clip runs once, in order of the tasks."""
+    pytest.importorskip("distributed")
+    many = tmp_path / "many"
+    many.mkdir()
+    for i in range(24):
+        shutil.copy(clips / "ok_00.glb", many / f"ok_{i:02d}.glb")
+    sizes, real = [], batch.dask_task_size
+
+    def sized(left, slots, clip_seconds):
+        sizes.append((left, slots, clip_seconds, real(left, slots, clip_seconds)))
+        return sizes[-1][-1]
+
+    monkeypatch.setattr(batch, "dask_task_size", sized)
+    report = run_batch([many], BatchOptions(job="convert", to="usda", out=tmp_path / "out", workers=2,
+                                            scheduler="local", dask_processes=False))
+    assert [c.status for c in report.clips] == ["done"] * 24
+    assert sizes[0][0] == 24 and sum(size for *_, size in sizes) == 24
+    assert all(b[0] == a[0] - a[-1] for a, b in zip(sizes, sizes[1:]))  # each task takes the next clips
+    assert [clip_seconds for _, _, clip_seconds, _ in sizes[:4]] == [None] * 4 and all(s[1] == 2 for s in sizes)
+    assert all(clip_seconds > 0 for _, _, clip_seconds, _ in sizes[4:])  # measured once the first tasks are back
+    assert len(sizes) > 4
+
+
 @pytest.mark.parametrize("processes", [True, False])
 def test_dask_local_cluster_runs_without_profiler_and_monitors_and_the_callers_config_is_untouched(
         clips, tmp_path, processes):
