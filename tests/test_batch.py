@@ -89,6 +89,26 @@ def test_dask_local_cluster_synthesizes_like_the_job_alone(clips, tmp_path):
     assert report.scheduler == "local" and report.summary["clips_per_second"] > 0
 
 
+def test_a_local_cluster_without_distributeds_private_start_wait_still_runs(clips, tmp_path, monkeypatch):
+    """The LocalCluster's workers start after the first tasks are queued, waited for by distributed's
+    private ``SpecCluster._correct_state``; a distributed without it waits for them by the public
+    ``Client.wait_for_workers`` instead, with the same outputs and report."""
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    waited = []
+    real = Client.wait_for_workers
+    monkeypatch.setattr(batch, "SPEC_CLUSTER_START_WAIT", "_not_in_this_distributed")
+    monkeypatch.setattr(Client, "wait_for_workers", lambda self, n, **kw: waited.append(n) or real(self, n, **kw))
+    report = run_batch([clips / "ok_00.glb", clips / "sub"], BatchOptions(
+        job="convert", to="usda", out=tmp_path / "out", workers=2, scheduler="local", dask_processes=False))
+    assert [(os.path.basename(c.file), c.status) for c in report.clips] == [
+        ("ok_00.glb", "done"), ("attention_00.glb", "done"), ("broken.glb", "failed")]
+    usdhands.convert(clips / "ok_00.glb", tmp_path / "alone.usda")
+    assert (tmp_path / "out" / "ok_00.usda").read_text() == (tmp_path / "alone.usda").read_text()
+    assert waited == [2]
+
+
 def test_dask_tasks_are_fed_two_per_worker_thread_and_sized_by_the_measured_clips(clips, tmp_path, monkeypatch):
     """The first 2 * workers tasks are sized before any clip was measured, each later one when a task
     has finished, from the mean seconds of the clips done; every clip runs once, in order of the tasks."""

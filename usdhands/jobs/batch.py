@@ -754,7 +754,11 @@ def _run_dask(todo, task, options: BatchOptions, report, warm: bool = False) -> 
                 client = stack.enter_context(Client(cluster))
                 feed = _TaskFeed(client, todo, task, slots)
                 cluster.scale(options.workers)
-                cluster.sync(cluster._correct_state)  # the workers started (raises as LocalCluster(n_workers) does)
+                correct = getattr(cluster, SPEC_CLUSTER_START_WAIT, None)  # private in distributed: optional
+                if correct is not None:
+                    cluster.sync(correct)  # the workers started (raises as LocalCluster(n_workers) does)
+                else:
+                    client.wait_for_workers(options.workers, timeout=LOCAL_WORKERS_START_S)
         else:
             try:
                 client = stack.enter_context(Client(options.scheduler, timeout="10s"))
@@ -871,6 +875,12 @@ def _warm_scheduler_versions() -> None:
         platform.uname().processor
 
 
+#: The private method of distributed's ``SpecCluster`` that a LocalCluster's start waits on (raising what a
+#: worker's start raised); a batch that queues its tasks before its local workers start waits on it too
+SPEC_CLUSTER_START_WAIT = "_correct_state"
+#: Where distributed has no such method: how long a batch waits for its local workers to register (by the
+#: public ``Client.wait_for_workers``) before it fails
+LOCAL_WORKERS_START_S = 120.0
 #: How long a Dask task aims to run, in its clips' measured seconds. Each task costs ~6 ms of CPU
 #: besides its clips, half in the caller's process (the scheduler's and the client's messages, its
 #: result fetched), half in the worker's event loop, and the worker waits ~3 ms between two tasks; on
