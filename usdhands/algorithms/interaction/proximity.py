@@ -273,9 +273,10 @@ class _Part:
 
 
 def _compiled_geometry():
-    """The interaction's module compiled ahead of time (its :class:`TriangleTree` for the nearest points and its
-    union-find for the shells), or None where it was not built: then libigl's ``AABB`` and SciPy's
-    ``connected_components`` (the same distances to rounding, the same shells)."""
+    """The interaction's module compiled ahead of time (its ``TriangleTree`` for the nearest points, its
+    union-find for the shells, its corner side test), or None where it was not built: then libigl's
+    ``AABB``, SciPy's ``connected_components`` and the NumPy corner test (the same distances to rounding,
+    the same shells, the same sides)."""
     from usdhands.compiled import kernel_module
 
     return kernel_module("algorithms.interaction._interaction_compiled")
