@@ -148,6 +148,21 @@ def main() -> None:
                   f"processes, load {os.getloadavg()[0]:.1f})  (target <= 2x)")
 
 
+def write_inputs(clip, mug, folder: Path) -> tuple[Path, Path]:
+    """The clip as ``grasping.glb`` and the mug as ``mug.obj`` in ``folder``, as a user would give them: the
+    .glb is read back in metres, an OBJ is taken in the clip's units (so the mug is written in metres)."""
+    import trimesh
+
+    from usdhands.formats.io import write_asset
+    from usdhands.model.asset import Asset
+
+    src, prop = folder / "grasping.glb", folder / "mug.obj"
+    write_asset(Asset("grasping", (clip.skeleton,), (clip,)), src)
+    trimesh.Trimesh(np.asarray(mug.vertices) * clip.skeleton.meters_per_unit, np.asarray(mug.faces),
+                    process=False).export(prop)
+    return src, prop
+
+
 def fresh_command_times(clip, mug, repeat: int) -> tuple[dict, dict]:
     """Wall and CPU seconds (medians of ``repeat`` processes alternating the two) of ``python -m usdhands
     synthesize`` of the clip written as .glb, without and with the mug as an OBJ prop: what a user waits
@@ -156,18 +171,10 @@ def fresh_command_times(clip, mug, repeat: int) -> tuple[dict, dict]:
     import subprocess
     import tempfile
 
-    import trimesh
-
-    from usdhands.formats.io import write_asset
-    from usdhands.model.asset import Asset
-
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT)] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
     with tempfile.TemporaryDirectory() as tmp:
-        src, prop = Path(tmp) / "grasping.glb", Path(tmp) / "mug.obj"
-        write_asset(Asset("grasping", (clip.skeleton,), (clip,)), src)
-        trimesh.Trimesh(np.asarray(mug.vertices) * clip.skeleton.meters_per_unit, np.asarray(mug.faces),
-                        process=False).export(prop)
+        src, prop = write_inputs(clip, mug, Path(tmp))
         base = [sys.executable, "-m", "usdhands", "synthesize", str(src), "-q"]
         cmds = {"plain": base + ["-o", str(Path(tmp) / "plain.glb")],
                 "props": base + ["--props", str(prop), "-o", str(Path(tmp) / "props.glb")]}
@@ -213,20 +220,12 @@ def synthesize_job_times(clip, mug, repeat: int = 5) -> dict:
     compared a NumPy search with a compiled one (the benchmark did so before session 7)."""
     import tempfile
 
-    import trimesh
-
     from usdhands.algorithms.synthesis import segment_cost
-    from usdhands.formats.io import write_asset
     from usdhands.jobs.synthesis import SynthesizeOptions, synthesize
-    from usdhands.model.asset import Asset
 
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "grasping.glb"
-        write_asset(Asset("grasping", (clip.skeleton,), (clip,)), src)
-        prop = Path(tmp) / "mug.obj"
-        metres = clip.skeleton.meters_per_unit  # the .glb is read back in metres; an OBJ is taken in the clip's units
-        trimesh.Trimesh(np.asarray(mug.vertices) * metres, np.asarray(mug.faces), process=False).export(prop)
+        src, prop = write_inputs(clip, mug, Path(tmp))
         jobs = {"plain": lambda: synthesize(src, Path(tmp) / "plain.glb"),
                 "props": lambda: synthesize(src, Path(tmp) / "props.glb", SynthesizeOptions(props=(prop,)))}
         for state in ("no numba (one command, batch worker)", "numba's kernels loaded"):

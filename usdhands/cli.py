@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import importlib
 import logging
 import os
@@ -83,8 +84,6 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The full argument parser with every subcommand registered; with ``command`` (a subcommand's
     name, as :func:`named_command` finds it), that subcommand's parser only: the other commands'
     modules are not imported (``handmap`` and ``inspect`` import NumPy, ~45 ms of a command's start)."""
-    import usdhands.commands as commands
-
     parser = _Parser(
         prog="usdhands",
         description="Finger animation for skeletal characters in USD, glTF and BVH files.",
@@ -92,12 +91,19 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"usdhands {__version__}")
     parser.set_defaults(verbose=False, quiet=False)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        if info.name.startswith("_") or (command is not None and _command_name(info.name) != command):
-            continue
-        module = importlib.import_module(f"usdhands.commands.{info.name}")
-        module.register(sub)
+    for name in _command_modules():
+        if command is None or _command_name(name) == command:
+            importlib.import_module(f"usdhands.commands.{name}").register(sub)
     return parser
+
+
+@functools.lru_cache(maxsize=1)
+def _command_modules() -> tuple[str, ...]:
+    """The modules of :mod:`usdhands.commands` that register a subcommand, by name, sorted (listed once a
+    process: :func:`named_command` and :func:`build_parser` both ask)."""
+    import usdhands.commands as commands
+
+    return tuple(sorted(info.name for info in pkgutil.iter_modules(commands.__path__) if not info.name.startswith("_")))
 
 
 def _command_name(module: str) -> str:
@@ -109,12 +115,8 @@ def named_command(argv: list[str]) -> str | None:
     """The subcommand a command line names: its first word not starting with ``-`` (the top level's
     options take no value), when that is a subcommand; None else (no command, ``--help``, ``--version``,
     a misspelled command: the full parser, whose usage and errors list every command)."""
-    import usdhands.commands as commands
-
     word = next((w for w in argv if not w.startswith("-")), None)
-    names = {_command_name(info.name) for info in pkgutil.iter_modules(commands.__path__)
-             if not info.name.startswith("_")}
-    return word if word in names else None
+    return word if word in {_command_name(name) for name in _command_modules()} else None
 
 
 def main(argv: list[str] | None = None) -> int:

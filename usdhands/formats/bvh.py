@@ -79,7 +79,7 @@ from usdhands.errors import AssetReadError, JointMismatchError
 from usdhands.formats._bvh_numpy_motion import parse_rows as parse_motion_rows
 from usdhands.formats.fixed_point_text import format_rows_6f
 from usdhands.model.asset import Asset
-from usdhands.model.clip import Clip, clip_size_problem
+from usdhands.model.clip import Clip, clip_size_problem, resampled_frames
 from usdhands.model.rotations import quat_identity, quat_to_euler_deg, unwrap_deg
 from usdhands.model.skeleton import Skeleton
 
@@ -799,7 +799,7 @@ def bvh_to_asset(bvh: BvhFile, path: Path, meters_per_unit: float = 0.01, fps: f
     values = np.ascontiguousarray(bvh.values, dtype=np.float64)
     T = values.shape[0]
     rate = _fps(bvh.frame_time)
-    n = T if fps is None or T < 2 else int(np.floor((T - 1) / rate * fps + 1e-6)) + 1  # after resampling
+    n = T if fps is None else resampled_frames(T, rate, fps)  # after resampling
     too_big = clip_size_problem(max(T, n), J, lambda: T * sum(1 for j in bvh.joints if j.channels))
     if too_big:  # before the clip's arrays are allocated (a line of text per frame, but joints without channels)
         raise AssetReadError(too_big, path=path)

@@ -20,7 +20,7 @@ from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel, UsdUtils, Vt
 
 from usdhands.errors import AssetReadError
 from usdhands.formats.usdc_crate import check_crate
-from usdhands.model.rotations import quat_canonical, quat_multiply, trs_to_xform, xform_to_trs
+from usdhands.model.rotations import matrix_to_quat, quat_canonical, quat_multiply, trs_to_xform, xform_to_trs
 
 __all__ = [
     "SOURCE_JOINT_NAMES_KEY", "SOURCE_SKELETON_KEY", "SOURCE_NAME_KEY", "SOURCE_MESH_KEY", "SOURCE_NODE_KEY",
@@ -556,29 +556,7 @@ def fold_similarity_into_roots(parents: np.ndarray, world: np.ndarray, translati
         if not (np.isfinite(qr).all() and (norm > 0).all() and (sr > 0).all() and np.isfinite(sr).all()):
             return None
     c = c2 ** 0.5
-    x, y, z, w = _rotation_quat([[a00 / c, a01 / c, a02 / c], [a10 / c, a11 / c, a12 / c], [a20 / c, a21 / c, a22 / c]])
-    # q_world * u for every u at once: the Hamilton product as a matrix on the right quaternion (xyzw)
-    left = np.array([[w, -z, y, x], [z, w, -x, y], [-y, x, w, z], [-x, -y, -z, w]])
     t[:, roots] = t[:, roots] @ a.T + world[:3, 3]
-    q[:, roots] = (qr / norm) @ left.T
+    q[:, roots] = quat_multiply(quat_canonical(matrix_to_quat(a / c)), qr / norm)  # w >= 0: the hemisphere this fold gave
     s[:, roots] = c * sr
     return t, q, s
-
-
-def _rotation_quat(r: list[list[float]]) -> tuple[float, float, float, float]:
-    """The xyzw unit quaternion (w >= 0) of one rotation matrix (column vectors) in Python floats, by
-    Markley's method as :func:`~usdhands.model.rotations.matrix_to_quat` (the same candidate)."""
-    d0, d1, d2 = r[0][0], r[1][1], r[2][2]
-    trace = d0 + d1 + d2
-    k = max(range(4), key=(d0, d1, d2, trace).__getitem__)
-    if k == 0:
-        q = [1 + 2 * d0 - trace, r[1][0] + r[0][1], r[2][0] + r[0][2], r[2][1] - r[1][2]]
-    elif k == 1:
-        q = [r[1][0] + r[0][1], 1 + 2 * d1 - trace, r[2][1] + r[1][2], r[0][2] - r[2][0]]
-    elif k == 2:
-        q = [r[2][0] + r[0][2], r[2][1] + r[1][2], 1 + 2 * d2 - trace, r[1][0] - r[0][1]]
-    else:
-        q = [r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1], 1 + trace]
-    n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) ** 0.5
-    sign = -1.0 if q[3] < 0 else 1.0
-    return q[0] * sign / n, q[1] * sign / n, q[2] * sign / n, q[3] * sign / n

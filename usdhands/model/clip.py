@@ -10,7 +10,7 @@ from usdhands.errors import InvalidAnimationError
 from usdhands.model.rotations import check_quat, quat_slerp, trs_to_xform
 from usdhands.model.skeleton import Skeleton, forward_kinematics, readonly
 
-__all__ = ["Clip", "MAX_JOINT_FRAMES", "MAX_FILLED_JOINT_FRAMES", "FILL_RATIO", "clip_size_problem"]
+__all__ = ["Clip", "MAX_JOINT_FRAMES", "MAX_FILLED_JOINT_FRAMES", "FILL_RATIO", "clip_size_problem", "resampled_frames"]
 
 
 #: Largest translation or scale component a clip may hold: far beyond any scene, and far
@@ -48,6 +48,14 @@ def clip_size_problem(frames: int, joints: int, held) -> str | None:
         return (f"{frames:,} frames x {joints:,} joints from values for {held:,} joint-frames: more than "
                 f"{MAX_FILLED_JOINT_FRAMES:,} joint-frames, over {FILL_RATIO} per value the file holds, are refused")
     return None
+
+
+def resampled_frames(num_frames: int, fps: float, to_fps: float) -> int:
+    """Frames :meth:`Clip.resample` gives ``num_frames`` frames at ``fps`` resampled to ``to_fps``: those of
+    ``[0, duration]`` at the new rate (the same count where the rates agree or there is one frame)."""
+    if abs(to_fps - fps) < 1e-9 or num_frames < 2:
+        return num_frames
+    return int(np.floor((num_frames - 1) / fps * to_fps + 1e-6)) + 1
 
 
 def _owned_readonly(a: np.ndarray, given) -> np.ndarray:
@@ -202,7 +210,7 @@ class Clip:
             raise ValueError(f"Expected fps > 0, got {fps}")
         if abs(fps - self.fps) < 1e-9 or self.num_frames < 2:
             return self.replace(fps=fps)
-        n = int(np.floor(self.duration * fps + 1e-6)) + 1
+        n = resampled_frames(self.num_frames, self.fps, fps)
         src = np.arange(n) / fps * self.fps
         i0 = np.clip(np.floor(src).astype(int), 0, self.num_frames - 2)
         w = np.clip(src - i0, 0.0, 1.0)

@@ -39,7 +39,7 @@ from usdhands.algorithms.synthesis.stitching import SeamReport, stitch_fragments
 from usdhands.algorithms.synthesis.config import SynthesisConfig
 from usdhands.algorithms.synthesis.feature_sets import extra_keys, feature_terms, hand_columns, weighted_columns
 from usdhands.algorithms.synthesis.wrist_features import NUM_WRIST_FEATURES, reach_cm, world_xforms_for, wrist_features
-from usdhands.model.clip import Clip
+from usdhands.model.clip import Clip, resampled_frames
 from usdhands.model.handmap import SIDES, HandMap
 
 _log = logging.getLogger(__name__)
@@ -459,7 +459,7 @@ def synthesize_clip(clip: Clip, handmap: HandMap, db: FingerDatabase, config: Sy
         qw = query_features(clip, handmap, side, feats, db.reach_cm, cfg, world)
         resampled = not same_rate(clip.fps, db.fps)
         if resampled:
-            n = int(np.floor(clip.duration * db.fps + 1e-6)) + 1
+            n = resampled_frames(clip.num_frames, clip.fps, db.fps)
             feats = resample_rows(feats, clip.fps, db.fps, n)
             qw = None if qw is None else resample_rows(qw, clip.fps, db.fps, n)
         hooks = interaction(side, hand, rig) if interaction is not None else None
