@@ -13,7 +13,9 @@ BVH), then measures clips per second of:
 
 Every batch run starts from an empty output folder; the pool or LocalCluster start-up is
 included in its time (the running cluster's is not: that is the difference between them).
-Prints the rates and the ratios 2 workers / 1 worker and batch / process-per-clip (targets:
+Each engine runs ``--rounds`` times with 1 and with 2 workers, taking turns; its rates are
+the clips over the median seconds. Prints the rates and the ratios 2 workers / 1 worker (of
+the medians, and the range of the rounds' own ratios) and batch / process-per-clip (targets:
 >= 1.7 and >= 5). The machine's load average is printed beside them: other processes on a
 shared machine slow the 2-worker runs most.
 
@@ -30,7 +32,11 @@ The running cluster is started with the settings ``batch`` gives its own LocalCl
 and its workers' malloc trim threshold at 1 GiB instead of Dask's 64 KiB (a Dask config file of
 those processes), as docs/pipeline.md advises for a farm.
 
-Run: ``python benchmarks/bench_batch.py [--clips 200] [--baseline 20]``
+The CPU of a LocalCluster's whole run (every process batch starts, start-up and close included)
+is sampled every 50 ms in one more run of each worker count, not timed: walking the process tree
+that often takes a few percent of a core, which two workers on two cores would lose.
+
+Run: ``python benchmarks/bench_batch.py [--clips 200] [--baseline 20] [--rounds 3]``
 """
 
 from __future__ import annotations
@@ -41,6 +47,7 @@ import os
 import shutil
 import subprocess
 import sys
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -65,9 +72,11 @@ def make_clips(folder: Path, count: int) -> list[Path]:
 
 
 def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None,
-                  cluster_pids: tuple[int, ...] = ()) -> tuple[float, dict]:
+                  cluster_pids: tuple[int, ...] = (), sample: bool = False) -> tuple[float, dict]:
     """Seconds of one ``usdhands batch`` process (start-up included) and its CPU accounting
-    (:func:`cpu_by_role`, between the 10% and 90% progress lines); checks every clip was done."""
+    (:func:`cpu_by_role`, between the 10% and 90% progress lines); checks every clip was done.
+    ``sample``: also the CPU of the whole run, sampled every 50 ms (:class:`ProcessTreeCpu`), whose
+    walks of the process tree take CPU from the run: its seconds are not timings."""
     import json
 
     shutil.rmtree(out, ignore_errors=True)
@@ -77,7 +86,7 @@ def run_batch_cli(inputs: Path, out: Path, workers: int, scheduler: str | None,
         cmd += ["--scheduler", scheduler]
     start = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    sampler = ProcessTreeCpu(proc.pid) if scheduler == "local" else None
+    sampler = ProcessTreeCpu(proc.pid) if sample else None
     marks, lines = [], []
     for line in proc.stderr:  # "synthesize: 20/200 done, 0 failed, ..." at each tenth (stderr is not a terminal)
         lines.append(line)
@@ -203,10 +212,6 @@ def print_cpu(acc: dict, clips: int) -> None:
           + ", ".join(f"{k} {v:.1f}" for k, v in sorted(parts.items(), key=lambda kv: -kv[1]))
           + f"; overhead {overhead:.1f} = {100 * overhead / max(work, 1e-9):.0f}% of the clips' work; "
           f"bound for 2 workers on 2 cores {2 / (1 + overhead / max(work, 1e-9)):.2f}x one clip thread")
-    if "whole run cpu" in acc:
-        whole = acc["whole run cpu"]
-        print(f"    CPU of the whole run, the batch process and its descendants (sampled): {whole:.1f} s, of which start-up and "
-              f"close ~{whole - clips * (work + overhead) / 1000:.1f} s (beyond {clips} clips at the middle's CPU)")
 
 
 @contextlib.contextmanager
@@ -263,6 +268,8 @@ def main() -> None:
     ap.add_argument("--clips", type=int, default=200)
     ap.add_argument("--baseline", type=int, default=20, help="clips run as one process each (the baseline)")
     ap.add_argument("--no-dask", action="store_true")
+    ap.add_argument("--rounds", type=int, default=3,
+                    help="runs of each engine with 1 and 2 workers, taking turns; rates from the median seconds")
     ap.add_argument("--runs", default="pool,local,running",
                     help="which batches: pool (local process pool), local (Dask LocalCluster), running "
                          "(a Dask cluster already running); comma-separated")
@@ -273,27 +280,48 @@ def main() -> None:
         clips = make_clips(tmp / "in", args.clips)
         print(f"{len(clips)} clips generated in {time.perf_counter() - t0:.1f} s; {os.cpu_count()} CPUs; "
               f"load average {os.getloadavg()[0]:.1f}")
-        rates, cpu = {}, {}
+        rates, cpu, rounds = {}, {}, {}
         chosen = set(args.runs.split(",")) - ({"local", "running"} if args.no_dask else set())
         runs = [(name, scheduler) for key, name, scheduler in (
             ("pool", "local pool", None), ("local", "Dask LocalCluster", "local"),
             ("running", "Dask cluster running", "running")) if key in chosen]
         for name, scheduler in runs:
-            for workers in (1, 2):
-                load = os.getloadavg()[0]
-                if scheduler == "running":
-                    with running_dask_cluster(workers, tmp / f"dask{workers}") as (address, pids):
+            seconds_of: dict = {1: [], 2: []}
+            with contextlib.ExitStack() as stack:
+                for r in range(args.rounds):  # 1 and 2 workers taking turns: a change of load hits both
+                    for workers in (1, 2):
                         load = os.getloadavg()[0]
-                        seconds, acc = run_batch_cli(tmp / "in", tmp / "out", workers, address, pids)
-                else:
-                    seconds, acc = run_batch_cli(tmp / "in", tmp / "out", workers, scheduler)
+                        if scheduler == "running":  # a cluster of its own per run: every run starts from the same
+                            address, pids = stack.enter_context(running_dask_cluster(workers, tmp / f"dask{workers}_{r}"))
+                            load = os.getloadavg()[0]
+                            seconds, acc = run_batch_cli(tmp / "in", tmp / "out", workers, address, pids)
+                            stack.close()
+                        else:
+                            seconds, acc = run_batch_cli(tmp / "in", tmp / "out", workers, scheduler)
+                        seconds_of[workers].append(seconds)
+                        if r == 0:
+                            cpu[(name, workers)] = acc
+                        print(f"{name:18s} {workers} worker(s), round {r + 1}: {seconds:6.2f} s, "
+                              f"{len(clips) / seconds:6.2f} clips/s (load average before {load:.1f})", flush=True)
+            rounds[name] = [a / b for a, b in zip(seconds_of[1], seconds_of[2])]
+            for workers in (1, 2):
+                seconds = statistics.median(seconds_of[workers])
                 rates[(name, workers)] = len(clips) / seconds
-                cpu[(name, workers)] = acc
+                acc = cpu[(name, workers)]
                 fixed = seconds - len(clips) * acc["seconds"] / acc["clips"]
-                print(f"{name:18s} {workers} worker(s): {seconds:7.1f} s, {rates[(name, workers)]:6.2f} clips/s "
-                      f"(load average before {load:.1f}); start-up and close {fixed:.1f} s (the run's seconds "
-                      f"beyond its clips at the middle's rate)")
+                print(f"{name:18s} {workers} worker(s): {seconds:7.2f} s (median of {args.rounds}), "
+                      f"{rates[(name, workers)]:6.2f} clips/s; start-up and close {fixed:.2f} s (the run's seconds "
+                      f"beyond its clips at the middle's rate, first round)")
                 print_cpu(acc, len(clips))
+            if scheduler == "local":  # its processes are the batch process's descendants: sampled, not timed
+                for workers in (1, 2):
+                    _, acc = run_batch_cli(tmp / "in", tmp / "out", workers, scheduler, sample=True)
+                    whole = acc["whole run cpu"]
+                    clip_cpu = sum(v for k, v in acc.items() if k not in NOT_ROLES)
+                    print(f"{name:18s} {workers} worker(s): CPU of the whole run, the batch process and its "
+                          f"descendants (an untimed run, sampled every 50 ms): {whole:.1f} s, of which start-up and "
+                          f"close ~{whole - len(clips) * clip_cpu / 1000:.1f} s (beyond {len(clips)} clips at the "
+                          f"middle's CPU)")
         base = clips[:args.baseline]
         load = os.getloadavg()[0]
         seconds = process_per_clip(base, tmp / "single")
@@ -305,7 +333,8 @@ def main() -> None:
             one, two = rates[(name, 1)], rates[(name, 2)]
             middle = cpu[(name, 2)]["clips"] / cpu[(name, 2)]["seconds"] / (
                 cpu[(name, 1)]["clips"] / cpu[(name, 1)]["seconds"])
-            print(f"{name}: 2 workers / 1 worker = {two / one:.2f}x (target 1.7x; the middle 80% of the clips "
+            print(f"{name}: 2 workers / 1 worker = {two / one:.2f}x (target 1.7x; of the medians; per round "
+                  f"{min(rounds[name]):.2f}-{max(rounds[name]):.2f}x; the middle 80% of the clips "
                   f"{middle:.2f}x); "
                   + (f"2 workers / the local pool's 1 worker = {two / pool_one:.2f}x; " if pool_one else "")
                   + f"batch 1 worker / process per clip = {one / baseline:.1f}x, "
