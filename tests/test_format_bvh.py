@@ -549,6 +549,20 @@ def test_fast_motion_text_matches_python_formatting():
         assert format_rows_6f(v) == python(v)
 
 
+def test_fast_motion_text_tables_hold_every_digit_group():
+    """Every entry of the writer's digit tables (built in NumPy) is the Python-formatted group: all 10,000
+    four-digit groups and every sign, point and separator record, not only those random numbers reach."""
+    from usdhands.formats import fixed_point_text as f
+
+    def python(width, prefix=b"", suffix=b""):
+        return np.frombuffer(b"".join(prefix + f"{i:0{width}d}".encode() + suffix for i in range(10 ** width)), "<u4")
+
+    for table, expected in ((f._SIGN_THOUSANDS, python(3, b"-")), (f._UNITS_POINT, python(3, suffix=b".")),
+                            (f._DECIMALS_1_4, python(4)), (f._DECIMALS_5_6[b" "], python(2, suffix=b" \0")),
+                            (f._DECIMALS_5_6[b"\n"], python(2, suffix=b"\n\0"))):
+        assert table.dtype == expected.dtype and np.array_equal(table, expected)
+
+
 @pytest.mark.parametrize("order", ["ZXY", "XYZ", "YZX"])
 def test_written_euler_angles_match_scipy_as_euler(tmp_path, order):
     """The writer's NumPy Euler conversion against scipy's ``as_euler`` + unwrap (what it replaced).
