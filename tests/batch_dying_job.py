@@ -30,3 +30,13 @@ def worker_state() -> dict:
     return {"had_numba": had_numba, "kernel_threads": kernel_threads(), "search_kernel": segment_cost._kernel_loaded(),
             "parent_has_numba": "llvmlite" in parent,
             "parent_started_threads": any(layer in parent for layer in ("omppool", "tbbpool", "workqueue"))}
+
+
+def processor_known() -> list:
+    """In a worker forked from the warm forkserver: whether ``platform.uname().processor`` (what a Dask
+    worker reports when it registers) was already asked before this process started, and whether the
+    process has another thread than its main one."""
+    import platform
+    import threading
+
+    return ["processor" in vars(platform.uname()), threading.active_count()]

@@ -347,6 +347,23 @@ def _run_fresh(code: str, **environ) -> object:
     return json.loads(done.stdout.splitlines()[-1])
 
 
+def test_a_worker_forked_from_the_warm_forkserver_with_dask_has_the_processor_name_already():
+    """With Dask preloaded (a LocalCluster's forkserver), the processor's name each worker reports when it
+    registers (``uname -p``) was asked once, in the forkserver, on a thread that ended before any fork;
+    without Dask (the local pool's) it is left unasked."""
+    pytest.importorskip("distributed")
+    code = (
+        "import json, multiprocessing\n"
+        "from concurrent.futures import ProcessPoolExecutor\n"
+        "from usdhands.jobs import batch\n"
+        "import batch_dying_job\n"
+        "assert batch.start_warm_forkserver(dask={dask})\n"
+        "with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('forkserver')) as pool:\n"
+        "    print(json.dumps(pool.submit(batch_dying_job.processor_known).result()))\n")
+    assert _run_fresh(code.format(dask=True)) == [True, 1]
+    assert _run_fresh(code.format(dask=False)) == [False, 1]
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/PID/maps")
 def test_a_worker_forked_from_the_warm_forkserver_has_the_kernel_and_one_kernel_thread():
     """Without the kernels compiled ahead of time: the warm forkserver loaded numba but started none of its

@@ -600,8 +600,19 @@ def _warm_forkserver_process() -> None:
     (:func:`_warm_worker`). Never raises (a forkserver whose preload failed would start no worker):
     what failed is loaded again by each worker.
 
+    With Dask loaded (the preload of a LocalCluster's forkserver), the processor's name that each worker
+    reports when it registers (``platform.uname().processor``: ``uname -p`` run once a process, ~8 ms) is
+    asked on a thread of its own while the rest loads, and kept for the workers forked after.
+
     At its exit the forkserver ends at once, its streams flushed (:func:`_end_at_once_at_exit`).
     """
+    import sys
+    import threading
+
+    asking = None
+    if "distributed" in sys.modules:
+        asking = threading.Thread(target=_warm_scheduler_versions, daemon=True)
+        asking.start()
     with contextlib.suppress(Exception):
         import numpy as np
 
@@ -614,6 +625,8 @@ def _warm_forkserver_process() -> None:
         import_what_a_clip_needs()  # the kernels compiled ahead of time among them
         if not _synthesis_kernels_built():  # else the workers run those: no numba
             limit_steps_fast(np.zeros((2, 1)), np.zeros(1))
+    if asking is not None:
+        asking.join()  # no thread left running when the forkserver forks
     _end_at_once_at_exit()
 
 
@@ -866,9 +879,10 @@ def _nannies_look_often():
 
 
 def _warm_scheduler_versions() -> None:
-    """Ask the platform for what Dask's scheduler reports of this machine when the first worker registers
-    (``platform.uname().processor`` runs ``uname -p`` once a process): done while the worker processes
-    start, not while the first one waits for the scheduler's answer."""
+    """Ask the platform for what Dask reports of this machine when a worker registers
+    (``platform.uname().processor`` runs ``uname -p`` once a process, then keeps it): in the batch process
+    while the worker processes start, not while the first one waits for the scheduler's answer; in the
+    warm forkserver (:func:`_warm_forkserver_process`) for the worker processes it forks."""
     import platform
 
     with contextlib.suppress(Exception):
