@@ -65,6 +65,43 @@ def test_step_limits_are_percentiles_inside_tracks_only():
     assert step_limits(rare, np.array([[0, 400]]), 99.5).tolist() == [3.0]
 
 
+def test_step_limits_column_by_column_equal_the_percentiles_of_the_whole_array():
+    """The limits, computed a column at a time, against NumPy's percentile along axis 0 of all the steps at once
+    (what they were before), to the bit: float32 and float64 curves, still and rarely moving DOFs, NaN, tracks
+    and a frame selection; and the errors of bad shapes."""
+    rng = np.random.default_rng(7)
+    curves = np.cumsum(rng.normal(size=(3000, 9)) * rng.uniform(0.1, 20, 9), axis=0)
+    curves[:, 2] = 4.0  # never moves
+    curves[:, 5] = np.where(np.arange(3000) > 2990, 7.0, 0.0)  # moves once
+    curves[1234, 7] = np.nan
+    tracks = np.array([[0, 700], [700, 1900], [1900, 3000]])
+    frames = rng.uniform(size=3000) > 0.2
+
+    def whole(f, percentile, frames=None):
+        f = np.asarray(f, dtype=np.float64)
+        steps = np.abs(np.diff(f, axis=0))
+        inside = np.ones(len(steps), bool)
+        inside[tracks[:, 1][:-1] - 1] = False
+        if frames is not None:
+            inside &= frames[:-1] & frames[1:]
+        steps = steps[inside]
+        lim = np.percentile(steps, percentile, axis=0)
+        return np.where(lim > 0, lim, steps.max(axis=0))
+
+    for f in (curves, curves.astype(np.float32)):
+        for percentile in (50.0, 90.0, 97.5, 100.0):
+            for sel in (None, frames):
+                expected = whole(f, percentile, sel)
+                got = step_limits(f, tracks, percentile, sel)
+                assert got.dtype == np.float64 and got.shape == (9,)
+                assert np.array_equal(got, expected, equal_nan=True), (percentile, sel is None)
+    assert step_limits(np.zeros((0, 3)), np.zeros((0, 2), int), 90.0).tolist() == [0.0, 0.0, 0.0]
+    with pytest.raises(ValueError, match=r"Expected frames \(3000,\) bool, got \(5,\)"):
+        step_limits(curves, tracks, 90.0, np.ones(5, bool))
+    with pytest.raises(ValueError, match=r"Expected fingers \(F, C\), got \(3000,\)"):
+        step_limits(curves[:, 0], tracks, 90.0)
+
+
 def test_limit_steps_turns_a_pop_into_a_ramp_and_leaves_smooth_curves_alone():
     smooth = np.cumsum(np.full((30, 2), 0.5), axis=0)
     assert np.array_equal(limit_steps(smooth, np.array([1.0, 1.0])), smooth)

@@ -144,11 +144,12 @@ def step_limits(fingers: np.ndarray, tracks: np.ndarray, percentile: float,
         Degrees per frame (0 for a DOF that never moves; the largest step for one that
         moves in fewer frames than the percentile leaves out).
     """
-    f = np.asarray(fingers, dtype=np.float64)
-    steps = np.abs(np.diff(f, axis=0))
-    inside = np.ones(len(steps), dtype=bool)
+    f = np.asarray(fingers)
+    if f.ndim != 2:
+        raise ValueError(f"Expected fingers (F, C), got {f.shape}")
+    inside = np.ones(max(len(f) - 1, 0), dtype=bool)
     ends = np.asarray(tracks)[:, 1] - 1  # step from a track's last frame to the next track's first
-    inside[ends[(ends >= 0) & (ends < len(steps))]] = False
+    inside[ends[(ends >= 0) & (ends < len(inside))]] = False
     if frames is not None:
         frames = np.asarray(frames, dtype=bool)
         if frames.shape != (len(f),):
@@ -156,9 +157,15 @@ def step_limits(fingers: np.ndarray, tracks: np.ndarray, percentile: float,
         inside &= frames[:-1] & frames[1:]
     if not inside.any():
         return np.zeros(f.shape[1])
-    steps = steps[inside]
-    lim = np.percentile(steps, percentile, axis=0)
-    return np.where(lim > 0, lim, steps.max(axis=0))
+    # a column at a time, the same percentiles as along axis 0 of the whole: on a database (10,560 x 45) the
+    # temporaries of one column stay in the allocator's reuse; those of the whole (five arrays of 3.8 MB)
+    # were ~4,600 fresh pages, the larger part of the first clip's extra cost in every process
+    limits = np.empty(f.shape[1])
+    for c in range(f.shape[1]):
+        steps = np.abs(np.diff(np.asarray(f[:, c], dtype=np.float64)))[inside]
+        lim = np.percentile(steps, percentile)
+        limits[c] = lim if lim > 0 else steps.max()
+    return limits
 
 
 def limit_steps(curves: np.ndarray, limits: np.ndarray) -> np.ndarray:
