@@ -33,8 +33,8 @@ and its workers' malloc trim threshold at 1 GiB instead of Dask's 64 KiB (a Dask
 those processes), as docs/pipeline.md advises for a farm.
 
 The CPU of a LocalCluster's whole run (every process batch starts, start-up and close included)
-is sampled every 50 ms in one more run of each worker count, not timed: walking the process tree
-that often takes a few percent of a core, which two workers on two cores would lose.
+is sampled every 50 ms in one more run of each worker count, not timed: each sample (a walk of the
+process tree) costs ~0.8 ms of CPU, ~1.6% of a core that two workers on two cores would lose.
 
 Run: ``python benchmarks/bench_batch.py [--clips 200] [--baseline 20] [--rounds 3]``
 """
