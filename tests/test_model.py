@@ -185,6 +185,55 @@ def test_validate_zero_frames_and_zero_quaternion():
         Clip(chain_skeleton(2), 30, rot).validate()
 
 
+def _validate_element_wise(clip: Clip) -> str | None:
+    """What ``Clip.validate`` must report, element by element (its checks without the whole-array shortcut):
+    the message's kind, joint and frame, or None."""
+    from usdhands.model.clip import MAX_MAGNITUDE
+
+    for label, arr in (("rotations", clip.rotations), ("translations", clip.translations), ("scales", clip.scales)):
+        for f, j in np.ndindex(arr.shape[:2]):
+            if not np.isfinite(arr[f, j]).all():
+                return f"NaN or infinite {label} (joint {clip.skeleton.joint_names[j]!r}, frame {f})"
+    for label, arr in (("translations", clip.translations), ("scales", clip.scales)):
+        for f, j in np.ndindex(arr.shape[:2]):
+            if (np.abs(arr[f, j]) > MAX_MAGNITUDE).any():
+                return f"{label} beyond {MAX_MAGNITUDE:g} (joint {clip.skeleton.joint_names[j]!r}, frame {f})"
+    for f, j in np.ndindex(clip.rotations.shape[:2]):
+        if np.sqrt(np.sum(clip.rotations[f, j] ** 2)) < 1e-6:
+            return f"zero-length quaternion (joint {clip.skeleton.joint_names[j]!r}, frame {f})"
+    return None
+
+
+def test_validate_finds_what_an_element_wise_check_finds():
+    """validate (whole-array extremes first, element-wise only when one could fail) against the checks run
+    element by element: random clips with NaN, infinities, magnitudes over 1e30 and short quaternions at
+    random places, several at once, and values at the thresholds (lengths 1e-6 and 3e-6, 1e30 itself,
+    huge finite quaternions whose squares overflow, tiny ones whose squares underflow)."""
+    rng = np.random.default_rng(11)
+    skeleton = chain_skeleton(5)
+    specials = [np.nan, np.inf, -np.inf, 1e31, -1e31, 1e30, -1e30, 1e200, 1e-200, 0.0]
+    for case in range(400):
+        rot = rng.normal(size=(7, 5, 4))
+        rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+        trans, scales = rng.normal(size=(7, 5, 3)) * 10, rng.uniform(0.5, 2, (7, 5, 3))
+        for _ in range(rng.integers(0, 3)):
+            target = (rot, trans, scales)[rng.integers(0, 3)]
+            f, j, c = rng.integers(0, 7), rng.integers(0, 5), rng.integers(0, target.shape[-1])
+            target[f, j, c] = specials[rng.integers(0, len(specials))]
+        if case % 5 == 0:  # a short quaternion: zero, just under or over the threshold, tiny or huge
+            f, j = rng.integers(0, 7), rng.integers(0, 5)
+            rot[f, j] = np.array([0.6, 0.0, 0.0, 0.8]) * [0.0, 0.9e-6, 1.1e-6, 3e-6, 1e-200, 1e200][case // 5 % 6]
+        clip = Clip(skeleton, 30, rot, trans, scales)
+        with np.errstate(over="ignore"):  # the squares of 1e200
+            expected = _validate_element_wise(clip)
+            if expected is None:
+                assert clip.validate() is clip
+            else:
+                with pytest.raises(InvalidAnimationError) as err:
+                    clip.validate()
+                assert expected in str(err.value), (case, expected, str(err.value))
+
+
 def test_finger_curves_round_trip_and_unwrap():
     sk = Skeleton(["a", "b"], [-1, 0], np.zeros((2, 3)), euler_deg_to_quat([[0, 0, 0], [10, 20, 30]]))
     angles = np.linspace(0, 400, 50)  # crosses 180 and 360 about z
