@@ -611,8 +611,10 @@ def _warm_forkserver_process() -> None:
 
     asking = None
     if "distributed" in sys.modules:
-        asking = threading.Thread(target=_warm_scheduler_versions, daemon=True)
-        asking.start()
+        thread = threading.Thread(target=_warm_scheduler_versions, daemon=True)
+        with contextlib.suppress(RuntimeError):  # no thread to be had: each worker asks for itself
+            thread.start()
+            asking = thread
     with contextlib.suppress(Exception):
         import numpy as np
 
