@@ -509,7 +509,8 @@ def test_compiled_decode_ints_equals_the_python_twin(width):
 
 
 def test_the_check_refuses_the_same_lies_with_and_without_the_compiled_loops(sample_assets, tmp_path, monkeypatch):
-    """Every crafted crate of the hostile corpus gives the same line with the Python loops as with the compiled ones."""
+    """Every crafted crate of the hostile corpus gives the same line with the Python loops and walks as with the
+    compiled ones."""
     import usdhands.formats.usdc_crate as crate
 
     lies = crate_lies(crate_seed(sample_assets, tmp_path))
@@ -518,6 +519,8 @@ def test_the_check_refuses_the_same_lies_with_and_without_the_compiled_loops(sam
         if python:
             monkeypatch.setattr(crate, "_lz4_block", crate.lz4_block_decompress)
             monkeypatch.setattr(crate, "_decode_ints", crate.decode_ints)
+            monkeypatch.setattr(crate, "_walk_values", None)
+            monkeypatch.setattr(crate, "_spec_types", None)
         for name, (data, _) in lies.items():
             try:
                 check_crate_bytes(data, "x.usdc")
@@ -526,3 +529,214 @@ def test_the_check_refuses_the_same_lies_with_and_without_the_compiled_loops(sam
                 lines.setdefault(name, []).append(str(e))
     assert all(a == b for a, b in lines.values()), lines
     assert sum(a is not None for a, _ in lines.values()) >= len(lies) - 1
+
+
+def _walk_seeds(sample_assets, tmp_path) -> list[bytes]:
+    """Crate files whose values the walks check: every kind of value USD writes (rich_layer), the humanoid
+    with a dictionary, and the sample conversation (885 frames of time samples)."""
+    rich = tmp_path / "rich_walk.usdc"
+    rich_layer(rich)
+    return [rich.read_bytes(), crate_seed(sample_assets, tmp_path),
+            (sample_assets / "conversation_bodyonly.usdc").read_bytes()]
+
+
+def _walk_outcome(fn, *args):
+    from usdhands.formats.usdc_crate import _Corrupt
+
+    try:
+        fn(*args)
+        return ("ok",)
+    except _Corrupt as e:
+        return ("corrupt", str(e))
+
+
+def _python_values(data, reps, version, tables):
+    from usdhands.formats.usdc_crate import _Crate
+
+    crate = _Crate(data)
+    crate.version, crate.tables = version, dict(tables)
+    crate.python_values(reps)
+
+
+def _compiled_values(data, reps, version, tables):
+    from usdhands.formats.usdc_crate import _Corrupt
+
+    _CRATE_COMPILED.walk_values(data, reps, tables["token"], tables["string"], tables["path"], version >= (0, 7, 0),
+                                version >= (0, 8, 0), _Corrupt)
+
+
+def _changed_rep(rep: int, rng, size: int) -> int:
+    """A value rep with its kind, flags or offset changed: a kind of every sort the walk knows (and others),
+    the array / inlined / compressed / edit bits, an offset inside, near the end of or far past the file."""
+    choice = int(rng.integers(0, 6))
+    if choice == 0:
+        kind = int(rng.choice([3, 7, 8, 10, 11, 12, 31, 32, 33, 34, 35, 36, 37, 40, 41, 45, 46, 47, 48, 49, 50, 52,
+                               53, 54, 55, 57, 58, 14, 200]))
+        return (rep & ~(0xFF << 48)) | (kind << 48)
+    if choice == 1:
+        return rep ^ (1 << int(rng.choice([60, 61, 62, 63])))
+    if choice == 2:
+        at = int(rng.choice([0, 1, 8, size - 9, size - 8, size - 1, size, size + 7, (1 << 48) - 1,
+                             int(rng.integers(0, max(size, 1)))]))
+        return (rep & ~((1 << 48) - 1)) | (at & ((1 << 48) - 1))
+    if choice == 3:
+        return (rep & ~0xFFFFFFFF) | int(rng.integers(0, 1 << 32))  # an inlined index or a changed offset
+    if choice == 4:
+        return int(rng.integers(0, 1 << 63, dtype=np.int64)) | (int(rng.integers(0, 2)) << 63)
+    return rep
+
+
+@needs_crate_kernel
+def test_compiled_value_walk_equals_the_python_walk(sample_assets, tmp_path):
+    """The compiled walk of the values gives the Python walk's outcome, the same message for the same first
+    claim that does not fit, on files USD writes, on their value reps changed (kinds, flags, offsets,
+    indices), on bytes of their values changed (counts, offsets, jumps, chunk tables), cut short, and
+    against tables smaller than the indices they hold."""
+    import struct
+
+    from usdhands.formats.usdc_crate import _Crate
+
+    rng = np.random.default_rng(12)
+    outcomes: dict[str, int] = {}
+    for seed in _walk_seeds(sample_assets, tmp_path):
+        crate = _Crate(seed)
+        crate.table_of_contents()
+        reps = crate.structural()
+        version, tables = crate.version, dict(crate.tables)
+        assert version >= (0, 8, 0)
+        count = len(reps) // 8
+        cases = [(seed, reps, version, tables), (seed, reps, (0, 6, 0), tables), (seed, reps, (0, 7, 0), tables)]
+        for trial in range(700):
+            data, new_reps, new_tables = bytearray(seed), bytearray(reps), dict(tables)
+            what = trial % 5
+            if what == 0:  # value reps changed
+                for _ in range(int(rng.integers(1, 4))):
+                    k = int(rng.integers(0, count))
+                    old = struct.unpack_from("<Q", new_reps, 8 * k)[0]
+                    struct.pack_into("<Q", new_reps, 8 * k, _changed_rep(old, rng, len(seed)) & ((1 << 64) - 1))
+            elif what == 1:  # bytes of the values changed: one byte, or an 8-byte count / offset
+                for _ in range(int(rng.integers(1, 4))):
+                    at = int(rng.integers(88, len(seed) - 8))
+                    if rng.random() < 0.5:
+                        data[at] = int(rng.integers(0, 256))
+                    else:
+                        value = int(rng.choice([0, 1, 7, 8, 16, 255, 1 << 20, 1 << 40, (1 << 63) - 1, -1, -(1 << 63),
+                                                int(rng.integers(0, len(seed)))]))
+                        struct.pack_into("<q", data, at, value)
+            elif what == 2:  # cut short
+                data = data[:int(rng.integers(0, len(seed)))]
+            elif what == 3:  # smaller tables: one, or all three
+                for table in (["token", "string", "path"] if rng.random() < 0.4 else
+                              [str(rng.choice(["token", "string", "path"]))]):
+                    new_tables[table] = int(rng.integers(0, max(tables[table], 1)))
+            else:  # a rep copied onto another (a shared value, a different one)
+                a, b = (int(x) for x in rng.integers(0, count, 2))
+                new_reps[8 * a:8 * a + 8] = new_reps[8 * b:8 * b + 8]
+                k = int(rng.integers(0, count))
+                old = struct.unpack_from("<Q", new_reps, 8 * k)[0]
+                struct.pack_into("<Q", new_reps, 8 * k, _changed_rep(old, rng, len(seed)) & ((1 << 64) - 1))
+            cases.append((bytes(data), bytes(new_reps), version, new_tables))
+        for data, new_reps, v, t in cases:
+            want = _walk_outcome(_python_values, data, new_reps, v, t)
+            got = _walk_outcome(_compiled_values, data, new_reps, v, t)
+            assert got == want, (want, got)
+            outcomes[want[-1] if want[0] == "corrupt" else "ok"] = outcomes.get(want[-1], 0) + 1
+    messages = {m.split(" ")[0] + " " + m.split(" ")[1] for m in outcomes if m != "ok"}
+    assert outcomes.get("ok", 0) > 300 and len(outcomes) > 200 and len(messages) > 12, (len(outcomes), messages)
+
+
+@needs_crate_kernel
+def test_compiled_spec_walk_equals_the_python_walk(sample_assets, tmp_path):
+    """The compiled walk of the path tree and the specs' types gives the Python walk's outcome and message on
+    the seeds' tables and on them changed: jumps (loops, past the table, near 2**63), elements (properties
+    where prims were), spec types, spec and path indexes; the compiled one declines (False) only where
+    path indexes leave the table or a jump could leave 64 bits."""
+    from usdhands.formats.usdc_crate import _Corrupt, _Crate
+
+    seen = []
+
+    class Capture(_Crate):
+        def spec_types(self, specs, paths):
+            seen.append(([a.copy() for a in specs], [a.copy() for a in paths], True))
+
+    for seed in _walk_seeds(sample_assets, tmp_path):
+        crate = Capture(seed)
+        crate.table_of_contents()
+        crate.structural()
+    assert len(seen) == 3
+    rng = np.random.default_rng(13)
+    outcomes: dict[str, int] = {}
+    declined = 0
+    for n in range(1, 13):  # small random trees: loops, jumps out of the table, properties with targets below
+        for trial in range(800):
+            p = [rng.permutation(n) if rng.random() < 0.8 else rng.integers(-1, n + 1, n),
+                 rng.choice([-2, -1, 1, 2], n),
+                 rng.choice([-2, -1, -1, -1, -1, -1, 0, 1, 2, n], n)]
+            if rng.random() < 0.8:
+                p[2][-1] = -2  # the last entry a leaf: a walk that ends
+            if rng.random() < 0.1:
+                p[2][int(rng.integers(0, n))] = int(rng.choice([1 << 62, (1 << 63) - 1, -(1 << 63)]))
+            m = int(rng.integers(0, 4))
+            s = [rng.integers(-1, n + 1, m), np.zeros(m, dtype=np.int64), rng.choice([1, 2, 6, 7, 8, 9, 10, 11, 12], m)]
+            seen.append(([a.astype(np.int64) for a in s], [a.astype(np.int64) for a in p], False))
+    for specs, paths, change in seen:
+        for trial in range(600 if change else 1):
+            s, p = [a.copy() for a in specs], [a.copy() for a in paths]
+            for _ in range(int(rng.integers(0 if trial < 5 else 1, 3)) if change else 0):
+                what = int(rng.integers(0, 5))
+                if what == 0:
+                    k = int(rng.integers(0, len(p[2])))
+                    p[2][k] = int(rng.choice([-2, -1, 0, 1, 2, -k, len(p[2]) - k, len(p[2]) - k - 1, 1 << 40,
+                                              (1 << 63) - 1, -(1 << 63), int(rng.integers(-5, len(p[2])))]))
+                elif what == 1:
+                    k = int(rng.integers(0, len(p[1])))
+                    p[1][k] = -p[1][k] - 1
+                elif what == 2:
+                    k = int(rng.integers(0, len(s[2])))
+                    s[2][k] = int(rng.integers(-1, 13))
+                elif what == 3:
+                    k = int(rng.integers(0, len(s[0])))
+                    s[0][k] = int(rng.choice([-1, len(p[0]), int(rng.integers(0, len(p[0])))]))
+                else:
+                    k = int(rng.integers(0, len(p[0])))
+                    p[0][k] = int(rng.choice([-1, len(p[0]), int(rng.integers(0, len(p[0])))]))
+            crate = _Crate(b"")
+            want = _walk_outcome(crate.python_spec_types, s, p)
+            try:
+                checked = _CRATE_COMPILED.spec_types(s[0], s[2], p[0], p[1], p[2], _Corrupt)
+                got = ("ok",)
+            except _Corrupt as e:
+                checked, got = True, ("corrupt", str(e))
+            if not checked:
+                declined += 1
+                assert (p[0] < 0).any() or (p[0] >= len(p[0])).any() or (p[2] > (1 << 62)).any()
+                continue
+            assert got == want, (want, got)
+            key = want[1].split(" reaches")[0] if want[0] == "corrupt" else "ok"
+            key = key.split(" of type")[0] + (" on a target path" if key.endswith("target path") else "")
+            outcomes[key] = outcomes.get(key, 0) + 1
+    assert outcomes.get("ok", 0) > 100 and outcomes.get("SPECS: a spec", 0) > 100, outcomes
+    assert outcomes.get("PATHS: its jumps table", 0) > 100 and declined < sum(outcomes.values()) // 4, (outcomes, declined)
+    assert outcomes.get("SPECS: a spec on a target path", 0) > 20, outcomes
+
+
+@needs_crate_kernel
+@pytest.mark.parametrize("levels, message", [(1, None), (63, None), (64, None), (65, "values nested more than 64 deep"),
+                                             (200, "values nested more than 64 deep")])
+def test_compiled_value_walk_nesting_and_shared_values(levels, message):
+    """Values inside values (a VtValue holding the next): both walks refuse the same depth; a value that holds
+    itself, or one reached twice, is walked once (no depth error, no endless walk)."""
+    import struct
+
+    tables = {"token": 10, "string": 10, "path": 10}
+    data = bytearray(16 + 16 * levels + 16)
+    reps = []
+    for level in range(levels + 1):  # value k at 16 + 16 k: a jump of 8, then the rep of value k + 1
+        reps.append((52 << 48) | (16 + 16 * level))
+    for level in range(levels):
+        struct.pack_into("<qQ", data, 16 + 16 * level, 8, reps[level + 1])
+    struct.pack_into("<qQ", data, 16 + 16 * levels, 8, reps[levels])  # the last holds itself
+    top = struct.pack("<QQ", reps[0], reps[0])
+    want = ("corrupt", message) if message else ("ok",)
+    assert _walk_outcome(_python_values, bytes(data), top, (0, 8, 0), tables) == want
+    assert _walk_outcome(_compiled_values, bytes(data), top, (0, 8, 0), tables) == want

@@ -9,7 +9,8 @@ and results to the bit:
   fragments (:mod:`usdhands.algorithms.synthesis._play_kernel`);
 - ``formats._bvh_compiled``: reading BVH motion (:mod:`usdhands.formats._bvh_kernel`);
 - ``formats._crate_compiled``: the LZ4 blocks and coded integers the check of a USD crate file
-  reads (:mod:`usdhands.formats.usdc_crate`, whose Python functions are its twins);
+  reads, and its walks of the values and of the path tree (:mod:`usdhands.formats.usdc_crate`,
+  whose Python functions and methods are its twins);
 - ``algorithms.interaction._interaction_compiled``: the sign of a distance to a closed shell and the
   RTS smoother's recursion (:mod:`usdhands.algorithms.interaction._proximity_kernel`,
   :mod:`usdhands.algorithms.interaction._recursion_kernel`), which ``correct`` and ``synthesize --props``

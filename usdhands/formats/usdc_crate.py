@@ -220,6 +220,10 @@ def decode_ints(encoded: bytes, n: int, width: int = 4) -> np.ndarray:
 _COMPILED = kernel_module("formats._crate_compiled")
 _lz4_block = _COMPILED.lz4_block_decompress if _COMPILED is not None else lz4_block_decompress
 _decode_ints = _COMPILED.decode_ints if _COMPILED is not None else decode_ints
+#: The walks of the values and of the path tree compiled (``_Crate.values``, ``_Crate.spec_types``: the
+#: same checks in the same order, the same messages), or None: the Python methods run
+_walk_values = getattr(_COMPILED, "walk_values", None)
+_spec_types = getattr(_COMPILED, "spec_types", None)
 
 
 def _sorted_unique(a: np.ndarray) -> np.ndarray:
@@ -354,6 +358,12 @@ class _Crate:
         interpreter ('Dereferenced an invalid SdfPrimSpec'). The path tree is walked as
         USD builds it (each entry once: a jump back would make USD loop).
         """
+        if _spec_types is not None and _spec_types(specs[0], specs[2], paths[0], paths[1], paths[2], _Corrupt):
+            return  # (False: path indexes outside the table or jumps near 2**63, which this function walks)
+        self.python_spec_types(specs, paths)
+
+    def python_spec_types(self, specs: list[np.ndarray], paths: list[np.ndarray]) -> None:
+        """:meth:`spec_types` in Python: the reference of the compiled walk."""
         indexes, elements, jumps = (a.tolist() for a in paths)
         n = len(indexes)
         kind = [""] * n  # "root", "prim", "property", "target"
@@ -476,6 +486,14 @@ class _Crate:
     def values(self, reps: bytes) -> None:
         if self.version < (0, 5, 0):
             return  # arrays still carried a rank then; USD has not written these since 2017
+        if _walk_values is not None:
+            _walk_values(self.data, reps, self.tables["token"], self.tables["string"], self.tables["path"],
+                         self.version >= (0, 7, 0), self.version >= (0, 8, 0), _Corrupt)
+            return
+        self.python_values(reps)
+
+    def python_values(self, reps: bytes) -> None:
+        """:meth:`values` in Python: the reference of the compiled walk."""
         self.array_reps: list[np.ndarray] = []
         seen: set[int] = set()
         self.many(np.frombuffer(reps, dtype="<u8"), 0, seen)
