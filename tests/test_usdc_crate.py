@@ -521,6 +521,7 @@ def test_the_check_refuses_the_same_lies_with_and_without_the_compiled_loops(sam
             monkeypatch.setattr(crate, "_decode_ints", crate.decode_ints)
             monkeypatch.setattr(crate, "_walk_values", None)
             monkeypatch.setattr(crate, "_spec_types", None)
+            monkeypatch.setattr(crate, "_check_structure", None)
         for name, (data, _) in lies.items():
             try:
                 check_crate_bytes(data, "x.usdc")
@@ -740,3 +741,81 @@ def test_compiled_value_walk_nesting_and_shared_values(levels, message):
     want = ("corrupt", message) if message else ("ok",)
     assert _walk_outcome(_python_values, bytes(data), top, (0, 8, 0), tables) == want
     assert _walk_outcome(_compiled_values, bytes(data), top, (0, 8, 0), tables) == want
+
+
+def _python_structure(data):
+    from usdhands.formats.usdc_crate import _Crate
+
+    crate = _Crate(data)
+    crate.table_of_contents()
+    captured = []
+    crate.spec_types = lambda specs, paths: captured.append((specs, paths))  # the structure alone
+    reps = crate.structural()
+    specs, paths = captured[0] if captured else (None, None)
+    return crate.version, crate.tables["token"], crate.tables["string"], crate.tables["path"], reps, specs, paths
+
+
+def _structure_outcome(fn, data):
+    from usdhands.formats.usdc_crate import _Corrupt
+
+    try:
+        version, tokens, strings, paths_n, reps, specs, paths = fn(data)
+    except _Corrupt as e:
+        return ("corrupt", str(e))
+    if specs is None or paths is None:  # the Python methods hand them over only both, to spec_types
+        specs = paths = None
+    arrays = [None if x is None else [a.tolist() for a in x] for x in (specs, paths)]
+    return ("ok", version, tokens, strings, paths_n, reps, *arrays)
+
+
+@needs_crate_kernel
+def test_compiled_structure_equals_the_python_checks(sample_assets, tmp_path):
+    """The compiled table of contents and structural sections give the Python methods' outcome: the same
+    version, table sizes, value reps, specs and paths, or the same message for the same first claim that
+    does not fit; on files USD writes, on bytes of their header, table of contents and section heads
+    changed (counts, offsets, sizes, chunk tables, LZ4 bytes), on any byte changed, and cut short."""
+    import struct
+
+    from usdhands.formats.usdc_crate import _Corrupt
+
+    def compiled(data):
+        return _CRATE_COMPILED.check_structure(data, _Corrupt)
+
+    rng = np.random.default_rng(14)
+    outcomes: dict[str, int] = {}
+    for seed in _walk_seeds(sample_assets, tmp_path):
+        toc = struct.unpack_from("<q", seed, 16)[0]
+        n = struct.unpack_from("<Q", seed, toc)[0]
+        heads = list(range(8, 24)) + list(range(toc, toc + 8 + 32 * n))
+        for k in range(n):
+            start, size = struct.unpack_from("<qq", seed, toc + 8 + 32 * k + 16)
+            heads += list(range(start, min(start + 48, start + size)))
+        cases = [seed, seed[:87], seed[:88], seed[:toc + 8], b""]
+        for k in range(n):  # TOKENS claiming 0 to 2 tokens in 0 or 1 bytes
+            if seed[toc + 8 + 32 * k:toc + 14 + 32 * k] == b"TOKENS":
+                start = struct.unpack_from("<q", seed, toc + 8 + 32 * k + 16)[0]
+                for count, raw in ((0, 0), (1, 0), (2, 0), (1, 1), (2, 1)):
+                    data = bytearray(seed)
+                    struct.pack_into("<QQ", data, start, count, raw)
+                    cases.append(bytes(data))
+        for trial in range(900):
+            data = bytearray(seed)
+            what = trial % 4
+            for _ in range(int(rng.integers(1, 3))):
+                at = int(rng.choice(heads)) if what < 2 else int(rng.integers(0, len(seed)))
+                if what == 0 or what == 2:
+                    data[at] = int(rng.integers(0, 256))
+                elif at + 8 <= len(data):
+                    value = int(rng.choice([0, 1, 2, 7, 8, 31, 32, 88, 255, 1 << 20, 1 << 40, (1 << 63) - 1, -1,
+                                            -(1 << 63), len(seed) - at, int(rng.integers(0, len(seed)))]))
+                    struct.pack_into("<q", data, at, value)
+            if what == 3:
+                data = data[:int(rng.integers(0, len(seed)))]
+            cases.append(bytes(data))
+        for data in cases:
+            want = _structure_outcome(_python_structure, data)
+            got = _structure_outcome(compiled, data)
+            assert got == want, (want[:2], got[:2])
+            key = "ok" if want[0] == "ok" else " ".join(w for w in want[1].split(" ")[:3] if not w.isdigit())
+            outcomes[key] = outcomes.get(key, 0) + 1
+    assert outcomes.get("ok", 0) > 300 and len(outcomes) > 15, outcomes

@@ -224,6 +224,9 @@ _decode_ints = _COMPILED.decode_ints if _COMPILED is not None else decode_ints
 #: same checks in the same order, the same messages), or None: the Python methods run
 _walk_values = getattr(_COMPILED, "walk_values", None)
 _spec_types = getattr(_COMPILED, "spec_types", None)
+#: The table of contents and the structural sections checked compiled (``_Crate.table_of_contents`` and
+#: ``structural``' twin), or None
+_check_structure = getattr(_COMPILED, "check_structure", None)
 
 
 def _sorted_unique(a: np.ndarray) -> np.ndarray:
@@ -395,6 +398,18 @@ class _Crate:
                 raise _Corrupt(f"SPECS: a spec of type {spec_type} on a {where} path")
 
     # -- layout ----------------------------------------------------------------------------
+    def structure(self) -> bytes | None:
+        """:meth:`table_of_contents` then :meth:`structural` (compiled where built: the same checks in the
+        same order and the same messages); returns the decompressed value reps of FIELDS (or None)."""
+        if _check_structure is None:
+            self.table_of_contents()
+            return self.structural()
+        self.version, tokens, strings, paths_n, reps, specs, paths = _check_structure(self.data, _Corrupt)
+        self.tables = {"token": tokens, "string": strings, "path": paths_n}
+        if specs is not None and paths is not None:
+            self.spec_types(specs, paths)
+        return reps
+
     def table_of_contents(self) -> None:
         if self.size < _BOOTSTRAP:
             raise _Corrupt(f"a .usdc file of {self.size} bytes is shorter than its {_BOOTSTRAP}-byte header")
@@ -674,8 +689,7 @@ def check_crate_bytes(data: bytes, path: str | os.PathLike | None = None) -> Non
     """
     crate = _Crate(data)
     try:
-        crate.table_of_contents()
-        reps = crate.structural()
+        reps = crate.structure()
         if reps is not None:
             crate.values(reps)
     except _Corrupt as e:
