@@ -642,3 +642,40 @@ def test_atomic_write_bytes_gives_the_mode_of_a_plain_open_and_leaves_nothing_on
     with pytest.raises(OutputPathError, match="is a folder"):
         atomic_write_bytes(tmp_path, b"x")
     assert listing(tmp_path) == ["plain.png", "tex.png"]
+
+
+@pytest.mark.parametrize("resolving", [False, True])
+def test_a_texture_that_would_overwrite_the_input_is_refused(tmp_path, monkeypatch, resolving):
+    """A texture's target that is the input file itself, or a symbolic link to it, is refused; a hard link
+    to it (another path to the same file, which the resolved paths do not show) and any other file are
+    written over, as before the files' identities were compared first (``resolving``: with that shortcut
+    off, the resolved paths alone decide)."""
+    import dataclasses
+
+    import usdhands.formats.usd_materials as materials
+
+    if resolving:
+        monkeypatch.setattr(materials, "_file_ids", lambda paths: ())
+    src = tmp_path / "scene.glb"
+    _scene(src)
+    asset = read_asset(src)
+    out = tmp_path / "out.usda"
+    write_asset(asset, out)
+    target = tmp_path / "out_textures" / "tex0.png"
+    before = target.read_bytes()
+    for name, make in (("same", None), ("symlink", os.symlink), ("hardlink", os.link), ("other", None)):
+        source = target
+        if make is not None:
+            source = tmp_path / f"{name}.png"
+            make(target, source)
+        elif name == "other":
+            source = tmp_path / "other.png"
+            source.write_bytes(b"another file")
+        pretend = dataclasses.replace(asset, path=str(source))
+        if name in ("same", "symlink"):
+            with pytest.raises(ValueError, match=f"texture {target} would overwrite an input"):
+                write_asset(pretend, out)
+            assert target.read_bytes() == before
+        else:
+            write_asset(pretend, out)
+            assert target.exists() and target.stat().st_ino != source.stat().st_ino
