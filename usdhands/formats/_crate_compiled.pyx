@@ -758,7 +758,8 @@ def check_structure(const unsigned char[::1] data, error):
             reps_size = c.u64(at, "FIELDS value reps size")
             if reps_size <= (0xFFFFFFFFFFFFFFFF - 64) // _LZ4_MAX_RATIO and n > (_LZ4_MAX_RATIO * reps_size + 64) // 8:
                 raise error(f"FIELDS claims {n} fields from {reps_size} compressed bytes")
-            reps = c.decompress(data, at + 8, reps_size, <int64_t>n * 8, "FIELDS value reps", end)
+            # (a count past what the bytes can hold wraps here; the span's check refuses it before the limit counts)
+            reps = c.decompress(data, at + 8, reps_size, <int64_t>(n * <uint64_t>8), "FIELDS value reps", end)
             if <uint64_t>len(reps) != n * 8:
                 raise error(f"FIELDS value reps decode to {len(reps)} bytes for {n} fields")
         else:
