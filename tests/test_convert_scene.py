@@ -655,7 +655,7 @@ def test_a_texture_that_would_overwrite_the_input_is_refused(tmp_path, monkeypat
     import usdhands.formats.usd_materials as materials
 
     if resolving:
-        monkeypatch.setattr(materials, "_file_ids", lambda paths: ())
+        monkeypatch.setattr(materials, "_file_ids", lambda paths: None)
     src = tmp_path / "scene.glb"
     _scene(src)
     asset = read_asset(src)

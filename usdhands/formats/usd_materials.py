@@ -63,8 +63,8 @@ def _image_file_name(image: Image, used: set[str]) -> str:
     return name
 
 
-def _file_ids(paths: Sequence[str | os.PathLike]) -> tuple[set[tuple[int, int]]] | tuple[()]:
-    """``((device, inode) of every path,)``, or ``()`` when one cannot be looked up. Two files with
+def _file_ids(paths: Sequence[str | os.PathLike]) -> set[tuple[int, int]] | None:
+    """The ``(device, inode)`` of every path, or None when one cannot be looked up. Two files with
     different identities are different files, so their resolved paths differ: a texture's target that is
     none of the inputs' files needs no resolving of paths (two ``realpath`` walks, ~40 us a write)."""
     ids = set()
@@ -72,15 +72,17 @@ def _file_ids(paths: Sequence[str | os.PathLike]) -> tuple[set[tuple[int, int]]]
         try:
             st = os.stat(p)
         except (OSError, ValueError):
-            return ()
+            return None
         ids.add((st.st_dev, st.st_ino))
-    return (ids,)
+    return ids
 
 
 def _write_images(images: Sequence[Image], final_path: Path, inputs: Sequence[Path]) -> list[str]:
     """Asset paths (relative to the output's folder) of every image; bytes are written to files."""
     folder = texture_folder(final_path)
-    out_dir = keep = ids = None  # each made once, when first needed
+    out_dir = keep = None  # each made once, when first needed
+    input_ids: set[tuple[int, int]] | None = None
+    inputs_looked_up = False
     used: set[str] = set()
     paths = []
     for image in images:
@@ -92,9 +94,10 @@ def _write_images(images: Sequence[Image], final_path: Path, inputs: Sequence[Pa
         name = _image_file_name(image, used)
         target = folder / name
         if os.path.lexists(target):  # a path that is not there overwrites nothing
-            ids = _file_ids(inputs) if ids is None else ids
+            if not inputs_looked_up:
+                input_ids, inputs_looked_up = _file_ids(inputs), True
             here = _file_ids([target])
-            if not (ids and here and not here[0] & ids[0]):  # not shown to be another file than every input
+            if input_ids is None or here is None or here & input_ids:  # not shown to be another file than every input
                 keep = {Path(p).resolve() for p in inputs} if keep is None else keep
                 if target.resolve() in keep:
                     raise ValueError(f"texture {target} would overwrite an input")

@@ -551,20 +551,26 @@ def start_warm_forkserver_early(job: str, workers: int, scheduler: str | None) -
     files (:func:`usdhands.compiled.kernel_file_built`: nothing imported, NumPy neither). The warm
     forkserver then loads while the caller checks its side files and makes the job's options, which
     load NumPy (~45 ms); :func:`run_batch` finds it running. Whether it started."""
-    from usdhands.compiled import KERNEL_MODULES, kernel_file_built
+    from usdhands.compiled import kernel_file_built
 
-    built = all(kernel_file_built(name) for name in KERNEL_MODULES if not name.startswith("algorithms.interaction."))
+    built = all(kernel_file_built(name) for name in _synthesis_kernel_modules())
     options = BatchOptions(job=job, out=Path(), workers=workers, scheduler=scheduler, warm_forkserver=True)
     return wants_warm_forkserver(options, built=built) and start_warm_forkserver(dask=scheduler is not None)
 
 
-def _synthesis_kernels_built() -> bool:
-    """Whether the kernels compiled ahead of time that a synthesize worker runs were built (the
-    interaction's are not among them: without those, its NumPy twins run, never numba)."""
-    from usdhands.compiled import KERNEL_MODULES, kernel_module
+def _synthesis_kernel_modules() -> tuple[str, ...]:
+    """The kernels compiled ahead of time that a synthesize worker runs (the interaction's are not among
+    them: without those, its NumPy twins run, never numba), by their names under ``usdhands``."""
+    from usdhands.compiled import KERNEL_MODULES
 
-    return all(kernel_module(name) is not None for name in KERNEL_MODULES
-               if not name.startswith("algorithms.interaction."))
+    return tuple(name for name in KERNEL_MODULES if not name.startswith("algorithms.interaction."))
+
+
+def _synthesis_kernels_built() -> bool:
+    """Whether the kernels of :func:`_synthesis_kernel_modules` were built (and load)."""
+    from usdhands.compiled import kernel_module
+
+    return all(kernel_module(name) is not None for name in _synthesis_kernel_modules())
 
 
 def start_warm_forkserver(dask: bool = False) -> bool:
