@@ -745,34 +745,21 @@ def _walk_local_headers(data, members: dict) -> None:
 
 def _check_package(path: Path, f) -> None:
     """Check each crate file a ``.usdz`` stores, as the bytes USD reads: after the member's local
-    header, whatever its checksum says (zipfile's read skipped a member whose CRC did not match,
-    which USD reads all the same), sliced from the mapped package (no checksum of every member).
+    header, whatever its checksum says, sliced from the mapped package (no checksum of every member).
 
-    The members are those the central directory names and those a walk of the local headers
-    from the start of the package finds (each header's data followed by the next header): USD
-    finds members that way, and a package whose central directory points elsewhere (usdz fuzz:
-    an entry's offset changed) handed USD a crate no check had read, which made it map 9.6 GB.
-    ``f``: the package, open for reading in binary (:func:`check_crate`'s, not opened again).
+    The members are those a walk of the local headers from the start of the package finds (each
+    header's data followed by the next header): USD finds members that way (``UsdZipFile``'s
+    iterator, from offset 0, the sizes of each local header) and never reads the central
+    directory. A package whose central directory points elsewhere (usdz fuzz: an entry's offset
+    changed) handed USD a crate a check of the directory's members had not read, which made it
+    map 9.6 GB. ``f``: the package, open for reading in binary (:func:`check_crate`'s, not opened again).
     """
-    import zipfile
-
     try:
         # not closed here, as check_crate's map: each member is checked through a view of the map (a
         # copy of CesiumMan.usdz's 220 KB crate and its page faults cost more than the check's reads),
         # which arrays the check made (an error's traceback) may still hold; it closes with the last
         data = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
         members = {}  # (start, size) -> name
-        try:
-            with zipfile.ZipFile(f) as package:
-                for info in package.infolist():
-                    if info.compress_type == zipfile.ZIP_STORED and info.file_size >= 8:
-                        at = info.header_offset
-                        if data[at:at + 4] == _LOCAL_HEADER:  # else not a member USD can find
-                            name_size, extra_size = struct.unpack_from("<HH", data, at + 26)
-                            start = at + _LOCAL_HEADER_SIZE + name_size + extra_size
-                            members[start, info.file_size] = info.filename
-        except (zipfile.BadZipFile, ValueError, EOFError, struct.error, NotImplementedError):
-            pass  # no central directory zipfile reads ("zip file version 11.6"): the local headers name members
         _walk_local_headers(data, members)
         for (start, size), name in sorted(members.items()):
             if size < 8 or data[start:start + 8] != CRATE_MAGIC:
