@@ -201,6 +201,47 @@ def test_a_package_member_found_by_its_local_header_is_checked(sample_assets, tm
     assert message in str(e.value) and "\n" not in str(e.value)
 
 
+def test_a_member_only_the_central_directory_names_is_not_read(sample_assets, tmp_path):
+    """The check reads the members USD reads: those a walk of the local headers reaches from the start of
+    the package (Sdf.ZipFile lists the same), not what the central directory names besides. A lying crate
+    behind bytes the walk cannot cross, named by the directory alone, is not USD's to read: the package
+    passes and opens; the same crate where the walk reaches it is refused."""
+    import struct
+
+    from pxr import Sdf
+
+    good = (tmp_path / "good.usdc")
+    Sdf.Layer.CreateAnonymous(".usdc").Export(str(good))
+    data, message = crate_lies(crate_seed(sample_assets, tmp_path))["token_count"]
+    package = tmp_path / "hidden.usdz"
+    with zipfile.ZipFile(package, "w", compression=zipfile.ZIP_STORED) as z:
+        z.writestr("root.usdc", good.read_bytes())
+        z.writestr("lie.usdc", data)
+    raw = bytearray(package.read_bytes())
+    second = raw.index(b"PK\x03\x04", 4)
+    gap = b"\0" * 64  # the walk stops here: no local header after the first member's data
+    raw[second:second] = gap
+    directory = raw.index(b"PK\x01\x02")
+    for entry in (directory, raw.index(b"PK\x01\x02", directory + 4)):  # the directory's offsets moved too
+        offset, = struct.unpack_from("<I", raw, entry + 42)
+        if offset >= second:
+            raw[entry + 42:entry + 46] = struct.pack("<I", offset + len(gap))
+    end = raw.rindex(b"PK\x05\x06")
+    start, = struct.unpack_from("<I", raw, end + 16)
+    raw[end + 16:end + 20] = struct.pack("<I", start + len(gap))
+    package.write_bytes(bytes(raw))
+    assert [i.filename for i in zipfile.ZipFile(package).infolist()] == ["root.usdc", "lie.usdc"]
+    assert list(Sdf.ZipFile.Open(str(package)).GetFileNames()) == ["root.usdc"]
+    assert check_crate(package)
+    assert Sdf.Layer.FindOrOpen(str(package)) is not None
+    del raw[second:second + len(gap)]  # the walk reaches it: refused
+    reached = tmp_path / "reached.usdz"
+    reached.write_bytes(bytes(raw))
+    with pytest.raises(AssetReadError, match="lie.usdc: cannot read as USD: ") as e:
+        check_crate(reached)
+    assert message in str(e.value)
+
+
 def test_the_rewritten_sections_of_the_cases_are_valid(sample_assets, tmp_path):
     """The spec-type case rewrites SPECS with its own encoder: unchanged types give a file USD reads."""
     import struct
@@ -273,6 +314,29 @@ def test_a_text_layer_composing_a_lying_crate_is_refused(sample_assets, tmp_path
         f"usdhands: error: {top}: composes {tmp_path / 'lie.usdc'}: cannot read as USD: "
         + result["stderr"].split("cannot read as USD: ", 1)[1].rstrip("\n")]
     assert message in result["stderr"]
+
+
+def test_each_layer_is_checked_once_whatever_path_names_it(tmp_path, monkeypatch):
+    """The layers a stage composes are checked once per file: a sublayer naming the opened file through a
+    symbolic link, and a crate named twice (once through a link), are the files already checked; the
+    opened file's real path is compared with theirs (it is looked up only when a second layer comes)."""
+    from pxr import Sdf
+
+    from usdhands.formats import usd_common
+
+    Sdf.Layer.CreateAnonymous(".usdc").Export(str(tmp_path / "a.usdc"))
+    (tmp_path / "b.usdc").symlink_to(tmp_path / "a.usdc")
+    (tmp_path / "alias.usda").symlink_to(tmp_path / "shot.usda")
+    top = tmp_path / "shot.usda"
+    top.write_text('#usda 1.0\n(\n    subLayers = [@./alias.usda@, @./a.usdc@, @./b.usdc@]\n)\n')
+    checked = []
+    real = usd_common.check_crate
+    monkeypatch.setattr(usd_common, "check_crate", lambda path: checked.append(path.name) or real(path))
+    layers = usd_common.checked_layers(top)
+    assert len(checked) == 2 and checked[0] == "shot.usda" and checked[1] in ("a.usdc", "b.usdc")
+    assert len(layers) == 2
+    checked.clear()
+    assert len(usd_common.checked_layers(tmp_path / "a.usdc")) == 1 and checked == ["a.usdc"]
 
 
 def _decode_ints_one_by_one(encoded: bytes, n: int, width: int) -> list[int]:

@@ -8,9 +8,11 @@ holds xyzw in memory, which is the model's order, so quaternion arrays move as t
 from __future__ import annotations
 
 import contextlib
+import errno
 import itertools
 import math
 import os
+import stat
 import sys
 import threading
 from pathlib import Path
@@ -186,28 +188,30 @@ def check_children(layer: Sdf.Layer, path: Path) -> None:
     def missing(where, key: str, child) -> AssetReadError:
         return AssetReadError(f"cannot read as USD: {key} of <{where}> lists <{child}>, which has no spec", path=path)
 
-    todo = [Sdf.Path.absoluteRootPath]
+    spec_at = layer.GetObjectAtPath
+    todo = [(Sdf.Path.absoluteRootPath, spec_at(Sdf.Path.absoluteRootPath))]  # each prim with its spec, looked up once
     while todo:
-        here = todo.pop()
-        spec = layer.GetObjectAtPath(here)
+        here, spec = todo.pop()
         for name in _children(spec, "primChildren", path):
             child = here.AppendChild(name)
-            if child.isEmpty or layer.GetObjectAtPath(child) is None:
+            child_spec = None if child.isEmpty else spec_at(child)
+            if child_spec is None:
                 raise missing(here, "primChildren", child if not child.isEmpty else name)
-            todo.append(child)
+            todo.append((child, child_spec))
         for name in _children(spec, "variantSetChildren", path):
             variant_set = here.AppendVariantSelection(name, "")
-            vs_spec = None if variant_set.isEmpty else layer.GetObjectAtPath(variant_set)
+            vs_spec = None if variant_set.isEmpty else spec_at(variant_set)
             if vs_spec is None:
                 raise missing(here, "variantSetChildren", variant_set if not variant_set.isEmpty else name)
             for variant in _children(vs_spec, "variantChildren", path):
                 child = here.AppendVariantSelection(name, variant)
-                if child.isEmpty or layer.GetObjectAtPath(child) is None:
+                child_spec = None if child.isEmpty else spec_at(child)
+                if child_spec is None:
                     raise missing(variant_set, "variantChildren", child if not child.isEmpty else variant)
-                todo.append(child)
+                todo.append((child, child_spec))
         for name in _children(spec, "properties", path):
             child = here.AppendProperty(name)
-            if child.isEmpty or layer.GetObjectAtPath(child) is None:
+            if child.isEmpty or spec_at(child) is None:
                 raise missing(here, "properties", child if not child.isEmpty else name)
 
 
@@ -227,14 +231,23 @@ def checked_layers(path: Path) -> list[Sdf.Layer]:
         A crate file (the input or one it composes) whose claims its bytes cannot hold.
     """
     held, seen, todo = [], set(), [Path(path)]
+    first = True
     while todo and len(seen) < MAX_LAYERS:
         here = todo.pop()
-        try:
-            key = os.path.realpath(here)
-        except ValueError:  # a NUL in a path a layer composes (usdz fuzz): no file; USD reports the layer missing
-            continue
-        if key in seen or not os.path.isfile(key):
-            continue  # a missing layer: USD reports it (a warning) when it composes
+        if first:  # the caller's file: its real path (a walk of its folders) only if another layer comes
+            first, key = False, None
+            if not os.path.isfile(here):
+                continue  # not a regular file (a pipe, a device): USD says what it makes of it
+        else:
+            try:
+                key = os.path.realpath(here)
+            except ValueError:  # a NUL in a path a layer composes (usdz fuzz): no file; USD reports the layer missing
+                continue
+            if None in seen:  # the first layer's real path, now that another is compared with it
+                seen.discard(None)
+                seen.add(os.path.realpath(path))
+            if key in seen or not os.path.isfile(key):
+                continue  # a missing layer: USD reports it (a warning) when it composes
         seen.add(key)
         try:
             crate = check_crate(here)
@@ -269,13 +282,23 @@ def open_stage(path: str | os.PathLike) -> Usd.Stage:
         return open_stage_quietly(path)
 
 
+#: The errors of a stat that Path.exists answers False for: no such file
+_NOT_THERE = (errno.ENOENT, errno.ENOTDIR, errno.EBADF, errno.ELOOP)
+
+
 def open_stage_quietly(path: str | os.PathLike) -> Usd.Stage:
     """:func:`open_stage` inside the caller's :func:`quiet_diagnostics` block (a reader that reads the
     stage in the same block enters it once: 15-30 us a block)."""
     path = Path(path)
-    if not path.exists():
-        raise AssetReadError("no such file", path=path)
-    if path.is_dir():
+    try:  # one stat: Path.exists then Path.is_dir took two
+        mode = os.stat(path).st_mode
+    except OSError as e:
+        if e.errno not in _NOT_THERE:
+            raise  # (a permission refused...: as Path.exists raised it)
+        raise AssetReadError("no such file", path=path) from None
+    except ValueError:  # a NUL in the path
+        raise AssetReadError("no such file", path=path) from None
+    if stat.S_ISDIR(mode):
         raise AssetReadError("is a folder, not a file", path=path)
     try:
         layers = checked_layers(path)  # held open: Stage.Open finds them in USD's layer registry
