@@ -195,6 +195,53 @@ def test_read_skinned_mesh_maps_joints_and_splits_uv_seams(tmp_path):
     np.testing.assert_allclose(m.geom_bind_xform[:3, 3], [0, 0, 2])
 
 
+@pytest.mark.parametrize("influences", ["vertex", "constant", "indexed"])
+def test_influences_read_once_are_the_skinning_querys(tmp_path, monkeypatch, influences):
+    """The reader keeps the influences its check read (no second read through UsdSkel's query) where
+    neither primvar is indexed: the mesh's arrays, bit for bit, are those of the query
+    (``ComputeJointInfluences``, which flattens the primvars); an indexed primvar goes to the query."""
+    from usdhands.formats import usd_read
+
+    path = build_stage(tmp_path / "char.usda")
+    stage = Usd.Stage.Open(str(path))
+    binding = UsdSkel.BindingAPI(stage.GetPrimAtPath("/Char/Body"))
+    if influences == "constant":  # the whole mesh on Hips: one element of two influences
+        binding.CreateJointIndicesPrimvar(True, 2).Set([1, 0])
+        binding.CreateJointWeightsPrimvar(True, 2).Set([0.9, 0.1])
+    elif influences == "indexed":  # the weights' elements in another order, put back by their indices
+        weights = binding.GetJointWeightsPrimvar()
+        weights.Set([0.6, 0.4, 0.5, 0.5, 1.0, 0.0, 0.75, 0.25])
+        weights.SetIndices(Vt.IntArray([3, 1, 2, 0]))
+    stage.GetRootLayer().Save()
+    calls = []
+    real_check = usd_read._check_influences
+    monkeypatch.setattr(usd_read, "_check_influences", lambda *a: calls.append(real_check(*a)) or calls[-1])
+    (fast,) = HANDLER.read(path).meshes
+    monkeypatch.setattr(usd_read, "_check_influences", lambda *a: real_check(*a) and None)
+    (query,) = HANDLER.read(path).meshes
+    assert (calls[0] is None) == (influences == "indexed")
+    assert fast.joint_indices.tobytes() == query.joint_indices.tobytes()
+    assert fast.joint_weights.tobytes() == query.joint_weights.tobytes()
+    assert fast.joint_indices.shape == (5, 2)
+    if influences == "constant":
+        assert (fast.joint_indices == [SKEL_JOINTS.index("Hips"), SKEL_JOINTS.index("Hips/Spine/Hand")]).all()
+    else:  # the weights of build_stage's vertices, flattened (original vertex 0 is the mesh's first)
+        assert fast.joint_weights[fast.face_vertex_indices[0]].tolist() == [0.75, 0.25]
+
+
+def test_cesium_man_influences_read_once_are_the_skinning_querys(shared_assets, monkeypatch):
+    from usdhands.formats import usd_read
+
+    path = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
+    (fast,) = read_asset(path).meshes
+    real_check = usd_read._check_influences
+    monkeypatch.setattr(usd_read, "_check_influences", lambda *a: real_check(*a) and None)
+    (query,) = read_asset(path).meshes
+    assert fast.joint_indices.shape == (3273, 4)
+    assert fast.joint_indices.tobytes() == query.joint_indices.tobytes()
+    assert fast.joint_weights.tobytes() == query.joint_weights.tobytes()
+
+
 def test_cesium_man(shared_assets):
     path = shared_assets / "usd_cesiumman" / "CesiumMan.usdz"
     asset = read_asset(path)

@@ -798,16 +798,21 @@ def _uv_primvar(api: UsdGeom.PrimvarsAPI) -> UsdGeom.Primvar | None:
 MAX_INFLUENCES = 256
 
 
-def _check_influences(prim: Usd.Prim, n_points: int, n_joints: int, path: Path, where: str) -> None:
+def _check_influences(prim: Usd.Prim, n_points: int, n_joints: int, path: Path, where: str) -> tuple | None:
     """Refuse joint influences UsdSkel should not be handed: sizes that disagree, indices out of range.
 
     A mutated .usdc mesh crashed the interpreter (segmentation fault) inside UsdSkel's
     influence computation; inconsistent ones were silently dropped (an unskinned mesh).
+
+    Returns the checked ``(jointIndices, jointWeights)`` values, as ``UsdSkel.SkinningQuery.
+    ComputeJointInfluences`` would give them (it flattens the two primvars and checks what this
+    function checked), where neither primvar is indexed; None where nothing is authored or one
+    is indexed (the caller asks the query).
     """
     binding = UsdSkel.BindingAPI(prim)
     ip, wp = binding.GetJointIndicesPrimvar(), binding.GetJointWeightsPrimvar()
     if not (ip and ip.HasAuthoredValue()) and not (wp and wp.HasAuthoredValue()):
-        return
+        return None
     if not (ip and ip.HasAuthoredValue() and wp and wp.HasAuthoredValue()):
         raise JointMismatchError("skel:jointIndices and skel:jointWeights must both be authored", path=path,
                                  location=where)
@@ -834,6 +839,7 @@ def _check_influences(prim: Usd.Prim, n_points: int, n_joints: int, path: Path, 
         raise JointMismatchError(f"skel:jointIndices outside 0..{n_joints - 1}", path=path, location=where)
     if not np.isfinite(np.asarray(weights, dtype=np.float64)).all():
         raise JointMismatchError("skel:jointWeights holds NaN or infinite weights", path=path, location=where)
+    return None if ip.IsIndexed() or wp.IsIndexed() else (indices, weights)
 
 
 def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.ndarray | None = None,
@@ -859,8 +865,9 @@ def _read_mesh(sq, skel_index: int, tokens: list[str], path: Path, world: np.nda
         geom_bind = matrices_to_numpy([UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(early)])[0]
     else:
         # joint influences, in the skeleton's joint order
-        _check_influences(prim, V, len(sq.GetJointOrder() or tokens), path, where)
-        idx, w = sq.ComputeJointInfluences(early) or (None, None)
+        # the values the check read where they are the query's (no second read of both primvars)
+        idx, w = (_check_influences(prim, V, len(sq.GetJointOrder() or tokens), path, where)
+                  or sq.ComputeJointInfluences(early) or (None, None))
         K = int(sq.GetNumInfluencesPerComponent())
         joint_indices = joint_weights = None
         if idx is not None and K > 0:
