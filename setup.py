@@ -2,7 +2,8 @@
 
 The kernels a batch worker or a one-clip command runs (the synthesis search, playing and
 stitching the chosen fragments, reading BVH motion, the interaction's side test and smoother
-recursion, the props' nearest-point tree and banded solves; :mod:`usdhands.compiled`) are
+recursion, the props' nearest-point tree and banded solves, joint transforms taken apart;
+:mod:`usdhands.compiled`) are
 compiled here, at install, so that a process using them never starts numba (about 0.35 s of
 CPU a process) and a correction against closed props imports neither libigl nor SciPy. They
 are optional: where no C compiler is found, the install goes on and the package runs the
@@ -22,6 +23,7 @@ KERNELS = {
     "usdhands.formats._bvh_compiled": "usdhands/formats/_bvh_compiled.pyx",
     "usdhands.formats._crate_compiled": "usdhands/formats/_crate_compiled.pyx",
     "usdhands.algorithms.interaction._interaction_compiled": "usdhands/algorithms/interaction/_interaction_compiled.pyx",
+    "usdhands.model._transforms_compiled": "usdhands/model/_transforms_compiled.pyx",
 }
 
 

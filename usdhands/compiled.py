@@ -1,6 +1,6 @@
 """The kernels compiled ahead of time: built from Cython when the package is installed (``setup.py``).
 
-Five modules, each the twin of a numba (or Python) kernel module with the same functions, arguments
+Six modules, each the twin of a numba (or Python) kernel module with the same functions, arguments
 and results to the bit:
 
 - ``algorithms.synthesis._search_compiled``: the synthesis search and one pair's warp
@@ -18,7 +18,12 @@ and results to the bit:
   closed props: a triangle tree for exact nearest points (libigl's ``AABB``: the same distances to
   rounding), the corner side test, the shells' union-find (SciPy's components) and the bounded
   smoother's banded Cholesky (``scipy.linalg.solveh_banded``: the same solutions to rounding). An
-  install without it runs libigl and SciPy there.
+  install without it runs libigl and SciPy there;
+- ``model._transforms_compiled``: joint transforms taken apart into translations, quaternions and
+  scales, and the USD reader's check of a skeleton's transforms
+  (:func:`usdhands.model.rotations.xform_to_trs`, ``usdhands.formats.usd_read._xforms_ok``), which
+  every reader of a skeleton runs: NumPy's small calls on a skeleton's few joints cost more than
+  their arithmetic.
 
 A process that runs these never imports numba: nothing to start (numba's import, CPU target
 and cached kernels cost about 0.35 s of CPU a process, measured), one thread each where
@@ -41,7 +46,8 @@ __all__ = ["kernel_module", "kernel_file_built", "ENABLED", "KERNEL_MODULES"]
 
 #: The compiled modules, by their names under ``usdhands``.
 KERNEL_MODULES = ("algorithms.synthesis._search_compiled", "algorithms.synthesis._play_compiled",
-                  "formats._bvh_compiled", "algorithms.interaction._interaction_compiled", "formats._crate_compiled")
+                  "formats._bvh_compiled", "algorithms.interaction._interaction_compiled", "formats._crate_compiled",
+                  "model._transforms_compiled")
 #: ``False``: never use them (as an install without a C compiler does), for tests and comparisons;
 #: set from the environment variable ``USDHANDS_COMPILED_KERNELS=0`` (the processes a batch starts
 #: inherit it).

@@ -47,7 +47,7 @@ from usdhands.formats.usd_schema_data import read_finger_motion
 from usdhands.formats.usd_materials import MaterialReader
 from usdhands.model.asset import Asset, BlendShape, BlendShapeWeights, RootNode, SkinnedMesh
 from usdhands.model.clip import Clip, clip_size_problem
-from usdhands.model.rotations import xform_to_trs
+from usdhands.model.rotations import transforms_kernel, xform_to_trs
 from usdhands.model.skeleton import Skeleton
 
 __all__ = ["read_usd", "read_stage", "read_skeleton", "frame_times"]
@@ -471,7 +471,18 @@ def _matrices(attr: Usd.Attribute, name: str, path, where: str):
 def _xforms_ok(m: np.ndarray) -> bool:
     """Whether :func:`_check_xforms` finds nothing wrong with ``m``, in its tests' order and numbers
     but on the whole array at once (the usual case: 9 NumPy calls instead of its ~25, half its time
-    on a skeleton's joints); False sends ``m`` to the full check, which names the joint."""
+    on a skeleton's joints); False sends ``m`` to the full check, which names the joint. The compiled
+    twin (``model._transforms_compiled.xforms_ok``) answers where it is built and can say."""
+    kernel = transforms_kernel()
+    if kernel is not None:
+        ok = kernel.xforms_ok(np.ascontiguousarray(m, dtype=np.float64))
+        if ok is not None:
+            return ok
+    return _numpy_xforms_ok(m)
+
+
+def _numpy_xforms_ok(m: np.ndarray) -> bool:
+    """:func:`_xforms_ok` in NumPy: the reference of the compiled twin."""
     if not np.isfinite(m).all():
         return False
     with np.errstate(all="ignore"):

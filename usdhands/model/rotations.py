@@ -40,6 +40,7 @@ __all__ = [
     "quat_canonical",
     "trs_to_xform",
     "xform_to_trs",
+    "transforms_kernel",
     "unwrap_deg",
 ]
 
@@ -208,6 +209,19 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     return q.reshape(shape + (4,))
 
 
+_TRANSFORMS_KERNEL: list = []
+
+
+def transforms_kernel():
+    """The compiled module of joint transforms (``usdhands.model._transforms_compiled``), or None where it
+    was not built or compiled kernels are off; looked up at the first call (not at import)."""
+    if not _TRANSFORMS_KERNEL:
+        from usdhands.compiled import kernel_module
+
+        _TRANSFORMS_KERNEL.append(kernel_module("model._transforms_compiled"))
+    return _TRANSFORMS_KERNEL[0]
+
+
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
 
@@ -335,10 +349,26 @@ def xform_to_trs(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Split ``(..., 4, 4)`` transforms into translations, xyzw rotations and scales.
 
     Assumes no shear. A negative determinant puts the reflection into the x scale.
+
+    Where the compiled twin is built (:mod:`usdhands.compiled`), it splits the transforms whose
+    decisions it can take (rotations times scales, not mirrored, not near singular), with the same
+    numbers to the bit; this function's NumPy steps do every other call.
     """
     m = np.asarray(m, dtype=np.float64)
     if m.shape[-2:] != (4, 4):
         raise ValueError(f"Expected xform to have shape (..., 4, 4), got {m.shape}")
+    kernel = transforms_kernel()
+    if kernel is not None and m.size:
+        split = kernel.xform_to_trs(np.ascontiguousarray(m.reshape(-1, 4, 4)))
+        if split is not None:
+            lead = m.shape[:-2]
+            t, q, s = split
+            return t.reshape(lead + (3,)), q.reshape(lead + (4,)), s.reshape(lead + (3,))
+    return _xform_to_trs(m)
+
+
+def _xform_to_trs(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`xform_to_trs` in NumPy (``m`` float64 ``(..., 4, 4)``): the reference of the compiled twin."""
     t = m[..., :3, 3].copy()
     basis = m[..., :3, :3]
     s = np.linalg.norm(basis, axis=-2)
