@@ -330,8 +330,8 @@ def test_each_layer_is_checked_once_whatever_path_names_it(tmp_path, monkeypatch
     top = tmp_path / "shot.usda"
     top.write_text('#usda 1.0\n(\n    subLayers = [@./alias.usda@, @./a.usdc@, @./b.usdc@]\n)\n')
     checked = []
-    real = usd_common.check_crate
-    monkeypatch.setattr(usd_common, "check_crate", lambda path: checked.append(path.name) or real(path))
+    real = usd_common.check_crate_file
+    monkeypatch.setattr(usd_common, "check_crate_file", lambda path: checked.append(path.name) or real(path))
     layers = usd_common.checked_layers(top)
     assert len(checked) == 2 and checked[0] == "shot.usda" and checked[1] in ("a.usdc", "b.usdc")
     assert len(layers) == 2

@@ -791,3 +791,395 @@ def check_structure(const unsigned char[::1] data, error):
         else:
             c.count(n, start + 8, 9, "PATHS", end)
     return version, tokens, strings, paths_n, reps, specs, paths
+
+
+# ------------------------------------------------------------------------------------------------
+# Whether every child a crate's specs list has a spec (``usd_common.check_children``'s question),
+# decided from the bytes where that is simple; False where it is not (the Sdf walk then decides).
+
+from libc.string cimport memchr, memcmp
+
+cdef uint32_t _TERMINATOR = 0xFFFFFFFF
+cdef int _TOKEN_VECTOR = 41
+# spec types (SdfSpecType)
+cdef int _ATTRIBUTE = 1, _PRIM = 6, _PSEUDO_ROOT = 7, _RELATIONSHIP = 8
+# a token's kind, found when first asked: 0 not yet, then 1 + these bits
+cdef int _IDENTIFIER = 1, _NAMESPACED = 2, _PRIM_CHILDREN = 4, _PROPERTIES = 8, _VARIANT_FIELD = 16
+
+
+cdef object _unpacked(const unsigned char[::1] data, int64_t at, uint64_t size, int64_t end, int64_t limit):
+    """The bytes of a TfFastCompression buffer of ``size`` bytes at ``at`` (before ``end``), at most
+    ``limit``; None where it is malformed (``_Crate.decompress`` without its messages)."""
+    cdef int chunks, c
+    cdef int64_t pos, stop
+    cdef int32_t n
+    if at < 0 or size == 0 or at > end or size > <uint64_t>(end - at) or limit < 0:
+        return None
+    chunks = data[at]
+    stop = at + <int64_t>size
+    try:
+        if chunks == 0:
+            return lz4_block_decompress(data[at + 1:stop], limit)
+        out, pos = bytearray(), at + 1
+        for c in range(chunks):
+            if pos + 4 > stop:
+                return None
+            n = <int32_t>_le32(&data[pos])
+            pos += 4
+            if n < 0 or pos + n > stop:
+                return None
+            out += lz4_block_decompress(data[pos:pos + n], limit - len(out))
+            pos += n
+        return bytes(out)
+    except ValueError:
+        return None
+
+
+cdef object _unpacked_ints(const unsigned char[::1] data, int64_t at, uint64_t n, int64_t end):
+    """``n`` compressed 32-bit integers stored from ``at`` (uint64 size, then the buffer), decoded
+    (int64), or None where they are not there."""
+    cdef uint64_t size
+    if at < 0 or at > end - 8 or n > <uint64_t>(end - at):
+        return None
+    size = _le64(&data[at])
+    raw = _unpacked(data, at + 8, size, end, 4 + (2 * <int64_t>n + 7) // 8 + 4 * <int64_t>n)
+    if raw is None:
+        return None
+    try:
+        return decode_ints(raw, n)
+    except ValueError:
+        return None
+
+
+cdef inline bint _ident_start(unsigned char c) noexcept nogil:
+    return (c >= 65 and c <= 90) or (c >= 97 and c <= 122) or c == 95
+
+
+cdef inline bint _ident_char(unsigned char c) noexcept nogil:
+    return _ident_start(c) or (c >= 48 and c <= 57)
+
+
+cdef int _token_kind(const unsigned char *s, int64_t n) noexcept nogil:
+    """A token's bits: a plain ASCII identifier, identifiers joined by ':', one of the children fields."""
+    cdef int64_t k
+    cdef bint start = True, plain = True
+    cdef int kind = 0
+    if n == 12 and memcmp(s, b"primChildren", 12) == 0:
+        kind |= _PRIM_CHILDREN
+    elif n == 10 and memcmp(s, b"properties", 10) == 0:
+        kind |= _PROPERTIES
+    elif (n == 18 and memcmp(s, b"variantSetChildren", 18) == 0) or (n == 15 and memcmp(s, b"variantChildren", 15) == 0):
+        kind |= _VARIANT_FIELD
+    if n == 0:
+        return kind
+    for k in range(n):
+        if start:
+            if not _ident_start(s[k]):
+                return kind
+            start = False
+        elif s[k] == 58:  # ':'
+            plain = False
+            start = True
+        elif not _ident_char(s[k]):
+            return kind
+    if start:  # ends with ':'
+        return kind
+    kind |= _NAMESPACED
+    if plain:
+        kind |= _IDENTIFIER
+    return kind
+
+
+cdef int _compare_pairs(const void *a, const void *b) noexcept nogil:
+    """(parent, element, entry) triples of int64 by parent, then element."""
+    cdef const int64_t *x = <const int64_t *>a
+    cdef const int64_t *y = <const int64_t *>b
+    if x[0] != y[0]:
+        return (x[0] > y[0]) - (x[0] < y[0])
+    return (x[1] > y[1]) - (x[1] < y[1])
+
+
+cdef class _Listing:
+    """The scratch of :func:`listed_children_have_specs`: one block of memory, freed with the object."""
+    cdef int64_t *block
+
+    def __dealloc__(self):
+        free(self.block)
+
+
+def listed_children_have_specs(const unsigned char[::1] data, const unsigned char[::1] reps,
+                               const int64_t[::1] spec_paths, const int64_t[::1] spec_fieldsets,
+                               const int64_t[::1] spec_types_, const int64_t[::1] indexes,
+                               const int64_t[::1] elements, const int64_t[::1] jumps, uint64_t paths_n):
+    """True when the bytes of a crate file (``data``, which the check passed; FIELDS' value ``reps``, the
+    decoded SPECS and PATHS, PATHS' count) show that every child its specs list has a spec, as
+    ``usd_common.check_children`` walks them through Sdf; False where that is not shown simply (the walk
+    decides then, and gives the error). Read as USD reads them (``crateFile.cpp``: the field sets as runs
+    ended by ~0, the path tree built from the jumps, the tokens split on NUL) and conservatively: True
+    only when
+
+    - the version is 0.4.0 or later (compressed sections), every index is in its table, the path
+      indexes of PATHS and those of SPECS are each unique, the tree is entry 0 (the root, no sibling)
+      and each entry is reached once, each spec's field set starts a run;
+    - every spec is the root's (pseudo-root, 7), a prim's whose path is the root then plain ASCII
+      identifiers (6), or a property's (attribute 1 or relationship 8) of such a prim, named by
+      identifiers joined by ':' (so each spec's path is the one its entries spell, and no two specs
+      of different kinds share one); no field is ``variantSetChildren`` or ``variantChildren``;
+    - each ``primChildren`` and ``properties`` field (the root's: ``primChildren`` only) is a token vector
+      stored out of line, not compressed, inside the file, whose names are such identifiers, each the
+      element of an entry below the spec's own entry (a property's: negative) that has a spec.
+    """
+    cdef Py_ssize_t size = data.shape[0]
+    cdef int64_t toc, start, length, at, end, tok_start = -1, tok_end = 0, fld_start = -1, fld_end = 0
+    cdef int64_t set_start = -1, set_end = 0
+    cdef uint64_t n_sections, n_tokens, raw, packed, n_fields, n_sets, k, j
+    cdef Py_ssize_t n = indexes.shape[0], m = spec_paths.shape[0], i, c, top, lo, hi, mid, p, kk
+    cdef int64_t here, parent, jump, e, t, node, rep, count, name, f, s
+    cdef const unsigned char *chars
+    cdef const unsigned char *zero
+    cdef int kind
+    cdef bint has_child, has_sibling, found
+
+    if size < 88 or (data[8], data[9], data[10]) < (0, 4, 0):
+        return False
+    if elements.shape[0] != n or jumps.shape[0] != n or spec_fieldsets.shape[0] != m or spec_types_.shape[0] != m:
+        return False
+    if n == 0 or paths_n == 0 or paths_n > <uint64_t>size:
+        return False
+    # the table of contents (the first section of each name, as USD's GetSection)
+    toc = <int64_t>_le64(&data[16])
+    if toc < 88 or toc > size - 8:
+        return False
+    n_sections = _le64(&data[toc])
+    if n_sections > <uint64_t>((size - toc - 8) // 32):
+        return False
+    for k in range(n_sections):
+        at = toc + 8 + <int64_t>k * 32
+        start, length = <int64_t>_le64(&data[at + 16]), <int64_t>_le64(&data[at + 24])
+        if start < 0 or length < 0 or start > size or length > size - start:
+            return False
+        zero = <const unsigned char *>memchr(&data[at], 0, 16)
+        name = 16 if zero == NULL else zero - &data[at]
+        if name == 6 and memcmp(&data[at], b"TOKENS", 6) == 0 and tok_start < 0:
+            tok_start, tok_end = start, start + length
+        elif name == 6 and memcmp(&data[at], b"FIELDS", 6) == 0 and fld_start < 0:
+            fld_start, fld_end = start, start + length
+        elif name == 9 and memcmp(&data[at], b"FIELDSETS", 9) == 0 and set_start < 0:
+            set_start, set_end = start, start + length
+    if tok_start < 0 or fld_start < 0 or set_start < 0:
+        return False
+    # TOKENS: the decompressed bytes, exactly as many as stated, NUL-ended, split into the stated count
+    if tok_end - tok_start < 24:
+        return False
+    n_tokens, raw, packed = _le64(&data[tok_start]), _le64(&data[tok_start + 8]), _le64(&data[tok_start + 16])
+    if raw == 0 or raw > <uint64_t>(_LZ4_MAX_RATIO * <uint64_t>size + 64) or n_tokens > raw:
+        return False
+    text = _unpacked(data, tok_start + 24, packed, tok_end, <int64_t>raw)
+    if text is None or <uint64_t>len(text) != raw:
+        return False
+    cdef const unsigned char[::1] chars_view = text
+    chars = &chars_view[0]
+    if chars[raw - 1] != 0:
+        return False
+    # FIELDS: the token of each field (its value reps are ``reps``)
+    if fld_end - fld_start < 8:
+        return False
+    n_fields = _le64(&data[fld_start])
+    if <uint64_t>reps.shape[0] != n_fields * 8 or n_fields > <uint64_t>size:
+        return False
+    field_tokens = _unpacked_ints(data, fld_start + 8, n_fields, fld_end)
+    if field_tokens is None:
+        return False
+    cdef const int64_t[::1] ftok = field_tokens
+    # FIELDSETS: runs of field indices, each ended by ~0
+    if set_end - set_start < 8:
+        return False
+    n_sets = _le64(&data[set_start])
+    if n_sets == 0 or n_sets > <uint64_t>size:
+        return False
+    sets = _unpacked_ints(data, set_start + 8, n_sets, set_end)
+    if sets is None:
+        return False
+    cdef const int64_t[::1] fsets = sets
+    if <uint32_t>fsets[n_sets - 1] != _TERMINATOR:
+        return False
+
+    # scratch: token offsets (n_tokens + 1) and kinds (n_tokens); by entry: parent, state; by path index:
+    # entry, spec; (parent, element, entry) triples of the entries below another
+    cdef _Listing scratch = _Listing()
+    scratch.block = <int64_t *>malloc(sizeof(int64_t) * (2 * n_tokens + 1 + 2 * n + 2 * paths_n + 3 * n + 1))
+    if scratch.block == NULL:
+        raise MemoryError()
+    cdef int64_t *offsets = scratch.block
+    cdef int64_t *kinds = offsets + n_tokens + 1
+    cdef int64_t *parents = kinds + n_tokens
+    cdef int64_t *state = parents + n  # 0 unreached; 1 root; 2 plain prim; 3 property of a plain prim; 4 other
+    cdef int64_t *entry_of = state + n
+    cdef int64_t *spec_of = entry_of + paths_n
+    cdef int64_t *pairs = spec_of + paths_n
+    # the tokens
+    p = 0
+    for k in range(n_tokens):
+        zero = <const unsigned char *>memchr(chars + p, 0, raw - p)
+        if zero == NULL:
+            return False
+        offsets[k] = p
+        kinds[k] = 0
+        p = zero - chars + 1
+    offsets[n_tokens] = p
+    if <uint64_t>p != raw:  # more NULs than tokens: USD would read the same, but say no
+        return False
+    # PATHS: unique path indexes, elements naming tokens, the tree walked from entry 0 as USD builds it
+    for k in range(paths_n):
+        entry_of[k] = -1
+        spec_of[k] = -1
+    for i in range(n):
+        if indexes[i] < 0 or <uint64_t>indexes[i] >= paths_n or entry_of[indexes[i]] >= 0:
+            return False
+        entry_of[indexes[i]] = i
+        e = elements[i]
+        if e <= -2147483648 or e > 2147483647 or <uint64_t>(e if e >= 0 else -e) >= n_tokens:
+            return False
+        if jumps[i] < -2 or jumps[i] > 2147483647:
+            return False
+        state[i] = 0
+    if jumps[0] >= 0:  # the root has a sibling (USD makes it a child of the root)
+        return False
+    # (a stack of (entry, parent) pairs in ``pairs``: each entry is pushed at most once)
+    top = 1
+    pairs[0], pairs[1] = 0, -1
+    while top:
+        top -= 1
+        here, parent = pairs[2 * top], pairs[2 * top + 1]
+        while True:
+            if here < 0 or here >= n or state[here]:
+                return False
+            parents[here] = parent
+            if parent < 0:
+                state[here] = 1
+            else:
+                e = elements[here]
+                if e > 0 and (state[parent] == 1 or state[parent] == 2):
+                    kind = kinds[e]
+                    if kind == 0:
+                        kind = 1 + _token_kind(chars + offsets[e], offsets[e + 1] - offsets[e] - 1)
+                        kinds[e] = kind
+                    state[here] = 2 if (kind - 1) & _IDENTIFIER else 4
+                elif e < 0 and state[parent] == 2:
+                    kind = kinds[-e]
+                    if kind == 0:
+                        kind = 1 + _token_kind(chars + offsets[-e], offsets[-e + 1] - offsets[-e] - 1)
+                        kinds[-e] = kind
+                    state[here] = 3 if (kind - 1) & _NAMESPACED else 4
+                else:
+                    state[here] = 4
+            jump = jumps[here]
+            has_child, has_sibling = jump > 0 or jump == -1, jump >= 0
+            if has_child and has_sibling:
+                if top >= n:
+                    return False
+                pairs[2 * top], pairs[2 * top + 1] = here + jump, parent
+                top += 1
+            if has_child:
+                parent = here
+            if not (has_child or has_sibling):
+                break
+            here += 1
+    # SPECS: unique path indexes of reached entries, each spec's type the one its path allows, field sets
+    for i in range(m):
+        s = spec_paths[i]
+        if s < 0 or <uint64_t>s >= paths_n or spec_of[s] >= 0 or entry_of[s] < 0:
+            return False
+        spec_of[s] = i
+        node, t = entry_of[s], spec_types_[i]
+        if state[node] == 1:
+            if t != _PSEUDO_ROOT:
+                return False
+        elif state[node] == 2:
+            if t != _PRIM:
+                return False
+        elif state[node] == 3:
+            if t != _ATTRIBUTE and t != _RELATIONSHIP:
+                return False
+        else:
+            return False
+        f = spec_fieldsets[i]
+        if f < 0 or <uint64_t>f >= n_sets or (f and <uint32_t>fsets[f - 1] != _TERMINATOR):
+            return False
+    if spec_of[indexes[0]] < 0:  # no pseudo-root spec
+        return False
+    # the entries below another, by (parent, element), for the look-ups
+    c = 0
+    for i in range(1, n):
+        if state[i]:
+            pairs[3 * c], pairs[3 * c + 1], pairs[3 * c + 2] = parents[i], elements[i], i
+            c += 1
+    qsort(pairs, c, 3 * sizeof(int64_t), _compare_pairs)
+    # each spec's children fields
+    for i in range(m):
+        node = entry_of[spec_paths[i]]
+        f = spec_fieldsets[i]
+        while <uint32_t>fsets[f] != _TERMINATOR:
+            j = <uint32_t>fsets[f]
+            f += 1
+            if j >= n_fields:
+                return False
+            t = <uint32_t>ftok[j]
+            if <uint64_t>t >= n_tokens:
+                return False
+            kind = kinds[t]
+            if kind == 0:
+                kind = 1 + _token_kind(chars + offsets[t], offsets[t + 1] - offsets[t] - 1)
+                kinds[t] = kind
+            kind -= 1
+            if kind & _VARIANT_FIELD:
+                return False
+            if not kind & (_PRIM_CHILDREN | _PROPERTIES):
+                continue
+            if kind & _PROPERTIES and state[node] != 2:
+                return False  # (the root's properties, a property's: the walk decides)
+            if kind & _PRIM_CHILDREN and state[node] != 1 and state[node] != 2:
+                return False
+            rep = <int64_t>_le64(&reps[8 * j])
+            if (<uint64_t>rep >> 60) != 0 or ((<uint64_t>rep >> 48) & 0xFF) != _TOKEN_VECTOR:
+                return False
+            at = rep & <int64_t>_PAYLOAD
+            if at > size - 8:
+                return False
+            count = <int64_t>_le64(&data[at])
+            if count < 0 or count > (size - at - 8) // 4:
+                return False
+            for kk in range(count):
+                name = _le32(&data[at + 8 + 4 * kk])
+                if <uint64_t>name >= n_tokens or name == 0:
+                    return False
+                t = kinds[name]
+                if t == 0:
+                    t = 1 + _token_kind(chars + offsets[name], offsets[name + 1] - offsets[name] - 1)
+                    kinds[name] = t
+                t -= 1
+                if kind & _PRIM_CHILDREN:
+                    if not t & _IDENTIFIER:
+                        return False
+                    e = name
+                else:
+                    if not t & _NAMESPACED:
+                        return False
+                    e = -name
+                # the entries (node, e): one of them with a spec
+                lo, hi = 0, c
+                while lo < hi:
+                    mid = (lo + hi) // 2
+                    if pairs[3 * mid] < node or (pairs[3 * mid] == node and pairs[3 * mid + 1] < e):
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                found = False
+                while lo < c and pairs[3 * lo] == node and pairs[3 * lo + 1] == e:
+                    if spec_of[indexes[pairs[3 * lo + 2]]] >= 0:
+                        found = True
+                        break
+                    lo += 1
+                if not found:
+                    return False
+    return True

@@ -23,13 +23,14 @@ import mmap
 import os
 import struct
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from usdhands.compiled import kernel_module
 from usdhands.errors import AssetReadError
 
-__all__ = ["CRATE_MAGIC", "check_crate", "check_crate_bytes", "lz4_block_decompress"]
+__all__ = ["CRATE_MAGIC", "CrateCheck", "check_crate", "check_crate_bytes", "check_crate_file", "lz4_block_decompress"]
 
 #: The first 8 bytes of every crate file.
 CRATE_MAGIC = b"PXR-USDC"
@@ -227,6 +228,9 @@ _spec_types = getattr(_COMPILED, "spec_types", None)
 #: The table of contents and the structural sections checked compiled (``_Crate.table_of_contents`` and
 #: ``structural``' twin), or None
 _check_structure = getattr(_COMPILED, "check_structure", None)
+#: Whether every child a crate's specs list has a spec, decided from its bytes (True), or not shown
+#: simply (False: ``usd_common.check_children`` walks the layer through Sdf); None where not built
+_listed_children = getattr(_COMPILED, "listed_children_have_specs", None)
 
 
 def _sorted_unique(a: np.ndarray) -> np.ndarray:
@@ -408,7 +412,20 @@ class _Crate:
         self.tables = {"token": tokens, "string": strings, "path": paths_n}
         if specs is not None and paths is not None:
             self.spec_types(specs, paths)
+            self.decoded = (reps, specs, paths)  # for listed_children
         return reps
+
+    #: FIELDS' value reps, SPECS and PATHS as :meth:`structure` decoded them (compiled), or None
+    decoded = None
+
+    def listed_children(self) -> bool:
+        """Whether the bytes show that every child the specs list has a spec (the compiled decision, after
+        the check passed; False where it is not built or not shown: the Sdf walk decides)."""
+        if _listed_children is None or self.decoded is None or self.decoded[0] is None:
+            return False
+        reps, specs, paths = self.decoded
+        return bool(_listed_children(self.data, reps, specs[0], specs[1], specs[2], paths[0], paths[1], paths[2],
+                                     self.tables["path"]))
 
     def table_of_contents(self) -> None:
         if self.size < _BOOTSTRAP:
@@ -679,8 +696,12 @@ class _Crate:
         self.compressed_ints(pos, n, "a compressed array")
 
 
-def check_crate_bytes(data: bytes, path: str | os.PathLike | None = None) -> None:
+def check_crate_bytes(data: bytes, path: str | os.PathLike | None = None, children: bool = False) -> bool:
     """Refuse crate bytes whose claims the bytes cannot hold (see the module docstring).
+
+    With ``children``, returns whether the bytes also show that every child the crate's specs list
+    has a spec (``usd_common.check_children``'s question, decided in compiled code where that is
+    simple: :func:`usdhands.formats._crate_compiled.listed_children_have_specs`); False otherwise.
 
     Raises
     ------
@@ -694,13 +715,21 @@ def check_crate_bytes(data: bytes, path: str | os.PathLike | None = None) -> Non
             crate.values(reps)
     except _Corrupt as e:
         raise AssetReadError(f"cannot read as USD: {e}", path=path) from None
+    return children and crate.listed_children()
 
 
-def check_crate(path: str | os.PathLike) -> bool:
-    """Check ``path`` with :func:`check_crate_bytes` if it is a crate file; whether it was one.
+class CrateCheck(NamedTuple):
+    """What :func:`check_crate_file` found: whether the file is a crate (a ``.usdz`` package: True), and
+    whether its bytes show that every child its root layer's specs list has a spec (the layer USD
+    opens from the file: a ``.usdc``'s own, a package's first member)."""
 
-    A ``.usdz`` package is checked member by member (each crate file it stores; True).
-    """
+    crate: bool
+    children_listed: bool
+
+
+def check_crate_file(path: str | os.PathLike) -> CrateCheck:
+    """Check ``path`` with :func:`check_crate_bytes` if it is a crate file (a ``.usdz`` package: member by
+    member, each crate file it stores). Raises as :func:`check_crate_bytes`."""
     path = Path(path)
     with open(path, "rb") as f:
         head = f.read(8)
@@ -709,12 +738,19 @@ def check_crate(path: str | os.PathLike) -> bool:
             # values (a copy of a 20 MB clip cost more than the check); USD maps the file as well.
             # Not closed here: arrays the check made may still view it (an error's traceback); it
             # closes when the last of them goes
-            check_crate_bytes(mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ), path)
-            return True
+            listed = check_crate_bytes(mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ), path, children=True)
+            return CrateCheck(True, listed)
         if head[:4] == b"PK\x03\x04":
-            _check_package(path, f)  # the file open already (not opened again)
-            return True
-    return False
+            return CrateCheck(True, _check_package(path, f))  # the file open already (not opened again)
+    return CrateCheck(False, False)
+
+
+def check_crate(path: str | os.PathLike) -> bool:
+    """Check ``path`` with :func:`check_crate_bytes` if it is a crate file; whether it was one.
+
+    A ``.usdz`` package is checked member by member (each crate file it stores; True).
+    """
+    return check_crate_file(path).crate
 
 
 #: A zip local file header: its signature, and where the lengths of the name and the extra field are.
@@ -743,7 +779,22 @@ def _walk_local_headers(data, members: dict) -> None:
             todo.append(start + n)
 
 
-def _check_package(path: Path, f) -> None:
+def _root_member(data) -> tuple[int, int] | None:
+    """``(start, size)`` of the member USD opens as a package's root layer, the first (the local header
+    at offset 0), where it is simply a stored crate file: stored, its two sizes equal, a plain name
+    ending in .usdc or .usd; else None."""
+    if data[:4] != _LOCAL_HEADER or len(data) < _LOCAL_HEADER_SIZE:
+        return None
+    method, = struct.unpack_from("<H", data, 8)
+    packed, size, name_size, extra_size = struct.unpack_from("<IIHH", data, 18)
+    name = bytes(data[_LOCAL_HEADER_SIZE:_LOCAL_HEADER_SIZE + name_size])
+    if method != 0 or packed != size or not name.isascii() or not name.decode().isprintable() or b"[" in name \
+            or b"]" in name or not name.lower().endswith((b".usdc", b".usd")):
+        return None
+    return _LOCAL_HEADER_SIZE + name_size + extra_size, size
+
+
+def _check_package(path: Path, f) -> bool:
     """Check each crate file a ``.usdz`` stores, as the bytes USD reads: after the member's local
     header, whatever its checksum says, sliced from the mapped package (no checksum of every member).
 
@@ -753,7 +804,11 @@ def _check_package(path: Path, f) -> None:
     directory. A package whose central directory points elsewhere (usdz fuzz: an entry's offset
     changed) handed USD a crate a check of the directory's members had not read, which made it
     map 9.6 GB. ``f``: the package, open for reading in binary (:func:`check_crate`'s, not opened again).
+
+    Returns whether the bytes show that every child the root layer's specs list has a spec (the root
+    layer: the first member, :func:`_root_member`, a crate file; :func:`check_crate_bytes`' ``children``).
     """
+    listed = False
     try:
         # not closed here, as check_crate's map: each member is checked through a view of the map (a
         # copy of CesiumMan.usdz's 220 KB crate and its page faults cost more than the check's reads),
@@ -761,13 +816,16 @@ def _check_package(path: Path, f) -> None:
         data = mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
         members = {}  # (start, size) -> name
         _walk_local_headers(data, members)
+        root = _root_member(data)
         for (start, size), name in sorted(members.items()):
             if size < 8 or data[start:start + 8] != CRATE_MAGIC:
                 continue  # USD reads only stored members (it refuses the others itself)
             try:
-                check_crate_bytes(memoryview(data)[start:start + size])
+                ok = check_crate_bytes(memoryview(data)[start:start + size], children=(start, size) == root)
             except AssetReadError as e:
                 shown = name if name.isprintable() else repr(name)[1:-1]  # a name holding a line break (usdz fuzz)
                 raise AssetReadError(f"{shown}: {e.message}", path=path) from None
+            listed = listed or ok
     except (OSError, ValueError):
-        return  # not a readable package (an empty file cannot be mapped): USD says so itself
+        return False  # not a readable package (an empty file cannot be mapped): USD says so itself
+    return listed
