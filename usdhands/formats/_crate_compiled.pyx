@@ -687,11 +687,13 @@ def spec_types(const int64_t[::1] spec_paths, const int64_t[::1] spec_types_, co
     return True
 
 
-def check_structure(const unsigned char[::1] data, error):
+def check_structure(const unsigned char[::1] data, error, list kept=None):
     """``usdc_crate._Crate.table_of_contents`` then ``structural`` (the bootstrap, the table of contents and
     the six structural sections, the same checks in the same order and the same messages, raised as
     ``error(message)``): ``(version, token count, string count, path count, FIELDS' value reps or None,
-    SPECS' three arrays or None, PATHS' three arrays or None)``; the caller checks the specs' types."""
+    SPECS' three arrays or None, PATHS' three arrays or None)``; the caller checks the specs' types.
+    ``kept``: a list FIELDSETS' decoded integers are appended to, where they were decoded (for
+    :func:`listed_children_have_specs`, which would decode them again)."""
     cdef _ValueWalk c = _ValueWalk()
     cdef int64_t size = data.shape[0], toc, start, length, end, at
     cdef uint64_t n, k, raw, packed, most, reps_size, encoded, tokens = 0, strings = 0, paths_n = 0
@@ -775,6 +777,8 @@ def check_structure(const unsigned char[::1] data, error):
                     decoded.append(values)
                 if name == "SPECS":
                     specs = decoded
+                elif kept is not None:
+                    kept.append(decoded[0])
             else:
                 c.count(n, start + 8, 4 * arrays, name, end)
     if "PATHS" in sections:
@@ -910,13 +914,14 @@ cdef class _Listing:
 def listed_children_have_specs(const unsigned char[::1] data, const unsigned char[::1] reps,
                                const int64_t[::1] spec_paths, const int64_t[::1] spec_fieldsets,
                                const int64_t[::1] spec_types_, const int64_t[::1] indexes,
-                               const int64_t[::1] elements, const int64_t[::1] jumps, uint64_t paths_n):
+                               const int64_t[::1] elements, const int64_t[::1] jumps, uint64_t paths_n,
+                               field_sets=None):
     """True when the bytes of a crate file (``data``, which the check passed; FIELDS' value ``reps``, the
-    decoded SPECS and PATHS, PATHS' count) show that every child its specs list has a spec, as
-    ``usd_common.check_children`` walks them through Sdf; False where that is not shown simply (the walk
-    decides then, and gives the error). Read as USD reads them (``crateFile.cpp``: the field sets as runs
-    ended by ~0, the path tree built from the jumps, the tokens split on NUL) and conservatively: True
-    only when
+    decoded SPECS and PATHS, PATHS' count; FIELDSETS' integers where ``check_structure`` kept them) show
+    that every child its specs list has a spec, as ``usd_common.check_children`` walks them through Sdf;
+    False where that is not shown simply (the walk decides then, and gives the error). Read as USD reads
+    them (``crateFile.cpp``: the field sets as runs ended by ~0, the path tree built from the jumps, the
+    tokens split on NUL, 32-bit integers) and conservatively: True only when
 
     - the version is 0.4.0 or later (compressed sections), every index is in its table, the path
       indexes of PATHS and those of SPECS are each unique, the tree is entry 0 (the root, no sibling)
@@ -928,6 +933,11 @@ def listed_children_have_specs(const unsigned char[::1] data, const unsigned cha
     - each ``primChildren`` and ``properties`` field (the root's: ``primChildren`` only) is a token vector
       stored out of line, not compressed, inside the file, whose names are such identifiers, each the
       element of an entry below the spec's own entry (a property's: negative) that has a spec.
+
+    Then every spec's path is the one its entries spell (USD appends each element to its parent's path;
+    an entry whose element it cannot append, and those below it, carry no spec), whichever spec USD keeps
+    where two share a path it was checked here, and each name the walk appends to a path it visits is
+    the path of an entry found here, which has a spec of the kind the walk looks up.
     """
     cdef Py_ssize_t size = data.shape[0]
     cdef int64_t toc, start, length, at, end, tok_start = -1, tok_end = 0, fld_start = -1, fld_end = 0
@@ -997,8 +1007,8 @@ def listed_children_have_specs(const unsigned char[::1] data, const unsigned cha
     n_sets = _le64(&data[set_start])
     if n_sets == 0 or n_sets > <uint64_t>size:
         return False
-    sets = _unpacked_ints(data, set_start + 8, n_sets, set_end)
-    if sets is None:
+    sets = _unpacked_ints(data, set_start + 8, n_sets, set_end) if field_sets is None else field_sets
+    if sets is None or <uint64_t>len(sets) != n_sets:
         return False
     cdef const int64_t[::1] fsets = sets
     if <uint32_t>fsets[n_sets - 1] != _TERMINATOR:

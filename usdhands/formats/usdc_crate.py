@@ -408,14 +408,15 @@ class _Crate:
         if _check_structure is None:
             self.table_of_contents()
             return self.structural()
-        self.version, tokens, strings, paths_n, reps, specs, paths = _check_structure(self.data, _Corrupt)
+        kept = []  # FIELDSETS' integers, for listed_children
+        self.version, tokens, strings, paths_n, reps, specs, paths = _check_structure(self.data, _Corrupt, kept)
         self.tables = {"token": tokens, "string": strings, "path": paths_n}
         if specs is not None and paths is not None:
             self.spec_types(specs, paths)
-            self.decoded = (reps, specs, paths)  # for listed_children
+            self.decoded = (reps, specs, paths, kept[0] if kept else None)
         return reps
 
-    #: FIELDS' value reps, SPECS and PATHS as :meth:`structure` decoded them (compiled), or None
+    #: FIELDS' value reps, SPECS, PATHS and FIELDSETS as :meth:`structure` decoded them (compiled), or None
     decoded = None
 
     def listed_children(self) -> bool:
@@ -423,9 +424,9 @@ class _Crate:
         the check passed; False where it is not built or not shown: the Sdf walk decides)."""
         if _listed_children is None or self.decoded is None or self.decoded[0] is None:
             return False
-        reps, specs, paths = self.decoded
+        reps, specs, paths, field_sets = self.decoded
         return bool(_listed_children(self.data, reps, specs[0], specs[1], specs[2], paths[0], paths[1], paths[2],
-                                     self.tables["path"]))
+                                     self.tables["path"], field_sets))
 
     def table_of_contents(self) -> None:
         if self.size < _BOOTSTRAP:
