@@ -13,7 +13,6 @@ changed) where, whenever the decision says True, the walk passes (run in a subpr
 
 from __future__ import annotations
 
-import json
 import os
 import struct
 import subprocess
