@@ -10,7 +10,9 @@ and results to the bit:
 - ``formats._bvh_compiled``: reading BVH motion (:mod:`usdhands.formats._bvh_kernel`);
 - ``formats._crate_compiled``: the LZ4 blocks and coded integers the check of a USD crate file
   reads, and its walks of the values and of the path tree (:mod:`usdhands.formats.usdc_crate`,
-  whose Python functions and methods are its twins);
+  whose Python functions and methods are its twins); and whether every child the crate's specs
+  list has a spec, where the bytes show it simply (else the Sdf walk of ``usd_common.check_children``
+  decides, as it does where the module was not built);
 - ``algorithms.interaction._interaction_compiled``: the sign of a distance to a closed shell and the
   RTS smoother's recursion (:mod:`usdhands.algorithms.interaction._proximity_kernel`,
   :mod:`usdhands.algorithms.interaction._recursion_kernel`), which ``correct`` and ``synthesize --props``
