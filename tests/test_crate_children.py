@@ -169,6 +169,28 @@ def test_a_listed_prim_without_a_spec_is_false_and_refused_by_the_walk(sample_as
     assert str(e.value) == f"{bad}: cannot read as USD: {message}"
 
 
+def test_a_crate_without_its_pseudo_roots_spec_is_refused_in_one_line(sample_assets, tmp_path):
+    """The humanoid's crate with the pseudo-root's spec dropped from SPECS (the fuzz found it): the walk
+    raised AttributeError on the missing spec ('NoneType' has no 'HasInfo'), and without the walk USD
+    aborted the interpreter reading the stage's metadata ('Dereferenced an invalid SdfPrimSpec'). Now
+    one line, exit status 2, in a process of its own (an abort would end this one)."""
+    from hostile import run_batch
+
+    seed = crate_seed(sample_assets, tmp_path)
+    paths, sets, types = (list(a) for a in _decoded(seed)["SPECS"])
+    k = types.index(7)
+    for a in (paths, sets, types):
+        del a[k]
+    data = _rewritten(seed, "SPECS", struct.pack("<Q", len(paths)) + b"".join(_encode_ints(a) for a in (paths, sets, types)))
+    assert decision(data) in (False, None)
+    bad = tmp_path / "rootless.usdc"
+    bad.write_bytes(data)
+    [result] = run_batch([["inspect", bad]])
+    assert result["code"] == 2, result
+    assert result["stderr"].splitlines() == [
+        f"usdhands: error: {bad}: cannot read as USD: the layer has no spec for its pseudo-root"]
+
+
 @needs_decision
 def test_a_listed_property_without_a_spec_is_false_and_refused_by_the_walk(sample_assets, tmp_path):
     from pxr import Sdf

@@ -201,7 +201,10 @@ def _walk_children(layer: Sdf.Layer, path: Path) -> None:
         return AssetReadError(f"cannot read as USD: {key} of <{where}> lists <{child}>, which has no spec", path=path)
 
     spec_at = layer.GetObjectAtPath
-    todo = [(Sdf.Path.absoluteRootPath, spec_at(Sdf.Path.absoluteRootPath))]  # each prim with its spec, looked up once
+    root = spec_at(Sdf.Path.absoluteRootPath)
+    if root is None:  # a crate without its pseudo-root's spec (usdc fuzz): USD aborted reading the stage's metadata
+        raise AssetReadError("cannot read as USD: the layer has no spec for its pseudo-root", path=path)
+    todo = [(Sdf.Path.absoluteRootPath, root)]  # each prim with its spec, looked up once
     while todo:
         here, spec = todo.pop()
         for name in _children(spec, "primChildren", path):
