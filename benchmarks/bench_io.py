@@ -43,10 +43,11 @@ The bare baselines, per format (``bare_read_*``, ``bare_write_*``):
   and ``np.sin`` of the half angles alone take about 14% of the loadtxt time of 10,000
   frames x 65 joints); writing: ``np.savetxt`` of the same numbers with ``%.6f`` (usdhands
   also turns the quaternions into Euler angles and writes the hierarchy). Two reading
-  rows: ``read``, the reader of a process where numba runs (its compiled motion parser
-  and axis products: every read once a kernel of the package has run or 128 MB of BVH
-  motion were read), and ``read.np``, NumPy alone (``np.loadtxt`` and the NumPy Euler
-  conversion: what a fresh process reads its first files with, numba not imported).
+  rows: ``read``, the reader every install with the kernels compiled ahead of time runs
+  (``usdhands.formats._bvh_compiled``: the motion parser and the axis products), and
+  ``read.np``, NumPy alone (``np.loadtxt`` and the NumPy Euler conversion: what an install
+  without a C compiler reads with until numba runs a kernel of the package or 128 MB of
+  BVH motion were read; the goal is the first row's).
 
 usdhands does more than each baseline (hierarchy, rest poses, unit and axis
 conversion, quaternion normalisation, Euler conversions, checks), so the ratios are
