@@ -27,7 +27,10 @@ The bare baselines, per format (``bare_read_*``, ``bare_write_*``):
   SkelAnimation per clip, ``Set`` of ``FromNumpy`` arrays per frame, and every Skeleton's
   joints and transforms, every mesh's points, faces, normals, UVs and influences, every
   image into a file beside, every material as a UsdPreviewSurface network bound to its
-  meshes, ``Export`` (usdhands writes its textures atomically: a temporary file renamed).
+  meshes, and (since session 13) what makes the file a character UsdSkel poses: one SkelRoot
+  above them, each mesh's ``skel:skeleton``, ``geomBindTransform`` and extent, each skeleton's
+  ``skel:animationSource``; ``Export`` (usdhands writes its textures atomically: a temporary
+  file renamed).
 - glTF (pygltflib + numpy): ``GLTF2.load``, ``np.frombuffer`` of every channel's input
   and output accessor, and the outputs put into one time-major ``(T, nodes, 4 or 3)`` float32
   array per path (rotation, translation), as a reader hands over arrays of that shape, and
@@ -127,23 +130,30 @@ def bare_write_usd(asset, path: Path) -> None:
     """One SkelAnimation per clip, Set per frame from numpy; what else the writer writes: every
     Skeleton's joints and transforms, every mesh's points, faces, normals, UVs and joint
     influences, every image's bytes in a file beside, every material as a UsdPreviewSurface
-    network (its factors, a texture reader per texture) bound to its meshes; Export."""
+    network (its factors, a texture reader per texture) bound to its meshes; what makes the file a
+    character UsdSkel poses (since session 13): everything under one SkelRoot, each mesh bound to
+    its skeleton (``skel:skeleton``, its ``geomBindTransform``) with its extent (UsdGeom's rule for
+    a boundable prim), each skeleton bound to its first animation (``skel:animationSource``); Export."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
     from usdhands.formats.usd_common import joint_tokens_for
 
     stage = Usd.Stage.CreateInMemory()
     stage.SetTimeCodesPerSecond(asset.clips[0].fps)
+    UsdSkel.Root.Define(stage, "/Root")
     for k, sk in enumerate(asset.skeletons):
-        skel = UsdSkel.Skeleton.Define(stage, f"/Skel{k}")
+        skel = UsdSkel.Skeleton.Define(stage, f"/Root/Skel{k}")
         skel.CreateJointsAttr().Set(joint_tokens_for(sk.joint_names, sk.parents))
         skel.CreateRestTransformsAttr().Set(Vt.Matrix4dArray.FromNumpy(
             np.ascontiguousarray(sk.rest_local_xforms().transpose(0, 2, 1))))
         bind = sk.bind_xforms if sk.bind_xforms is not None else sk.rest_world_xforms()
         skel.CreateBindTransformsAttr().Set(Vt.Matrix4dArray.FromNumpy(np.ascontiguousarray(bind.transpose(0, 2, 1))))
     for k, m in enumerate(asset.meshes):
-        mesh = UsdGeom.Mesh.Define(stage, f"/Mesh{k}")
-        mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(m.points, dtype=np.float32)))
+        mesh = UsdGeom.Mesh.Define(stage, f"/Root/Mesh{k}")
+        points = np.ascontiguousarray(m.points, dtype=np.float32)
+        mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(points))
+        if len(points):
+            mesh.CreateExtentAttr().Set(Vt.Vec3fArray.FromNumpy(np.stack([points.min(axis=0), points.max(axis=0)])))
         mesh.CreateFaceVertexCountsAttr().Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(m.face_vertex_counts,
                                                                                           dtype=np.int32)))
         mesh.CreateFaceVertexIndicesAttr().Set(Vt.IntArray.FromNumpy(np.ascontiguousarray(m.face_vertex_indices,
@@ -162,6 +172,8 @@ def bare_write_usd(asset, path: Path) -> None:
                 np.ascontiguousarray(m.joint_indices, dtype=np.int32).ravel()))
             binding.CreateJointWeightsPrimvar(False, n).Set(Vt.FloatArray.FromNumpy(
                 np.ascontiguousarray(m.joint_weights, dtype=np.float32).ravel()))
+            binding.CreateSkeletonRel().SetTargets([Sdf.Path(f"/Root/Skel{m.skeleton_index}")])
+            binding.CreateGeomBindTransformAttr().Set(Gf.Matrix4d(m.geom_bind_xform.T.tolist()))
     image_paths = []
     for k, image in enumerate(asset.images):
         image_paths.append(path.parent / f"bare_image{k}_{image.name}")
@@ -190,10 +202,13 @@ def bare_write_usd(asset, path: Path) -> None:
         materials.append(material)
     for k, m in enumerate(asset.meshes):
         if m.material is not None:
-            UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(f"/Mesh{k}")).Bind(materials[m.material])
+            UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(f"/Root/Mesh{k}")).Bind(materials[m.material])
     for k, clip in enumerate(asset.clips):
         sk = clip.skeleton
-        anim = UsdSkel.Animation.Define(stage, f"/Anim{k}")
+        anim = UsdSkel.Animation.Define(stage, f"/Root/Anim{k}")
+        skel_binding = UsdSkel.BindingAPI.Apply(stage.GetPrimAtPath(f"/Root/Skel{next(i for i, s in enumerate(asset.skeletons) if s is sk)}"))
+        if not skel_binding.GetAnimationSourceRel().HasAuthoredTargets():
+            skel_binding.CreateAnimationSourceRel().SetTargets([anim.GetPath()])
         anim.CreateJointsAttr().Set(joint_tokens_for(sk.joint_names, sk.parents))
         rot = np.ascontiguousarray(clip.rotations, dtype=np.float32)
         tr = np.ascontiguousarray(clip.translations, dtype=np.float32)
