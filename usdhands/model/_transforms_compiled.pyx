@@ -109,43 +109,36 @@ def xform_to_trs(const double[:, :, ::1] m):
 
 def xforms_ok(const double[:, :, ::1] m):
     """The USD reader's ``_xforms_ok`` of ``(N, 4, 4)`` float64 transforms: True or False, or None where
-    a determinant is too near the bound of 1e-6 to say."""
+    a determinant is too near the bound of 1e-6 to say (and no test failed: NumPy's answer is then
+    the AND of them all, as here)."""
     cdef Py_ssize_t n = m.shape[0], k, i, c
     cdef double b[9]
     cdef double col[3]
     cdef double det
+    cdef bint undecided = False
     for k in range(n):
         for i in range(4):
             for c in range(4):
                 if not isfinite(m[k, i, c]):
                     return False
-    for k in range(n):
+        for c in range(3):
+            if not (fabs(m[k, 3, c]) <= 1e-6):
+                return False
+        if not (fabs(m[k, 3, 3] - 1.0) <= 1e-6):
+            return False
         for i in range(3):
             for c in range(3):
                 b[3 * i + c] = m[k, i, c]
-        for c in range(3):
+        for c in range(3):  # np.linalg.norm(m[:, :3, :3], axis=1): the rows' squares summed in order
             col[c] = sqrt((b[c] * b[c] + b[3 + c] * b[3 + c]) + b[6 + c] * b[6 + c])
             if not (isfinite(col[c]) and col[c] > 1e-12):
                 return False
-    for k in range(n):
-        for i in range(3):
-            for c in range(3):
-                b[3 * i + c] = m[k, i, c]
-        for c in range(3):
-            col[c] = sqrt((b[c] * b[c] + b[3 + c] * b[3 + c]) + b[6 + c] * b[6 + c])
         for i in range(3):
             for c in range(3):
                 b[3 * i + c] = b[3 * i + c] / col[c]
         det = fabs(_det3(b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7], b[8]))
         if not isfinite(det) or fabs(det - 1e-6) <= 1e-8 * 1e-6 + 1e-15:
-            return None
-        if det < 1e-6:
+            undecided = True
+        elif det < 1e-6:
             return False
-    for k in range(n):
-        for c in range(3):
-            if not fabs(m[k, 3, c]) <= 1e-6:
-                return False
-    for k in range(n):
-        if not fabs(m[k, 3, 3] - 1.0) <= 1e-6:
-            return False
-    return True
+    return None if undecided else True
