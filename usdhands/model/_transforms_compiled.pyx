@@ -7,8 +7,9 @@ same operations in the same order (column lengths as NumPy's ``norm`` sums them,
 method as ``matrix_to_quat`` builds and normalises it). Two of NumPy's steps are decisions on
 numbers LAPACK and BLAS compute (the sign of a determinant, a Gram matrix against the
 identity); this module decides them only where a determinant is far from zero and a Gram
-matrix far from the tolerance, and otherwise answers None: the NumPy function then does the
-whole call (a mirror, a singular or sheared transform: its SVD, its errors).
+matrix far from the tolerance (a mirror far from singular is its own: the reflection goes into the
+x scale), and otherwise answers None: the NumPy function then does the whole call (a singular,
+sheared or not finite transform: its SVD, its errors).
 
 :func:`xforms_ok` is the USD reader's ``_xforms_ok`` (finite transforms with columns longer
 than 1e-12, a normalised determinant of at least 1e-6 in magnitude, an affine last row), None

@@ -351,7 +351,7 @@ def xform_to_trs(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     Assumes no shear. A negative determinant puts the reflection into the x scale.
 
     Where the compiled twin is built (:mod:`usdhands.compiled`), it splits the transforms whose
-    decisions it can take (rotations times scales, not mirrored, not near singular), with the same
+    decisions it can take (rotations times scales, mirrored or not, far from singular), with the same
     numbers to the bit; this function's NumPy steps do every other call.
     """
     m = np.asarray(m, dtype=np.float64)
