@@ -191,6 +191,26 @@ def test_a_crate_without_its_pseudo_roots_spec_is_refused_in_one_line(sample_ass
         f"usdhands: error: {bad}: cannot read as USD: the layer has no spec for its pseudo-root"]
 
 
+def test_a_field_named_past_the_token_table_is_refused_in_one_line(sample_assets, tmp_path):
+    """A field whose name is a token index past the table (the children decision's fuzz): USD's crate
+    reader refuses the file ('Corrupt asset @path@'), which reads as one line naming the file once."""
+    from hostile import run_batch
+
+    seed = crate_seed(sample_assets, tmp_path)
+    d = _decoded(seed)
+    fields = list(d["fields"])
+    fields[3] = len(d["tokens"]) + 1000
+    start, end = _sections(seed)["FIELDS"][1:]
+    packed = struct.unpack_from("<Q", seed, start + 8)[0]
+    data = _rewritten(seed, "FIELDS", struct.pack("<Q", len(fields)) + _encode_ints(fields) + seed[start + 16 + packed:end])
+    bad = tmp_path / "field_name.usdc"
+    bad.write_bytes(data)
+    [result] = run_batch([["inspect", bad]])
+    assert result["code"] == 2, result
+    assert result["stderr"].splitlines() == [
+        f"usdhands: error: {bad}: cannot read as USD: corrupt crate file (USD's reader refused its contents)"]
+
+
 @needs_decision
 def test_a_listed_property_without_a_spec_is_false_and_refused_by_the_walk(sample_assets, tmp_path):
     from pxr import Sdf

@@ -136,6 +136,7 @@ def tf_error_reason(err: BaseException, path: str | os.PathLike | None = None) -
     first = " ".join(first.split())
     if path is not None:
         for p in sorted({str(path), str(Path(path).resolve())}, key=len, reverse=True):  # the longer first
+            first = first.replace(f"Corrupt asset @{p}@", "corrupt crate file (USD's reader refused its contents)")
             first = first.replace(f"@{p}@", "the file").replace(f"{p}:", "line ").replace(p, "the file")
     first = first.strip()
     if len(first) > MAX_REASON_CHARS:  # the text parser quotes the whole offending line (a whole array)
