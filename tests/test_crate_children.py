@@ -169,46 +169,41 @@ def test_a_listed_prim_without_a_spec_is_false_and_refused_by_the_walk(sample_as
     assert str(e.value) == f"{bad}: cannot read as USD: {message}"
 
 
+def _assert_inspect_refuses(bad: Path, data: bytes, reason: str) -> None:
+    """``data`` written to ``bad`` and inspected in a process of its own (an abort would end this one):
+    exit status 2 and one line, ``cannot read as USD: <reason>``."""
+    from hostile import run_batch
+
+    bad.write_bytes(data)
+    [result] = run_batch([["inspect", bad]])
+    assert result["code"] == 2, result
+    assert result["stderr"].splitlines() == [f"usdhands: error: {bad}: cannot read as USD: {reason}"]
+
+
 def test_a_crate_without_its_pseudo_roots_spec_is_refused_in_one_line(sample_assets, tmp_path):
     """The humanoid's crate with the pseudo-root's spec dropped from SPECS (the fuzz found it): the walk
     raised AttributeError on the missing spec ('NoneType' has no 'HasInfo'), and without the walk USD
     aborted the interpreter reading the stage's metadata ('Dereferenced an invalid SdfPrimSpec'). Now
     one line, exit status 2, in a process of its own (an abort would end this one)."""
-    from hostile import run_batch
-
     seed = crate_seed(sample_assets, tmp_path)
     paths, sets, types = (list(a) for a in _decoded(seed)["SPECS"])
     k = types.index(7)
     for a in (paths, sets, types):
         del a[k]
-    data = _rewritten(seed, "SPECS", struct.pack("<Q", len(paths)) + b"".join(_encode_ints(a) for a in (paths, sets, types)))
+    data = _with_specs(seed, paths, sets, types)
     assert decision(data) in (False, None)
-    bad = tmp_path / "rootless.usdc"
-    bad.write_bytes(data)
-    [result] = run_batch([["inspect", bad]])
-    assert result["code"] == 2, result
-    assert result["stderr"].splitlines() == [
-        f"usdhands: error: {bad}: cannot read as USD: the layer has no spec for its pseudo-root"]
+    _assert_inspect_refuses(tmp_path / "rootless.usdc", data, "the layer has no spec for its pseudo-root")
 
 
 def test_a_field_named_past_the_token_table_is_refused_in_one_line(sample_assets, tmp_path):
     """A field whose name is a token index past the table (the children decision's fuzz): USD's crate
     reader refuses the file ('Corrupt asset @path@'), which reads as one line naming the file once."""
-    from hostile import run_batch
-
     seed = crate_seed(sample_assets, tmp_path)
     d = _decoded(seed)
     fields = list(d["fields"])
     fields[3] = len(d["tokens"]) + 1000
-    start, end = _sections(seed)["FIELDS"][1:]
-    packed = struct.unpack_from("<Q", seed, start + 8)[0]
-    data = _rewritten(seed, "FIELDS", struct.pack("<Q", len(fields)) + _encode_ints(fields) + seed[start + 16 + packed:end])
-    bad = tmp_path / "field_name.usdc"
-    bad.write_bytes(data)
-    [result] = run_batch([["inspect", bad]])
-    assert result["code"] == 2, result
-    assert result["stderr"].splitlines() == [
-        f"usdhands: error: {bad}: cannot read as USD: corrupt crate file (USD's reader refused its contents)"]
+    _assert_inspect_refuses(tmp_path / "field_name.usdc", _with_fields(seed, fields),
+                            "corrupt crate file (USD's reader refused its contents)")
 
 
 @needs_decision
@@ -328,6 +323,18 @@ def _rewritten(data: bytes, name: str, section: bytes) -> bytes:
     return bytes(out) + section
 
 
+def _with_specs(seed: bytes, paths: list, sets: list, types: list) -> bytes:
+    """``seed`` with SPECS rewritten: the specs' path indexes, field sets and types."""
+    return _rewritten(seed, "SPECS", struct.pack("<Q", len(paths)) + b"".join(_encode_ints(a) for a in (paths, sets, types)))
+
+
+def _with_fields(seed: bytes, fields: list) -> bytes:
+    """``seed`` with FIELDS' names (token indices) rewritten, its value reps as they were."""
+    start, end = _sections(seed)["FIELDS"][1:]
+    packed = struct.unpack_from("<Q", seed, start + 8)[0]
+    return _rewritten(seed, "FIELDS", struct.pack("<Q", len(fields)) + _encode_ints(fields) + seed[start + 16 + packed:end])
+
+
 def _mutants(seed: bytes, rng: np.random.Generator, count: int) -> list[bytes]:
     d = _decoded(seed)
     sections = _sections(seed)
@@ -377,8 +384,7 @@ def _mutants(seed: bytes, rng: np.random.Generator, count: int) -> list[bytes]:
                 types[k] = int(rng.integers(0, 12))
             else:
                 sets[k] = int(rng.choice(sets))
-            section = struct.pack("<Q", len(paths)) + b"".join(_encode_ints(a) for a in (paths, sets, types))
-            data = bytearray(_rewritten(seed, "SPECS", section))
+            data = bytearray(_with_specs(seed, paths, sets, types))
         elif what == 5:  # PATHS: an element, a jump or a path index changed
             indexes, elements, jumps = (list(a) for a in d["PATHS"])
             k = int(rng.integers(len(indexes)))
@@ -408,12 +414,7 @@ def _mutants(seed: bytes, rng: np.random.Generator, count: int) -> list[bytes]:
         elif what == 7:  # FIELDS: a field's name made another token (its value kept)
             fields = list(d["fields"])
             fields[int(rng.integers(len(fields)))] = int(rng.integers(n_tokens))
-            start, end = sections["FIELDS"][1:]
-            n = len(fields)
-            old = struct.unpack_from("<Q", seed, start + 8)[0]
-            rest = seed[start + 16 + old:end]  # the value reps, as they were
-            section = struct.pack("<Q", n) + _encode_ints(fields) + rest
-            data = bytearray(_rewritten(seed, "FIELDS", section))
+            data = bytearray(_with_fields(seed, fields))
         else:  # TOKENS: a name renamed (to a plain, a namespaced, an odd or a duplicate name)
             tokens = list(d["tokens"])
             k = int(rng.integers(1, n_tokens))

@@ -619,51 +619,76 @@ def walk_values(const unsigned char[::1] data, const unsigned char[::1] reps, to
 cdef tuple _KINDS = ("", "root", "prim", "property", "target")
 
 
-def spec_types(const int64_t[::1] spec_paths, const int64_t[::1] spec_types_, const int64_t[::1] indexes,
-               const int64_t[::1] elements, const int64_t[::1] jumps, error):
-    """``usdc_crate._Crate.spec_types`` on the decoded SPECS (path indexes, types) and PATHS (indexes,
-    element tokens, jumps): True when checked (``error(message)`` raised for a type that does not fit or a
-    walk that loops or leaves the table), False where the path indexes leave ``0..n-1`` or a jump
-    could leave 64 bits: the Python function decides those."""
-    cdef Py_ssize_t n = min(indexes.shape[0], elements.shape[0], jumps.shape[0]), k, top = 0
-    cdef Py_ssize_t m = min(spec_paths.shape[0], spec_types_.shape[0])
-    cdef int64_t here, parent, jump, t
-    cdef int where
-    cdef bint has_child, has_sibling, fits_type
-    for k in range(n):
-        if indexes[k] < 0 or indexes[k] >= n or jumps[k] > INT64_MAX - n:
-            return False
-    kind = np.zeros(n + 1, dtype=np.int8)  # by entry; then, from n on, by path index: of_path
-    cdef signed char[::1] kinds = kind
-    of = np.zeros(n + 1, dtype=np.int8)
-    cdef signed char[::1] of_path = of
-    stack = np.empty((n + 1, 2), dtype=np.int64)
-    cdef int64_t[:, ::1] todo = stack
-    if n:
-        todo[0, 0], todo[0, 1] = 0, -1
-        top = 1
+cdef Py_ssize_t _walk_tree(const int64_t[::1] jumps, Py_ssize_t n, int64_t *order, int64_t *parents,
+                           int64_t *stack, int64_t *bad) noexcept:
+    """A crate's path tree walked from entry 0 as USD builds its paths from ``jumps`` (-1: a child only, at
+    the next entry; 0: a sibling only, at the next entry; > 0: both, the sibling at entry + jump; -2:
+    neither). Each entry reached goes into ``order`` (a parent before its children) with its parent in
+    ``parents`` (-1: the root), which must hold -2 ("not reached") for every entry on the call. Returns
+    how many entries were reached, or -1 with ``bad[0]`` the first entry reached twice or outside 0..n-1.
+    ``stack``: room for n + 1 (entry, parent) pairs (each entry reached pushes at most one). The caller
+    has refused jumps that could take an entry past 64 bits."""
+    cdef Py_ssize_t top = 1, count = 0
+    cdef int64_t here, parent, jump
+    cdef bint has_child, has_sibling
+    if n == 0:
+        return 0
+    stack[0], stack[1] = 0, -1
     while top:
         top -= 1
-        here, parent = todo[top, 0], todo[top, 1]
+        here, parent = stack[2 * top], stack[2 * top + 1]
         while True:
-            if not (0 <= here < n) or kinds[here]:
-                raise error(f"PATHS: its jumps table reaches entry {here} twice or outside 0..{n - 1}")
-            if parent < 0:
-                kinds[here] = 1
-            elif elements[here] < 0:
-                kinds[here] = 3
-            else:
-                kinds[here] = 4 if kinds[parent] >= 3 else 2
+            if here < 0 or here >= n or parents[here] != -2:
+                bad[0] = here
+                return -1
+            parents[here] = parent
+            order[count] = here
+            count += 1
             jump = jumps[here]
             has_child, has_sibling = jump > 0 or jump == -1, jump >= 0
             if has_child and has_sibling:
-                todo[top, 0], todo[top, 1] = here + jump, parent
+                stack[2 * top], stack[2 * top + 1] = here + jump, parent
                 top += 1
             if has_child:
                 parent = here
             if not (has_child or has_sibling):
                 break
             here += 1
+    return count
+
+
+def spec_types(const int64_t[::1] spec_paths, const int64_t[::1] spec_types_, const int64_t[::1] indexes,
+               const int64_t[::1] elements, const int64_t[::1] jumps, error):
+    """``usdc_crate._Crate.spec_types`` on the decoded SPECS (path indexes, types) and PATHS (indexes,
+    element tokens, jumps): True when checked (``error(message)`` raised for a type that does not fit or a
+    walk that loops or leaves the table), False where the path indexes leave ``0..n-1`` or a jump
+    could leave 64 bits: the Python function decides those."""
+    cdef Py_ssize_t n = min(indexes.shape[0], elements.shape[0], jumps.shape[0]), k, reached
+    cdef Py_ssize_t m = min(spec_paths.shape[0], spec_types_.shape[0])
+    cdef int64_t here, parent, t, bad = 0
+    cdef int where
+    cdef bint fits_type
+    for k in range(n):
+        if indexes[k] < 0 or indexes[k] >= n or jumps[k] > INT64_MAX - n:
+            return False
+    kind = np.zeros(n + 1, dtype=np.int8)  # by entry
+    cdef signed char[::1] kinds = kind
+    of = np.zeros(n + 1, dtype=np.int8)  # by path index
+    cdef signed char[::1] of_path = of
+    walk = np.full(2 * n + 2 * (n + 1) + 1, -2, dtype=np.int64)  # parents, order, stack
+    cdef int64_t[::1] w = walk
+    reached = _walk_tree(jumps, n, &w[n], &w[0], &w[2 * n], &bad)
+    if reached < 0:
+        raise error(f"PATHS: its jumps table reaches entry {bad} twice or outside 0..{n - 1}")
+    for k in range(reached):  # root, property, target or prim, each after its parent
+        here = w[n + k]
+        parent = w[here]
+        if parent < 0:
+            kinds[here] = 1
+        elif elements[here] < 0:
+            kinds[here] = 3
+        else:
+            kinds[here] = 4 if kinds[parent] >= 3 else 2
     for k in range(n):
         if kinds[k]:
             of_path[indexes[k]] = kinds[k]
@@ -943,12 +968,12 @@ def listed_children_have_specs(const unsigned char[::1] data, const unsigned cha
     cdef int64_t toc, start, length, at, end, tok_start = -1, tok_end = 0, fld_start = -1, fld_end = 0
     cdef int64_t set_start = -1, set_end = 0
     cdef uint64_t n_sections, n_tokens, raw, packed, n_fields, n_sets, k, j
-    cdef Py_ssize_t n = indexes.shape[0], m = spec_paths.shape[0], i, c, top, lo, hi, mid, p, kk
-    cdef int64_t here, parent, jump, e, t, node, rep, count, name, f, s
+    cdef Py_ssize_t n = indexes.shape[0], m = spec_paths.shape[0], i, c, reached, lo, hi, mid, p, kk
+    cdef int64_t here, parent, e, t, node, rep, count, name, f, s
     cdef const unsigned char *chars
     cdef const unsigned char *zero
     cdef int kind
-    cdef bint has_child, has_sibling, found
+    cdef bint found
 
     if size < 88 or (data[8], data[9], data[10]) < (0, 4, 0):
         return False
@@ -1017,7 +1042,7 @@ def listed_children_have_specs(const unsigned char[::1] data, const unsigned cha
     # scratch: token offsets (n_tokens + 1) and kinds (n_tokens); by entry: parent, state; by path index:
     # entry, spec; (parent, element, entry) triples of the entries below another
     cdef _Listing scratch = _Listing()
-    scratch.block = <int64_t *>malloc(sizeof(int64_t) * (2 * n_tokens + 1 + 2 * n + 2 * paths_n + 3 * n + 1))
+    scratch.block = <int64_t *>malloc(sizeof(int64_t) * (2 * n_tokens + 1 + 2 * n + 2 * paths_n + 3 * n + 1 + n))
     if scratch.block == NULL:
         raise MemoryError()
     cdef int64_t *offsets = scratch.block
@@ -1026,7 +1051,8 @@ def listed_children_have_specs(const unsigned char[::1] data, const unsigned cha
     cdef int64_t *state = parents + n  # 0 unreached; 1 root; 2 plain prim; 3 property of a plain prim; 4 other
     cdef int64_t *entry_of = state + n
     cdef int64_t *spec_of = entry_of + paths_n
-    cdef int64_t *pairs = spec_of + paths_n
+    cdef int64_t *pairs = spec_of + paths_n  # the walk's stack, then the (parent, element, entry) triples
+    cdef int64_t *order = pairs + 3 * n + 1
     # the tokens
     p = 0
     for k in range(n_tokens):
@@ -1053,48 +1079,33 @@ def listed_children_have_specs(const unsigned char[::1] data, const unsigned cha
         if jumps[i] < -2 or jumps[i] > 2147483647:
             return False
         state[i] = 0
+        parents[i] = -2
     if jumps[0] >= 0:  # the root has a sibling (USD makes it a child of the root)
         return False
-    # (a stack of (entry, parent) pairs in ``pairs``: each entry is pushed at most once)
-    top = 1
-    pairs[0], pairs[1] = 0, -1
-    while top:
-        top -= 1
-        here, parent = pairs[2 * top], pairs[2 * top + 1]
-        while True:
-            if here < 0 or here >= n or state[here]:
-                return False
-            parents[here] = parent
-            if parent < 0:
-                state[here] = 1
+    reached = _walk_tree(jumps, n, order, parents, pairs, &here)
+    if reached < 0:
+        return False
+    for i in range(reached):  # each entry after its parent
+        here = order[i]
+        parent = parents[here]
+        if parent < 0:
+            state[here] = 1
+        else:
+            e = elements[here]
+            if e > 0 and (state[parent] == 1 or state[parent] == 2):
+                kind = kinds[e]
+                if kind == 0:
+                    kind = 1 + _token_kind(chars + offsets[e], offsets[e + 1] - offsets[e] - 1)
+                    kinds[e] = kind
+                state[here] = 2 if (kind - 1) & _IDENTIFIER else 4
+            elif e < 0 and state[parent] == 2:
+                kind = kinds[-e]
+                if kind == 0:
+                    kind = 1 + _token_kind(chars + offsets[-e], offsets[-e + 1] - offsets[-e] - 1)
+                    kinds[-e] = kind
+                state[here] = 3 if (kind - 1) & _NAMESPACED else 4
             else:
-                e = elements[here]
-                if e > 0 and (state[parent] == 1 or state[parent] == 2):
-                    kind = kinds[e]
-                    if kind == 0:
-                        kind = 1 + _token_kind(chars + offsets[e], offsets[e + 1] - offsets[e] - 1)
-                        kinds[e] = kind
-                    state[here] = 2 if (kind - 1) & _IDENTIFIER else 4
-                elif e < 0 and state[parent] == 2:
-                    kind = kinds[-e]
-                    if kind == 0:
-                        kind = 1 + _token_kind(chars + offsets[-e], offsets[-e + 1] - offsets[-e] - 1)
-                        kinds[-e] = kind
-                    state[here] = 3 if (kind - 1) & _NAMESPACED else 4
-                else:
-                    state[here] = 4
-            jump = jumps[here]
-            has_child, has_sibling = jump > 0 or jump == -1, jump >= 0
-            if has_child and has_sibling:
-                if top >= n:
-                    return False
-                pairs[2 * top], pairs[2 * top + 1] = here + jump, parent
-                top += 1
-            if has_child:
-                parent = here
-            if not (has_child or has_sibling):
-                break
-            here += 1
+                state[here] = 4
     # SPECS: unique path indexes of reached entries, each spec's type the one its path allows, field sets
     for i in range(m):
         s = spec_paths[i]
